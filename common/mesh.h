@@ -1,0 +1,59 @@
+// Tetrahedral meshes: reading (Gmsh .msh v1/v2/v4 ASCII, VTK legacy unstructured grid), writing VTK,
+// boundary extraction and validation. Pure: no DDS, no GL.
+#pragma once
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace surgsim {
+
+/// A linear (P1) tetrahedral mesh. Node indices are 0-based in file order (gaps in file ids are compacted).
+struct TetMesh {
+  Eigen::MatrixX3d nodes;          // #V x 3, m
+  Eigen::MatrixX4i tets;           // #T x 4, indices into nodes, positively oriented after validation/repair
+  std::vector<std::int64_t> ids;   // #V, the node id used in the source file (for messages); may be empty
+  std::string source;              // file it came from ("" when generated in memory), used in messages
+};
+
+/// A triangle surface. tris index into `nodes` of the owning TetMesh (not compacted) unless stated otherwise.
+struct SurfaceMesh {
+  Eigen::MatrixX3i tris;            // #F x 3, counter-clockwise seen from outside (outward normals)
+  std::vector<int> nodes;           // sorted unique node indices used by tris (the surface nodes)
+};
+
+/// Reads .msh (v1, v2 or v4 ASCII) or .vtk (legacy ASCII unstructured grid), chosen by extension.
+/// Keeps tetrahedra only (other element types are skipped; a file with none is an error).
+/// Throws surgsim::Error naming the file and line on any malformed input.
+TetMesh read_mesh(const std::string& path);
+TetMesh read_msh(const std::string& path);
+TetMesh read_vtk(const std::string& path);
+
+/// Writes a VTK legacy ASCII unstructured grid; optional per-node vector field (e.g. displacement, #V x 3).
+void write_vtk(const std::string& path, const TetMesh& mesh, const Eigen::MatrixX3d* node_vectors = nullptr,
+               const std::string& vector_name = "displacement");
+/// Writes a Gmsh v2.2 ASCII mesh (tets only).
+void write_msh(const std::string& path, const TetMesh& mesh);
+
+/// Boundary faces (faces belonging to exactly one tet), oriented outward.
+SurfaceMesh boundary_surface(const TetMesh& mesh);
+
+/// Signed volume of tet t (positive when nodes 1,2,3 are counter-clockwise seen from node 0... i.e.
+/// det[x1-x0, x2-x0, x3-x0] / 6 > 0).
+double tet_volume(const TetMesh& mesh, int t);
+
+struct MeshValidation {
+  bool fix_orientation = true;      // flip negatively oriented tets instead of refusing them
+  double min_volume_ratio = 1e-12;  // |vol| below ratio * mean |vol| is a zero-volume error
+};
+
+/// Validates (and, if allowed, repairs orientation of) a mesh: non-finite coordinates, out-of-range indices,
+/// repeated nodes in a tet, zero-volume tets, inverted tets (when not fixing), unreferenced nodes,
+/// non-manifold boundary (an edge shared by other than two boundary faces). Throws surgsim::Error naming the file
+/// and the element (file id) at fault.
+void validate_mesh(TetMesh& mesh, const MeshValidation& opts = {});
+
+/// Content hash of nodes and tets (used by scenes, caches, SceneInfo).
+std::uint64_t mesh_hash(const TetMesh& mesh);
+
+}  // namespace surgsim

@@ -1,0 +1,39 @@
+// Timing statistics with storage fixed up front: recording a sample never allocates (the haptic loop uses it).
+#pragma once
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+namespace surgsim {
+
+struct Percentiles {
+  double p50 = 0, p90 = 0, p99 = 0, max = 0, mean = 0;
+  std::size_t count = 0;
+};
+
+/// Keeps up to `capacity` samples (later ones only update count/max/mean: never allocates after construction).
+class SampleRecorder {
+ public:
+  explicit SampleRecorder(std::size_t capacity = 1 << 20);
+  void add(double value) noexcept;
+  std::size_t count() const { return count_; }
+  Percentiles summary() const;  // allocates (a sorted copy); call outside real-time code
+  void clear() noexcept;
+
+ private:
+  std::vector<double> samples_;
+  std::size_t stored_ = 0;
+  std::size_t count_ = 0;
+  double max_ = 0;
+  double sum_ = 0;
+};
+
+/// {"p50":..,"p99":..,"max":..} (+ p90, mean, count) for the stats JSON.
+nlohmann::json to_json(const Percentiles& p);
+
+/// Writes a JSON value to a file atomically (temp file + rename). Throws surgsim::Error on failure.
+void write_json_file(const std::string& path, const nlohmann::json& value);
+
+}  // namespace surgsim

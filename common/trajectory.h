@@ -1,0 +1,71 @@
+// Tool trajectories: CSV with a versioned header, recorded from live input, replayed tick-exact.
+//
+//   # surgsim-trajectory v1
+//   t,pitch,yaw,insertion,roll,jaw
+//   0.000000,0.0,0.0,0.05,0.0,0.5
+//
+// t in s (strictly increasing), angles in rad, insertion in m. Lines starting with '#' after the first are
+// comments. Between samples the pose is interpolated linearly; after the last it is held.
+#pragma once
+#include <array>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+namespace surgsim {
+
+/// The 5 tool DOF (same meaning and units as msg::ToolPose).
+struct Pose5 {
+  double pitch = 0;      // rad
+  double yaw = 0;        // rad
+  double insertion = 0;  // m
+  double roll = 0;       // rad
+  double jaw = 0;        // rad (0 = closed)
+};
+
+struct TrajectorySample {
+  double t = 0;  // s
+  Pose5 pose;
+};
+
+class Trajectory {
+ public:
+  /// Reads and validates a trajectory file. Throws surgsim::Error "FILE:LINE: ..." on a bad header, a wrong
+  /// column count, a non-numeric or non-finite value, non-increasing time, or a truncated last line.
+  static Trajectory load(const std::string& path);
+
+  const std::vector<TrajectorySample>& samples() const { return samples_; }
+  double duration() const { return samples_.empty() ? 0.0 : samples_.back().t; }
+  /// Pose at time t (linear interpolation, clamped to the ends). Allocates nothing.
+  Pose5 at(double t) const;
+  std::vector<TrajectorySample>& mutable_samples() { return samples_; }
+
+ private:
+  std::vector<TrajectorySample> samples_;
+  mutable std::size_t cursor_ = 0;  // last segment used, makes sequential lookups O(1)
+};
+
+/// Appends samples to a trajectory file as they arrive, flushing every `flush_every` samples so that a crash
+/// loses at most that many. Opened (and its header written) at start-up.
+class TrajectoryRecorder {
+ public:
+  TrajectoryRecorder() = default;
+  ~TrajectoryRecorder();
+  TrajectoryRecorder(const TrajectoryRecorder&) = delete;
+  TrajectoryRecorder& operator=(const TrajectoryRecorder&) = delete;
+  /// Throws surgsim::Error if the file cannot be created.
+  void open(const std::string& path, int flush_every = 10);
+  bool is_open() const { return file_ != nullptr; }
+  /// Writes one line; never allocates. Returns false on an I/O error (counted, not thrown).
+  bool append(double t, const Pose5& pose);
+  void close();
+  long write_errors() const { return write_errors_; }
+
+ private:
+  std::FILE* file_ = nullptr;
+  int flush_every_ = 10;
+  int since_flush_ = 0;
+  long write_errors_ = 0;
+};
+
+}  // namespace surgsim
