@@ -1,0 +1,19 @@
+// The organ mesh a scene names: read from its file, or generated (and cached) by the organ mesher.
+#pragma once
+#include <iosfwd>
+#include <string>
+
+#include "mesh.h"
+#include "scene.h"
+
+namespace surgsim {
+
+/// Cache folder for generated meshes and tensors: $SURGSIM_CACHE_DIR, else $XDG_CACHE_HOME/surgsim,
+/// else ~/.cache/surgsim. Created if missing.
+std::string default_cache_dir();
+
+/// Loads (file) or generates-and-caches (generate) the scene's tetrahedral mesh and validates it.
+/// Throws surgsim::Error naming the scene file and the mesh at fault.
+TetMesh load_scene_mesh(const Scene& scene, const std::string& cache_dir, std::ostream* progress = nullptr);
+
+}  // namespace surgsim

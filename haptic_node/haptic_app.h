@@ -1,0 +1,82 @@
+// The haptic node: init (scene, mesh, model, DDS, buffers), run (the fixed-rate loop), shutdown (stats).
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include "mesh.h"
+#include "scene.h"
+#include "stats.h"
+#include "trajectory.h"
+
+namespace surgsim {
+
+struct HapticOptions {
+  std::string scene = "liver";      // scene YAML path or shipped scene name
+  double duration = -1;             // s of simulated time; < 0: the replayed trajectory's length (+0.5 s), else until stopped
+  double rate_hz = 0;               // > 0 overrides the scene's haptic rate
+  std::string replay;               // trajectory to replay; empty = the scene's default trajectory
+  std::string record;               // write the input used as a trajectory file
+  double speed = 1.0;               // replay speed; <= 0 means "max" (no pacing, tick-exact)
+  std::string log;                  // per-tick CSV
+  std::string stats;                // JSON summary on exit
+  std::string cache_dir;            // generated meshes and tensors
+  int domain = -1;                  // DDS domain; < 0 = default ($SURGSIM_DOMAIN or 0)
+  std::string dds_profiles;         // Fast DDS XML; empty = <config>/dds/profiles.xml
+  std::string dds_participant = "surgsim_default";
+  int rt_priority = 80;             // SCHED_FIFO priority; 0 = normal scheduling
+  bool lock_memory = true;
+  double wait_for_visual = 0;       // s to wait for a visual node to match before starting (0 = don't wait)
+  bool quiet = false;
+};
+
+class HapticApp {
+ public:
+  explicit HapticApp(const HapticOptions& options);  // init: throws surgsim::Error / std::runtime_error
+  ~HapticApp();
+  HapticApp(const HapticApp&) = delete;
+  HapticApp& operator=(const HapticApp&) = delete;
+
+  /// Runs the loop until the duration is reached or stop() is called. Returns 0 on a clean run.
+  int run();
+  /// Safe from a signal handler: sets an atomic flag.
+  void stop() { stop_requested_.store(true, std::memory_order_relaxed); }
+  /// Writes the stats JSON (when asked) and prints the summary line.
+  void shutdown();
+
+ private:
+  struct Dds;
+
+  void tick(std::uint64_t k);
+
+  HapticOptions options_;
+  Scene scene_;
+  TetMesh mesh_;
+  SurfaceMesh surface_;
+  Trajectory trajectory_;
+  TrajectoryRecorder recorder_;
+  std::FILE* log_ = nullptr;
+  std::unique_ptr<Dds> dds_;
+  std::atomic<bool> stop_requested_{false};
+
+  double rate_hz_ = 300;
+  double dt_ = 1.0 / 300;
+  std::uint64_t total_ticks_ = 0;    // 0 = unbounded
+  std::uint64_t ticks_done_ = 0;
+  std::uint64_t scene_hash_ = 0;
+  std::uint64_t mesh_hash_ = 0;
+  std::string realtime_note_;
+
+  // Tick statistics (preallocated).
+  SampleRecorder tick_us_;
+  SampleRecorder wake_late_us_;
+  std::int64_t deadline_misses_ = 0;
+  int contacts_max_ = 0;
+  double force_max_n_ = 0;
+  std::uint64_t nonfinite_rejected_ = 0;
+  double wall_seconds_ = 0;
+};
+
+}  // namespace surgsim

@@ -1,0 +1,65 @@
+// haptic_node: tool input -> collision -> contacts -> force at the haptic rate; publishes ContactFrames.
+#include <CLI/CLI.hpp>
+#include <csignal>
+#include <iostream>
+#include <string>
+
+#include "haptic_app.h"
+
+namespace {
+surgsim::HapticApp* g_app = nullptr;
+void on_signal(int) {
+  if (g_app != nullptr) g_app->stop();
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  surgsim::HapticOptions o;
+  std::string speed = "1";
+  CLI::App cli{"surgsim haptic node: replays or receives tool motion, detects contacts and computes forces at the "
+               "haptic rate, publishes contact frames over DDS."};
+  cli.add_option("--scene", o.scene, "Scene YAML file or shipped scene name")->capture_default_str();
+  cli.add_option("--duration", o.duration, "Stop after S seconds of simulated time (default: trajectory length + 0.5 s)");
+  cli.add_option("--rate", o.rate_hz, "Haptic rate override, Hz");
+  cli.add_option("--replay", o.replay, "Tool trajectory to replay (default: the scene's)");
+  cli.add_option("--record", o.record, "Write the tool input used to this trajectory file");
+  cli.add_option("--speed", speed, "Replay speed factor, or 'max' (as fast as possible, tick-exact)")->capture_default_str();
+  cli.add_option("--log", o.log, "Per-tick CSV: tick,t,fx,fy,fz,contacts");
+  cli.add_option("--stats", o.stats, "Write a JSON summary here on exit");
+  cli.add_option("--cache", o.cache_dir, "Cache folder for generated meshes and tensors (default $SURGSIM_CACHE_DIR or ~/.cache/surgsim)");
+  cli.add_option("--domain", o.domain, "DDS domain id (default $SURGSIM_DOMAIN or 0)");
+  cli.add_option("--dds-profiles", o.dds_profiles, "Fast DDS XML profiles file (default config/dds/profiles.xml)");
+  cli.add_option("--dds-participant", o.dds_participant, "Participant profile: surgsim_default, surgsim_shm, surgsim_udp")->capture_default_str();
+  cli.add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority for the loop (0 = normal scheduling)")->capture_default_str();
+  cli.add_flag("!--no-mlock", o.lock_memory, "Do not lock memory");
+  cli.add_option("--wait-for-visual", o.wait_for_visual, "Wait up to S seconds for a visual node before starting");
+  cli.add_flag("--quiet", o.quiet, "Print nothing but errors");
+  CLI11_PARSE(cli, argc, argv);
+
+  if (speed == "max") {
+    o.speed = 0;
+  } else {
+    try {
+      std::size_t used = 0;
+      o.speed = std::stod(speed, &used);
+      if (used != speed.size() || !(o.speed > 0)) throw std::invalid_argument(speed);
+    } catch (const std::exception&) {
+      std::cerr << "haptic_node: --speed '" << speed << "' is not a positive number or 'max'\n";
+      return 2;
+    }
+  }
+
+  try {
+    surgsim::HapticApp app(o);
+    g_app = &app;
+    std::signal(SIGINT, on_signal);
+    std::signal(SIGTERM, on_signal);
+    const int rc = app.run();
+    app.shutdown();
+    g_app = nullptr;
+    return rc;
+  } catch (const std::exception& e) {
+    std::cerr << "haptic_node: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,280 @@
+#include "visual_app.h"
+
+#include <sys/stat.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "Surgsim.h"
+#include "SurgsimPubSubTypes.h"
+#include "clock.h"
+#include "dds_support.h"
+#include "error.h"
+#include "image.h"
+#include "renderer.h"
+#include "scene_mesh.h"
+#include "tool.h"
+
+namespace surgsim {
+
+using eprosima::fastdds::dds::DataReader;
+using eprosima::fastdds::dds::DataReaderListener;
+using eprosima::fastdds::dds::DataWriter;
+using eprosima::fastdds::dds::SampleInfo;
+using eprosima::fastrtps::types::ReturnCode_t;
+
+namespace {
+
+// Keeps the newest ContactFrame and the one-way latency of each (same-host clocks).
+class ContactFrameListener : public DataReaderListener {
+ public:
+  void on_data_available(DataReader* reader) override {
+    SampleInfo info;
+    while (reader->take_next_sample(&incoming_, &info) == ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      const std::uint64_t now = monotonic_ns();
+      std::lock_guard<std::mutex> lock(mutex_);
+      latency_us_.add(static_cast<double>(now - incoming_.stamp_ns()) * 1e-3);
+      newest_ = incoming_;
+      ++received_;
+      last_receive_ns_ = now;
+    }
+  }
+  /// Copies the newest frame if it is newer than `seq_seen`; returns true then.
+  bool newest(msg::ContactFrame& out, std::uint64_t& count) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    count = received_;
+    if (received_ == taken_) return false;
+    taken_ = received_;
+    out = newest_;
+    return true;
+  }
+  std::uint64_t received() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return received_;
+  }
+  std::uint64_t last_receive_ns() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return last_receive_ns_;
+  }
+  Percentiles latency() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return latency_us_.summary();
+  }
+
+ private:
+  std::mutex mutex_;
+  msg::ContactFrame incoming_;
+  msg::ContactFrame newest_;
+  SampleRecorder latency_us_{1 << 20};
+  std::uint64_t received_ = 0;
+  std::uint64_t taken_ = 0;
+  std::uint64_t last_receive_ns_ = 0;
+};
+
+class SceneInfoListener : public DataReaderListener {
+ public:
+  void on_data_available(DataReader* reader) override {
+    SampleInfo info;
+    msg::SceneInfo s;
+    while (reader->take_next_sample(&s, &info) == ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      std::lock_guard<std::mutex> lock(mutex_);
+      info_ = s;
+      have_ = true;
+    }
+  }
+  bool get(msg::SceneInfo& out) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (have_) out = info_;
+    return have_;
+  }
+
+ private:
+  std::mutex mutex_;
+  msg::SceneInfo info_;
+  bool have_ = false;
+};
+
+Eigen::Vector3d from_msg(const msg::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
+Pose5 from_msg(const msg::ToolPose& p) {
+  Pose5 o;
+  o.pitch = p.pitch();
+  o.yaw = p.yaw();
+  o.insertion = p.insertion();
+  o.roll = p.roll();
+  o.jaw = p.jaw();
+  return o;
+}
+
+}  // namespace
+
+struct VisualApp::Dds {
+  explicit Dds(const dds::DdsOptions& o) : participant(o) {}
+  dds::Participant participant;
+  ContactFrameListener frames;
+  SceneInfoListener scene_info;
+  DataReader* frame_reader = nullptr;
+  DataReader* scene_reader = nullptr;
+  DataWriter* status_writer = nullptr;
+  msg::VisualStatus status;
+};
+
+VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
+  // --- init: scene and the visible mesh ---
+  scene_ = load_scene(resolve_scene_path(options_.scene));
+  rate_hz_ = options_.rate_hz > 0 ? options_.rate_hz : scene_.visual.rate_hz;
+  png_every_ = options_.png_every >= 0 ? options_.png_every : scene_.visual.png_every;
+  const std::string cache = options_.cache_dir.empty() ? default_cache_dir() : options_.cache_dir;
+  mesh_ = load_scene_mesh(scene_, cache, options_.quiet ? nullptr : &std::cerr);
+  surface_ = boundary_surface(mesh_);
+  scene_hash_ = scene_.hash() ^ (mesh_hash(mesh_) * 0x9E3779B97F4A7C15ull);
+
+  // --- init: renderer (no GL context at all when headless) ---
+  renderer_ = make_renderer(options_.headless ? "null" : "osmesa", scene_.visual.width, scene_.visual.height);
+  if (!options_.headless && png_every_ > 0) {
+    std::error_code ec;
+    std::filesystem::create_directories(options_.out, ec);
+    if (ec) throw_error(options_.out, ": cannot create the output folder (", ec.message(), ")");
+  }
+
+  // --- init: DDS ---
+  dds::DdsOptions dopt;
+  dopt.domain = options_.domain >= 0 ? options_.domain : dds::default_domain();
+  dopt.profiles_file = options_.dds_profiles.empty() ? config_dir() + "/dds/profiles.xml" : options_.dds_profiles;
+  dopt.participant_profile = options_.dds_participant;
+  dopt.name = "surgsim_visual";
+  dds_ = std::make_unique<Dds>(dopt);
+  auto& p = dds_->participant;
+  dds_->scene_reader = p.reader(p.topic(dds::kSceneInfoTopic, new msg::SceneInfoPubSubType()), dds::kLatchedReader,
+                                &dds_->scene_info);
+  dds_->frame_reader = p.reader(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()),
+                                dds::kStreamReader, &dds_->frames);
+  dds_->status_writer = p.writer(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()), dds::kStreamWriter);
+
+  if (!options_.quiet) {
+    std::cerr << "visual_node: scene '" << scene_.name << "', " << surface_.tris.rows() << " surface triangles, "
+              << renderer_->name() << " renderer " << scene_.visual.width << "x" << scene_.visual.height << " at "
+              << rate_hz_ << " Hz\n";
+  }
+}
+
+VisualApp::~VisualApp() = default;
+
+int VisualApp::run() {
+  using clock = std::chrono::steady_clock;
+  const auto period = std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / rate_hz_));
+  const std::uint64_t wall_start = monotonic_ns();
+  auto next = clock::now();
+
+  // Rest positions of the visible surface (float for the GPU); deformation is applied per frame.
+  Eigen::MatrixX3f positions = mesh_.nodes.cast<float>();
+  msg::ContactFrame frame;
+  bool have_frame = false;
+  bool hash_checked = false;
+  bool hash_ok = true;
+  const Eigen::Vector3f organ_rgb(0.62f, 0.22f, 0.18f);
+
+  while (!stop_requested_.load(std::memory_order_relaxed)) {
+    if (options_.duration >= 0 && static_cast<double>(monotonic_ns() - wall_start) * 1e-9 >= options_.duration) break;
+    if (options_.idle_exit > 0 && dds_->frames.received() > 0 &&
+        static_cast<double>(monotonic_ns() - dds_->frames.last_receive_ns()) * 1e-9 > options_.idle_exit) {
+      break;
+    }
+
+    // Check the haptic side's scene identity once it is known; refuse to draw frames of another scene.
+    msg::SceneInfo info;
+    if (!hash_checked && dds_->scene_info.get(info)) {
+      hash_checked = true;
+      hash_ok = info.scene_hash() == scene_hash_;
+      if (!hash_ok) {
+        std::cerr << "visual_node: the haptic node runs scene '" << info.scene_name() << "' (hash " << info.scene_hash()
+                  << ", mesh hash " << info.mesh_hash() << ") but this node loaded '" << scene_.name << "' (hash "
+                  << scene_hash_ << "): start both nodes with the same scene and mesh; contact frames are ignored\n";
+      }
+    }
+
+    std::uint64_t received = 0;
+    if (dds_->frames.newest(frame, received) && hash_ok) have_frame = true;
+
+    // Deformation of the visible mesh plugs in here (issue 5); the walking skeleton draws the rest shape.
+    const std::uint64_t d0 = monotonic_ns();
+    deform_us_.add(static_cast<double>(monotonic_ns() - d0) * 1e-3);
+
+    const std::uint64_t r0 = monotonic_ns();
+    renderer_->begin_frame(scene_.visual.camera);
+    renderer_->draw_surface(positions, surface_.tris, organ_rgb);
+    if (have_frame) renderer_->draw_tool(tool_geometry(scene_.tool, from_msg(frame.pose())), scene_.tool.shaft_radius);
+    renderer_->end_frame();
+    ++frames_rendered_;
+    if (png_every_ > 0 && !options_.headless && frames_rendered_ % static_cast<std::uint64_t>(png_every_) == 0) {
+      Image image;
+      if (renderer_->read_image(image)) {
+        char name[64];
+        std::snprintf(name, sizeof name, "frame_%06llu.png", static_cast<unsigned long long>(frames_rendered_));
+        const std::string path = options_.out + "/" + name;
+        write_png(path, image);
+        if (first_png_.empty()) first_png_ = path;
+        last_png_ = path;
+        ++pngs_written_;
+      }
+    }
+    render_ms_.add(static_cast<double>(monotonic_ns() - r0) * 1e-6);
+
+    // Echo the newest haptic stamp so the haptic node measures the round trip on its own clock.
+    auto& st = dds_->status;
+    st.stamp_ns(monotonic_ns());
+    st.fps(rate_hz_);
+    st.lod(0);
+    st.last_seq_shown(have_frame ? frame.seq() : 0);
+    st.echoed_stamp_ns(have_frame ? frame.stamp_ns() : 0);
+    st.frames_rendered(frames_rendered_);
+    dds_->status_writer->write(&st);
+
+    next += period;
+    const auto now = clock::now();
+    if (next < now) next = now;  // fell behind: do not burst
+    std::this_thread::sleep_until(next);
+  }
+  wall_seconds_ = static_cast<double>(monotonic_ns() - wall_start) * 1e-9;
+  return hash_ok ? 0 : 3;
+}
+
+void VisualApp::shutdown() {
+  msg::SceneInfo info;
+  const bool have_info = dds_->scene_info.get(info);
+  const Percentiles latency = dds_->frames.latency();
+  const Percentiles deform = deform_us_.summary();
+  const Percentiles render = render_ms_.summary();
+  nlohmann::json j;
+  j["node"] = "visual";
+  j["scene"] = scene_.name;
+  j["renderer"] = renderer_->name();
+  j["frames_received"] = dds_->frames.received();
+  j["frames_rendered"] = frames_rendered_;
+  j["pngs_written"] = pngs_written_;
+  j["fps"] = wall_seconds_ > 0 ? static_cast<double>(frames_rendered_) / wall_seconds_ : 0.0;
+  j["wall_seconds"] = wall_seconds_;
+  j["deform_us"] = to_json(deform);
+  j["render_ms"] = to_json(render);
+  j["latency_us"] = to_json(latency);
+  j["scene_info_received"] = have_info;
+  j["scene_hash_ok"] = have_info && info.scene_hash() == scene_hash_;
+  j["out"] = options_.out;
+  j["first_png"] = first_png_;
+  j["last_png"] = last_png_;
+  if (!options_.stats.empty()) write_json_file(options_.stats, j);
+  if (!options_.quiet) {
+    std::cerr << "visual_node: " << frames_rendered_ << " frames rendered (" << j["fps"].get<double>() << " fps), "
+              << j["frames_received"].get<std::uint64_t>() << " contact frames received, latency p50 " << latency.p50
+              << " us p99 " << latency.p99 << " us, " << pngs_written_ << " PNG in " << options_.out << "\n";
+  }
+}
+
+}  // namespace surgsim

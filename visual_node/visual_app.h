@@ -1,0 +1,67 @@
+// The visual node: init (scene, mesh, renderer, DDS), run (frame-paced loop drawing the newest contact frame),
+// shutdown (video, stats).
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "mesh.h"
+#include "scene.h"
+#include "stats.h"
+
+namespace surgsim {
+
+class Renderer;
+
+struct VisualOptions {
+  std::string scene = "liver";
+  double duration = -1;          // s of wall time; < 0: until stopped (SIGINT/SIGTERM) or idle exit
+  double idle_exit = 0;          // s without frames, after some were received, before exiting (0 = never)
+  std::string out = "out/frames";  // PNG / VTK output folder
+  bool headless = false;         // null renderer: no GL context
+  std::string stats;
+  std::string cache_dir;
+  int domain = -1;
+  std::string dds_profiles;
+  std::string dds_participant = "surgsim_default";
+  double rate_hz = 0;            // > 0 overrides the scene's visual rate
+  int png_every = -1;            // >= 0 overrides the scene's png_every
+  bool quiet = false;
+};
+
+class VisualApp {
+ public:
+  explicit VisualApp(const VisualOptions& options);
+  ~VisualApp();
+  VisualApp(const VisualApp&) = delete;
+  VisualApp& operator=(const VisualApp&) = delete;
+
+  int run();
+  void stop() { stop_requested_.store(true, std::memory_order_relaxed); }
+  void shutdown();
+
+ private:
+  struct Dds;
+
+  VisualOptions options_;
+  Scene scene_;
+  TetMesh mesh_;
+  SurfaceMesh surface_;
+  std::uint64_t scene_hash_ = 0;
+  std::unique_ptr<Renderer> renderer_;
+  std::unique_ptr<Dds> dds_;
+  std::atomic<bool> stop_requested_{false};
+
+  double rate_hz_ = 50;
+  int png_every_ = 5;
+  std::uint64_t frames_rendered_ = 0;
+  std::uint64_t pngs_written_ = 0;
+  double wall_seconds_ = 0;
+  SampleRecorder deform_us_{1 << 18};
+  SampleRecorder render_ms_{1 << 18};
+  std::string first_png_;
+  std::string last_png_;
+};
+
+}  // namespace surgsim
