@@ -4,6 +4,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace surgsim {
@@ -20,15 +21,25 @@ struct Material {
   double poisson_ratio = 0.45;    // [0, 0.5)
 };
 
-/// Fixed (clamped) nodes: the union of an index list, an axis-aligned box and the negative side of a plane.
+/// Fixed (clamped) nodes: the union of an index list, axis-aligned boxes and the negative side of a plane.
+/// YAML: `fixed: {nodes: [..], box: {min, max}, boxes: [{min, max}, ..], plane: {point, normal}}`, all optional.
+/// The single `box` key sets has_box/box_min/box_max AND is appended to `boxes`, so code that reads `boxes`
+/// sees every box; fixes() covers both (a box present in both places is counted once, harmlessly).
 struct FixedRegion {
   std::vector<int> nodes;                           // 0-based node indices in file order
   bool has_box = false;
   Eigen::Vector3d box_min = Eigen::Vector3d::Zero();  // m
   Eigen::Vector3d box_max = Eigen::Vector3d::Zero();  // m
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes;  // (min, max) per box, m; min < max
   bool has_plane = false;
   Eigen::Vector3d plane_point = Eigen::Vector3d::Zero();   // m
   Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitZ(); // unit; nodes with (x - point) . normal >= 0 are fixed
+
+  /// True if node `index` at rest position `x` (m) is fixed: listed, inside a box (bounds inclusive) or on
+  /// the fixed side of the plane.
+  bool fixes(int index, const Eigen::Vector3d& x) const;
+  /// True if nothing at all is fixed by this region.
+  bool empty() const { return nodes.empty() && !has_box && boxes.empty() && !has_plane; }
 };
 
 /// Quasi non-linear law (paper section 3.4): curve files and polynomial degree. Empty files: linear only.
@@ -88,11 +99,16 @@ struct Scene {
   VisualSpec visual;
   std::string trajectory;  // absolute path of the default trajectory, may be empty
 
-  /// Hash of everything both nodes must agree on (model, mesh source, material, fixed set, non-linear law, tool).
+  /// Hash of everything both nodes must agree on: model, mesh source (file NAME, not path or content; or
+  /// generator + target_nodes), material, fixed set, non-linear law (curve file names + degree), tool spec and
+  /// haptic rate. Name, visual settings and trajectory do not enter it. Stable across hosts and runs.
   std::uint64_t hash() const;
 };
 
 /// Loads and validates a scene. Throws surgsim::Error "FILE:LINE: key 'a.b': <what is wrong> (<fix>)".
+/// Every key is optional except `name` and `mesh` (`mesh` is optional for model "intestine"); unknown keys, wrong
+/// types, out-of-range values and referenced files (mesh, curves, surface, trajectory) that do not exist are
+/// errors. Relative paths are resolved against the scene file's folder; axes and normals are normalized.
 Scene load_scene(const std::string& path);
 
 /// Directory with shipped data (config/) for programs run from the build or source tree:
@@ -100,6 +116,7 @@ Scene load_scene(const std::string& path);
 std::string config_dir();
 
 /// Resolves a scene argument: an existing path, or a shipped scene name ("liver" -> config/liver.yaml).
+/// Throws surgsim::Error listing the shipped scenes when neither exists.
 std::string resolve_scene_path(const std::string& name_or_path);
 
 }  // namespace surgsim

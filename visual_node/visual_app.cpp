@@ -179,7 +179,7 @@ int VisualApp::run() {
   bool have_frame = false;
   bool hash_checked = false;
   bool hash_ok = true;
-  const Eigen::Vector3f organ_rgb(0.62f, 0.22f, 0.18f);
+  const Eigen::Vector3f organ_rgb = kLiverRgb;
 
   while (!stop_requested_.load(std::memory_order_relaxed)) {
     if (options_.duration >= 0 && static_cast<double>(monotonic_ns() - wall_start) * 1e-9 >= options_.duration) break;
