@@ -14,6 +14,7 @@ struct TetMesh {
   Eigen::MatrixX4i tets;           // #T x 4, indices into nodes, positively oriented after validation/repair
   std::vector<std::int64_t> ids;   // #V, the node id used in the source file (for messages); may be empty
   std::string source;              // file it came from ("" when generated in memory), used in messages
+  std::vector<std::int64_t> tet_ids;  // #T, the element id used in the source file (for messages); may be empty
 };
 
 /// A triangle surface. tris index into `nodes` of the owning TetMesh (not compacted) unless stated otherwise.
@@ -23,8 +24,9 @@ struct SurfaceMesh {
 };
 
 /// Reads .msh (v1, v2 or v4 ASCII) or .vtk (legacy ASCII unstructured grid), chosen by extension.
-/// Keeps tetrahedra only (other element types are skipped; a file with none is an error).
-/// Throws surgsim::Error naming the file and line on any malformed input.
+/// Keeps tetrahedra only (other element types are skipped; a file with none is an error). Second-order tets
+/// (Gmsh type 11, VTK type 24) and binary files are refused. Does not validate: call validate_mesh next.
+/// Throws surgsim::Error naming the file and line on any malformed input ("FILE:LINE: what").
 TetMesh read_mesh(const std::string& path);
 TetMesh read_msh(const std::string& path);
 TetMesh read_vtk(const std::string& path);
@@ -49,8 +51,8 @@ struct MeshValidation {
 
 /// Validates (and, if allowed, repairs orientation of) a mesh: non-finite coordinates, out-of-range indices,
 /// repeated nodes in a tet, zero-volume tets, inverted tets (when not fixing), unreferenced nodes,
-/// non-manifold boundary (an edge shared by other than two boundary faces). Throws surgsim::Error naming the file
-/// and the element (file id) at fault.
+/// non-manifold boundary (an edge shared by other than two boundary faces; a face shared by more than two tets).
+/// Throws surgsim::Error naming the file and the element (file id) at fault; on error the mesh is left unchanged.
 void validate_mesh(TetMesh& mesh, const MeshValidation& opts = {});
 
 /// Content hash of nodes and tets (used by scenes, caches, SceneInfo).
