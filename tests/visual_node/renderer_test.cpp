@@ -1,0 +1,462 @@
+#include "renderer.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <utility>
+#include <vector>
+
+#include "error.h"
+
+namespace surgsim {
+namespace {
+
+constexpr int kWidth = 320;
+constexpr int kHeight = 240;
+
+struct Surface {
+  Eigen::MatrixX3f positions;  // #V x 3
+  Eigen::MatrixX3i tris;       // #F x 3, outward
+};
+
+/// Icosphere with shared vertices (so that smooth normals and dents behave as on an organ surface).
+Surface icosphere(int subdivisions, float radius) {
+  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
+  std::vector<Eigen::Vector3f> p = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                                    {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  for (auto& v : p) v.normalize();
+  std::vector<Eigen::Vector3i> f = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
+                                    {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
+                                    {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
+                                    {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
+  for (int s = 0; s < subdivisions; ++s) {
+    std::map<std::pair<int, int>, int> midpoints;
+    auto mid = [&](int a, int b) {
+      const auto key = std::minmax(a, b);
+      const auto it = midpoints.find(key);
+      if (it != midpoints.end()) return it->second;
+      p.push_back((p[a] + p[b]).normalized());
+      const int id = static_cast<int>(p.size()) - 1;
+      midpoints.emplace(key, id);
+      return id;
+    };
+    std::vector<Eigen::Vector3i> next;
+    for (const auto& tri : f) {
+      const int ab = mid(tri[0], tri[1]), bc = mid(tri[1], tri[2]), ca = mid(tri[2], tri[0]);
+      next.push_back({tri[0], ab, ca});
+      next.push_back({tri[1], bc, ab});
+      next.push_back({tri[2], ca, bc});
+      next.push_back({ab, bc, ca});
+    }
+    f.swap(next);
+  }
+  Surface s;
+  s.positions.resize(static_cast<Eigen::Index>(p.size()), 3);
+  for (std::size_t i = 0; i < p.size(); ++i) s.positions.row(static_cast<Eigen::Index>(i)) = radius * p[i].transpose();
+  s.tris.resize(static_cast<Eigen::Index>(f.size()), 3);
+  for (std::size_t i = 0; i < f.size(); ++i) s.tris.row(static_cast<Eigen::Index>(i)) = f[i].transpose();
+  return s;
+}
+
+/// Looking at the origin from -y, z up, 4 m away: a unit sphere fills a good part of the picture.
+Camera front_camera() {
+  Camera c;
+  c.eye = {0, -4, 0};
+  c.target = {0, 0, 0};
+  c.up = {0, 0, 1};
+  c.fov_deg = 35.0;
+  return c;
+}
+
+bool is_background(const Image& image, int x, int y) {
+  const std::uint8_t* p = image.at(x, y);
+  return p[0] == kBackgroundRgb[0] && p[1] == kBackgroundRgb[1] && p[2] == kBackgroundRgb[2];
+}
+
+double foreground_fraction(const Image& image) {
+  int n = 0;
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) n += is_background(image, x, y) ? 0 : 1;
+  }
+  return static_cast<double>(n) / (image.width * image.height);
+}
+
+Image render_surface(Renderer& renderer, const Surface& surface, const Camera& camera = front_camera()) {
+  renderer.begin_frame(camera);
+  renderer.draw_surface(surface.positions, surface.tris, kLiverRgb);
+  renderer.end_frame();
+  Image image;
+  EXPECT_TRUE(renderer.read_image(image));
+  return image;
+}
+
+std::string temp_path(const std::string& name) { return ::testing::TempDir() + name; }
+
+TEST(OsMesaRenderer, CoreProfileContext) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  std::printf("renderer: %s\n", renderer->info().c_str());
+  // The core profile is what we ask for; "osmesa-compat" would mean Mesa refused it (still usable).
+  EXPECT_STREQ(renderer->name(), "osmesa");
+  EXPECT_EQ(renderer->width(), kWidth);
+  EXPECT_EQ(renderer->height(), kHeight);
+}
+
+TEST(OsMesaRenderer, SphereIsVisibleRedAndFramed) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  const Image image = render_surface(*renderer, icosphere(3, 1.0f));
+  ASSERT_EQ(image.width, kWidth);
+  ASSERT_EQ(image.height, kHeight);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+  EXPECT_EQ(renderer->counts().surfaces, 1u);
+
+  // A unit sphere 4 m away with a 35 degree field of view covers about a third of the picture.
+  const double fraction = foreground_fraction(image);
+  EXPECT_GT(fraction, 0.2);
+  EXPECT_LT(fraction, 0.6);
+  const std::uint8_t* centre = image.at(kWidth / 2, kHeight / 2);
+  EXPECT_GT(centre[0], centre[1] + 40) << "centre should be the organ's red-brown";
+  EXPECT_GT(centre[0], centre[2] + 40);
+  for (const auto& [x, y] : {std::pair{0, 0}, {kWidth - 1, 0}, {0, kHeight - 1}, {kWidth - 1, kHeight - 1}}) {
+    EXPECT_TRUE(is_background(image, x, y)) << "corner " << x << "," << y;
+  }
+  // The sphere is centred: its projected centre is the image centre.
+  const Eigen::Vector2f c = project_to_pixel(front_camera(), kWidth, kHeight, Eigen::Vector3f::Zero());
+  EXPECT_NEAR(c.x(), kWidth / 2.0f, 1e-3f);
+  EXPECT_NEAR(c.y(), kHeight / 2.0f, 1e-3f);
+
+  // Written as a PNG that reads back to the same pixels.
+  const std::string path = temp_path("surgsim_renderer_sphere.png");
+  write_png(path, image);
+  const Image back = read_png(path);
+  EXPECT_EQ(back.width, kWidth);
+  EXPECT_EQ(back.height, kHeight);
+  EXPECT_TRUE(back.rgb == image.rgb);
+}
+
+TEST(OsMesaRenderer, ShadingFollowsTheKeyLight) {
+  // The key light comes from the viewer's upper left: that side of the sphere is brighter than the lower right.
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  const Image image = render_surface(*renderer, icosphere(3, 1.0f));
+  const Eigen::Vector2f c = project_to_pixel(front_camera(), kWidth, kHeight, Eigen::Vector3f::Zero());
+  const Eigen::Vector2f edge = project_to_pixel(front_camera(), kWidth, kHeight, Eigen::Vector3f(0, 0, 1));
+  const float r_px = c.y() - edge.y();  // projected radius, about
+  auto brightness = [&](float dx, float dy) {
+    const std::uint8_t* p = image.at(static_cast<int>(c.x() + dx * r_px), static_cast<int>(c.y() + dy * r_px));
+    return static_cast<int>(p[0]) + p[1] + p[2];
+  };
+  const int upper_left = brightness(-0.4f, -0.5f);
+  const int lower_right = brightness(0.5f, 0.5f);
+  EXPECT_GT(upper_left, lower_right + 60) << "upper left " << upper_left << ", lower right " << lower_right;
+
+  // Not a flat silhouette: the red channel spans a wide range over the sphere.
+  int lo = 255, hi = 0;
+  for (int y = 0; y < kHeight; ++y) {
+    for (int x = 0; x < kWidth; ++x) {
+      if (is_background(image, x, y)) continue;
+      lo = std::min<int>(lo, image.at(x, y)[0]);
+      hi = std::max<int>(hi, image.at(x, y)[0]);
+    }
+  }
+  EXPECT_GT(hi - lo, 80);
+}
+
+TEST(OsMesaRenderer, DentChangesPixelsNearItOnly) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  Surface sphere = icosphere(3, 1.0f);
+  const Image before = render_surface(*renderer, sphere);
+
+  // Push a cap of vertices (within 20 degrees of a direction on the visible side) inwards.
+  const Eigen::Vector3f dent_dir = Eigen::Vector3f(0.45f, -1.0f, 0.4f).normalized();
+  int moved = 0;
+  for (Eigen::Index v = 0; v < sphere.positions.rows(); ++v) {
+    const Eigen::Vector3f p = sphere.positions.row(v).transpose();
+    const float cos_angle = p.normalized().dot(dent_dir);
+    if (cos_angle > std::cos(20.0f * 3.14159265f / 180.0f)) {
+      sphere.positions.row(v) *= 0.75f;
+      ++moved;
+    }
+  }
+  ASSERT_GT(moved, 3);
+  const Image after = render_surface(*renderer, sphere);
+
+  const Eigen::Vector2f dent_px = project_to_pixel(front_camera(), kWidth, kHeight, dent_dir);
+  const Eigen::Vector2f c = project_to_pixel(front_camera(), kWidth, kHeight, Eigen::Vector3f::Zero());
+  const Eigen::Vector2f edge = project_to_pixel(front_camera(), kWidth, kHeight, Eigen::Vector3f(0, 0, 1));
+  const float r_px = c.y() - edge.y();
+  int changed_near = 0, changed_far = 0;
+  for (int y = 0; y < kHeight; ++y) {
+    for (int x = 0; x < kWidth; ++x) {
+      const bool changed = !std::equal(before.at(x, y), before.at(x, y) + 3, after.at(x, y));
+      const float d = (Eigen::Vector2f(x + 0.5f, y + 0.5f) - dent_px).norm();
+      if (d < 0.2f * r_px) changed_near += changed ? 1 : 0;
+      // The cap plus one ring of neighbours (whose normals change) spans well under one sphere radius.
+      if (d > r_px) changed_far += changed ? 1 : 0;
+    }
+  }
+  EXPECT_GT(changed_near, 50);
+  EXPECT_EQ(changed_far, 0);
+}
+
+TEST(OsMesaRenderer, ToolShaftAndJawsAreDrawn) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  ToolGeometry tool{};
+  tool.trocar = {-1.2, 0.0, 1.0};
+  tool.tip = {0.3, 0.0, -0.2};
+  tool.direction = (tool.tip - tool.trocar).normalized();
+  tool.jaw_normal = {0, -1, 0};
+  const Eigen::Vector3d side = tool.direction.cross(tool.jaw_normal).normalized();
+  tool.jaw_tips[0] = tool.tip + 0.25 * (tool.direction + 0.5 * side).normalized();
+  tool.jaw_tips[1] = tool.tip + 0.25 * (tool.direction - 0.5 * side).normalized();
+
+  const Camera camera = front_camera();
+  renderer->begin_frame(camera);
+  renderer->draw_tool(tool, 0.05f);
+  renderer->end_frame();
+  Image image;
+  ASSERT_TRUE(renderer->read_image(image));
+  EXPECT_EQ(renderer->counts().tools, 1u);
+
+  const Eigen::Vector2f a = project_to_pixel(camera, kWidth, kHeight, tool.trocar.cast<float>());
+  const Eigen::Vector2f b = project_to_pixel(camera, kWidth, kHeight, tool.tip.cast<float>());
+  const Eigen::Vector2f normal = Eigen::Vector2f(-(b - a).y(), (b - a).x()).normalized();
+  for (float s = 0.1f; s < 0.95f; s += 0.1f) {
+    const Eigen::Vector2f q = a + s * (b - a);
+    const int x = static_cast<int>(q.x()), y = static_cast<int>(q.y());
+    ASSERT_TRUE(x >= 0 && x < kWidth && y >= 0 && y < kHeight);
+    EXPECT_FALSE(is_background(image, x, y)) << "shaft at s = " << s;
+    const std::uint8_t* p = image.at(x, y);
+    EXPECT_LT(std::abs(p[0] - p[2]), 40) << "shaft should be grey at s = " << s;
+    const Eigen::Vector2f off = q + 25.0f * normal;  // well beside the shaft (about 10 px wide)
+    EXPECT_TRUE(is_background(image, static_cast<int>(off.x()), static_cast<int>(off.y()))) << "beside, s = " << s;
+  }
+  // Each jaw, halfway along.
+  for (const auto& jaw : tool.jaw_tips) {
+    const Eigen::Vector2f q = project_to_pixel(camera, kWidth, kHeight, (0.5 * (tool.tip + jaw)).cast<float>());
+    EXPECT_FALSE(is_background(image, static_cast<int>(q.x()), static_cast<int>(q.y())));
+  }
+}
+
+TEST(OsMesaRenderer, PointsAreDrawnAsMarkers) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  Eigen::MatrixX3f points(2, 3);
+  points << -0.8f, 0.0f, 0.3f, 0.7f, 0.0f, -0.5f;
+  renderer->begin_frame(front_camera());
+  renderer->draw_points(points, 0.06f, kMarkerRgb);
+  renderer->end_frame();
+  Image image;
+  ASSERT_TRUE(renderer->read_image(image));
+  EXPECT_EQ(renderer->counts().points, 2u);
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    const Eigen::Vector2f q = project_to_pixel(front_camera(), kWidth, kHeight, points.row(i).transpose());
+    const std::uint8_t* p = image.at(static_cast<int>(q.x()), static_cast<int>(q.y()));
+    EXPECT_GT(p[0], p[2] + 60) << "marker " << i << " should be yellow";
+    EXPECT_GT(p[1], p[2] + 60) << "marker " << i << " should be yellow";
+  }
+  EXPECT_LT(foreground_fraction(image), 0.05);
+}
+
+TEST(OsMesaRenderer, DeterministicAcrossFramesAndInstances) {
+  const Surface sphere = icosphere(3, 1.0f);
+  auto first = make_renderer("osmesa", kWidth, kHeight);
+  auto second = make_renderer("osmesa", kWidth, kHeight);
+  // Interleaved use: each renderer makes its own context current.
+  const Image a1 = render_surface(*first, sphere);
+  const Image b1 = render_surface(*second, sphere);
+  const Image a2 = render_surface(*first, sphere);
+  EXPECT_TRUE(a1.rgb == a2.rgb);
+  EXPECT_TRUE(a1.rgb == b1.rgb);
+}
+
+TEST(OsMesaRenderer, MeshSizeChangesReuseBuffers) {
+  // Small -> large -> small through the same surface slot: buffers grow once, then are updated in place.
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  const Surface coarse = icosphere(1, 1.0f);
+  const Surface fine = icosphere(3, 1.0f);
+  const Image c1 = render_surface(*renderer, coarse);
+  const Image f1 = render_surface(*renderer, fine);
+  const Image c2 = render_surface(*renderer, coarse);
+  EXPECT_FALSE(c1.rgb == f1.rgb);
+  EXPECT_TRUE(c1.rgb == c2.rgb);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+
+  // Two surfaces in one frame use two slots: a second sphere beside the first.
+  Surface small = icosphere(2, 0.3f);
+  small.positions.col(0).array() += 1.4f;
+  renderer->begin_frame(front_camera());
+  renderer->draw_surface(fine.positions, fine.tris, kLiverRgb);
+  renderer->draw_surface(small.positions, small.tris, Eigen::Vector3f(0.3f, 0.5f, 0.8f));
+  renderer->end_frame();
+  Image two;
+  ASSERT_TRUE(renderer->read_image(two));
+  const Eigen::Vector2f q = project_to_pixel(front_camera(), kWidth, kHeight, Eigen::Vector3f(1.4f, -0.3f, 0.0f));
+  const std::uint8_t* p = two.at(static_cast<int>(q.x()), static_cast<int>(q.y()));
+  EXPECT_GT(p[2], p[0]) << "the second surface is blue";
+  EXPECT_EQ(renderer->counts().surfaces, 5u);
+}
+
+TEST(OsMesaRenderer, BadInputIsSkippedAndCounted) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  Surface sphere = icosphere(1, 1.0f);
+  Surface bad_index = sphere;
+  bad_index.tris(3, 1) = static_cast<int>(sphere.positions.rows());
+  Surface bad_position = sphere;
+  bad_position.positions(0, 2) = std::nanf("");
+  ToolGeometry bad_tool{};
+  bad_tool.trocar = {0, 0, 1};
+  bad_tool.tip = {0, 0, std::nan("")};
+  bad_tool.jaw_tips = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+
+  renderer->begin_frame(front_camera());
+  renderer->draw_surface(bad_index.positions, bad_index.tris, kLiverRgb);
+  renderer->draw_surface(bad_position.positions, bad_position.tris, kLiverRgb);
+  renderer->draw_tool(bad_tool, 0.05f);
+  renderer->end_frame();
+  Image image;
+  ASSERT_TRUE(renderer->read_image(image));
+  EXPECT_EQ(renderer->counts().rejected, 3u);
+  EXPECT_EQ(renderer->counts().surfaces, 0u);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+  EXPECT_EQ(foreground_fraction(image), 0.0);
+}
+
+TEST(NullRenderer, CountsAndHasNoImage) {
+  auto renderer = make_renderer("null", 640, 480);
+  EXPECT_STREQ(renderer->name(), "null");
+  Image image;
+  EXPECT_FALSE(renderer->read_image(image));
+  const Surface sphere = icosphere(1, 1.0f);
+  ToolGeometry tool{};
+  tool.trocar = {0, 0, 1};
+  tool.tip = {0, 0, 0};
+  tool.jaw_tips = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+  Eigen::MatrixX3f points = Eigen::MatrixX3f::Zero(3, 3);
+  for (int frame = 0; frame < 2; ++frame) {
+    renderer->begin_frame(front_camera());
+    renderer->draw_surface(sphere.positions, sphere.tris, kLiverRgb);
+    renderer->draw_tool(tool, 0.01f);
+    renderer->draw_points(points, 0.01f, kMarkerRgb);
+    renderer->end_frame();
+  }
+  EXPECT_FALSE(renderer->read_image(image));
+  EXPECT_EQ(renderer->counts().frames, 2u);
+  EXPECT_EQ(renderer->counts().surfaces, 2u);
+  EXPECT_EQ(renderer->counts().tools, 2u);
+  EXPECT_EQ(renderer->counts().points, 6u);
+  EXPECT_EQ(renderer->counts().rejected, 0u);
+}
+
+TEST(MakeRenderer, RefusesUnknownBackendAndBadSize) {
+  try {
+    make_renderer("vulkan", 64, 64);
+    FAIL() << "expected surgsim::Error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("vulkan"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(make_renderer("null", 0, 64), Error);
+  EXPECT_THROW(make_renderer("osmesa", 64, 100000), Error);
+}
+
+TEST(WritePng, UnwritablePathThrowsNamingIt) {
+  Image image;
+  image.resize(8, 8);
+  const std::string path = "/nonexistent-surgsim-dir/frame.png";
+  try {
+    write_png(path, image);
+    FAIL() << "expected surgsim::Error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+  }
+  Image malformed;
+  malformed.width = 4;
+  malformed.height = 4;  // no pixels
+  EXPECT_THROW(write_png(temp_path("surgsim_malformed.png"), malformed), Error);
+}
+
+TEST(WritePng, HeaderAndPixelsReadBack) {
+  Image image;
+  image.resize(37, 11);  // odd width: rows are not 4-byte aligned
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) {
+      std::uint8_t* p = image.at(x, y);
+      p[0] = static_cast<std::uint8_t>(7 * x);
+      p[1] = static_cast<std::uint8_t>(23 * y);
+      p[2] = static_cast<std::uint8_t>(x * y);
+    }
+  }
+  const std::string path = temp_path("surgsim_gradient.png");
+  write_png(path, image);
+
+  // The signature, then IHDR with big-endian width and height, 8-bit RGB (colour type 2).
+  std::ifstream in(path, std::ios::binary);
+  const std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(bytes.size(), 33u);
+  const unsigned char signature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  EXPECT_TRUE(std::equal(signature, signature + 8, bytes.begin()));
+  EXPECT_EQ(std::string(bytes.begin() + 12, bytes.begin() + 16), "IHDR");
+  auto be32 = [&](int at) { return (bytes[at] << 24) | (bytes[at + 1] << 16) | (bytes[at + 2] << 8) | bytes[at + 3]; };
+  EXPECT_EQ(be32(16), 37);
+  EXPECT_EQ(be32(20), 11);
+  EXPECT_EQ(bytes[24], 8);
+  EXPECT_EQ(bytes[25], 2);
+
+  const Image back = read_png(path);
+  EXPECT_EQ(back.width, 37);
+  EXPECT_EQ(back.height, 11);
+  EXPECT_TRUE(back.rgb == image.rgb);
+  EXPECT_THROW(read_png(temp_path("surgsim_no_such_file.png")), Error);
+}
+
+TEST(VertexNormals, SphereNormalsPointOutwards) {
+  const Surface sphere = icosphere(2, 2.0f);
+  Eigen::MatrixX3f normals(sphere.positions.rows(), 3);
+  vertex_normals(sphere.positions, sphere.tris, normals);
+  ASSERT_EQ(normals.rows(), sphere.positions.rows());
+  for (Eigen::Index v = 0; v < normals.rows(); ++v) {
+    EXPECT_NEAR(normals.row(v).norm(), 1.0f, 1e-5f);
+    EXPECT_GT(normals.row(v).dot(sphere.positions.row(v).normalized()), 0.99f);
+  }
+}
+
+TEST(VertexNormals, WritesIntoAnInterleavedBuffer) {
+  // The OSMesa backend writes normals straight into its x y z nx ny nz buffer: same values as a plain matrix.
+  const Surface sphere = icosphere(1, 1.0f);
+  const Eigen::Index nv = sphere.positions.rows();
+  Eigen::MatrixX3f plain(nv, 3);
+  vertex_normals(sphere.positions, sphere.tris, plain);
+  std::vector<float> interleaved(static_cast<std::size_t>(6 * nv), -7.0f);
+  using Strided = Eigen::Map<Eigen::MatrixX3f, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+  vertex_normals(sphere.positions, sphere.tris,
+                 Strided(interleaved.data() + 3, nv, 3, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(1, 6)));
+  for (Eigen::Index v = 0; v < nv; ++v) {
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(interleaved[6 * v + 3 + k], plain(v, k));
+      EXPECT_EQ(interleaved[6 * v + k], -7.0f) << "positions' slots untouched";
+    }
+  }
+}
+
+TEST(VertexNormals, WeightedByFaceArea) {
+  // Vertex 0 is shared by a large face in the xy plane (area 8, normal +z) and a small one in the xz plane
+  // (area 0.5, normal -y): its normal is (0, -0.5, 8) normalized. Vertex 5 is in no face.
+  Eigen::MatrixX3f p(6, 3);
+  p << 0, 0, 0,  4, 0, 0,  0, 4, 0,  1, 0, 0,  0, 0, 1,  9, 9, 9;
+  Eigen::MatrixX3i t(2, 3);
+  t << 0, 1, 2,  0, 3, 4;
+  Eigen::MatrixX3f normals(p.rows(), 3);
+  vertex_normals(p, t, normals);
+  const Eigen::RowVector3f expected = Eigen::RowVector3f(0.0f, -0.5f, 8.0f).normalized();
+  EXPECT_LT((normals.row(0) - expected).norm(), 1e-6f);
+  EXPECT_LT((normals.row(1) - Eigen::RowVector3f(0, 0, 1)).norm(), 1e-6f);
+  EXPECT_LT((normals.row(3) - Eigen::RowVector3f(0, -1, 0)).norm(), 1e-6f);
+  EXPECT_LT((normals.row(5) - Eigen::RowVector3f(0, 0, 1)).norm(), 1e-6f);
+}
+
+}  // namespace
+}  // namespace surgsim

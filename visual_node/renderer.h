@@ -1,0 +1,102 @@
+// The visual node's renderer behind an interface (DESIGN.md section 3): an OSMesa backend that draws off-screen
+// and a null backend that only counts calls (--headless, and tests of the visual logic without a GL context).
+//
+// A frame is: begin_frame(camera), any number of draw_* calls, end_frame(), then optionally read_image().
+// Construction may throw (no GL context, shader compile failure); the per-frame calls never throw: input they
+// cannot draw (out-of-range indices, non-finite coordinates) is skipped and counted in counts().rejected.
+#pragma once
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "image.h"
+#include "scene.h"
+#include "tool.h"
+
+namespace surgsim {
+
+/// Default colours, linear RGB in [0, 1].
+inline const Eigen::Vector3f kLiverRgb(0.58f, 0.20f, 0.15f);    // red-brown liver
+inline const Eigen::Vector3f kMarkerRgb(0.95f, 0.85f, 0.20f);   // contact-point markers
+/// Background, as stored in the image (a dark neutral, not black, so a test can tell foreground apart).
+constexpr std::uint8_t kBackgroundRgb[3] = {40, 42, 48};
+
+/// What a renderer was asked to do (both backends count the same way).
+struct RenderCounts {
+  std::uint64_t frames = 0;     // end_frame calls
+  std::uint64_t surfaces = 0;   // draw_surface calls drawn
+  std::uint64_t tools = 0;      // draw_tool calls drawn
+  std::uint64_t points = 0;     // markers drawn (sum of rows passed to draw_points)
+  std::uint64_t rejected = 0;   // draw calls skipped because of bad input
+  std::uint64_t gl_errors = 0;  // frames that ended with a GL error flag (OSMesa only)
+};
+
+class Renderer {
+ public:
+  virtual ~Renderer() = default;
+
+  /// Starts a frame: clears to the background and sets view and projection from `camera` (vertical field of view;
+  /// near and far planes follow the eye-target distance).
+  virtual void begin_frame(const Camera& camera) = 0;
+
+  /// A triangle surface. positions: #V x 3, m; tris: #F x 3 indices into positions, counter-clockwise seen from
+  /// outside. Smooth normals (area-weighted per vertex) are recomputed from the positions on every call; both
+  /// sides are lit. GPU buffers are allocated for the largest size seen and then only updated.
+  virtual void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions,
+                            const Eigen::Ref<const Eigen::MatrixX3i>& tris, const Eigen::Vector3f& rgb) = 0;
+
+  /// The tool in metallic grey: the shaft as a cylinder of `radius` (m) from tool.trocar to tool.tip, and the two
+  /// jaws as thinner cylinders from the tip to jaw_tips[0] and jaw_tips[1].
+  virtual void draw_tool(const ToolGeometry& tool, float radius) = 0;
+
+  /// Small spheres of `radius` (m) at each row of `points` (#P x 3, m), e.g. contact points.
+  virtual void draw_points(const Eigen::Ref<const Eigen::MatrixX3f>& points, float radius,
+                           const Eigen::Vector3f& rgb) = 0;
+
+  /// Finishes the frame (waits for the rasterizer, so the time of begin..end is the render time).
+  virtual void end_frame() = 0;
+
+  /// Copies the last finished frame into `out` (resized to width x height; row 0 = top; reuses its capacity).
+  /// False when the backend has no image (null) or no frame has been finished yet.
+  virtual bool read_image(Image& out) = 0;
+
+  /// "osmesa" (core profile), "osmesa-compat" (core profile unavailable) or "null".
+  virtual const char* name() const = 0;
+  /// One line for logs, e.g. the GL version and renderer string.
+  virtual std::string info() const = 0;
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  const RenderCounts& counts() const { return counts_; }
+
+ protected:
+  Renderer(int width, int height) : width_(width), height_(height) {}
+  int width_;
+  int height_;
+  RenderCounts counts_;
+};
+
+/// Creates a renderer: backend "osmesa" or "null"; width and height in pixels (16..8192).
+/// Throws surgsim::Error on an unknown backend, a bad size, or when the GL context or shaders cannot be created.
+std::unique_ptr<Renderer> make_renderer(const std::string& backend, int width, int height);
+
+// Geometry shared by the backends and by tests (pure; no GL).
+
+/// Any #V x 3 float view: a plain MatrixX3f, or a strided Map into an interleaved vertex buffer.
+using MatrixX3fView = Eigen::Ref<Eigen::MatrixX3f, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+
+/// Area-weighted vertex normals: each vertex gets the normalized sum of the cross products of its faces.
+/// `normals` must already be #V x 3 (nothing is allocated); a vertex without faces (or with a degenerate fan)
+/// gets (0, 0, 1). Indices must be in range (not checked here).
+void vertex_normals(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
+                    MatrixX3fView normals);
+
+/// World -> view (right-handed, camera looking down -z) for camera.eye/target/up.
+Eigen::Matrix4f view_matrix(const Camera& camera);
+/// View -> clip (OpenGL conventions) for the camera's vertical field of view and the image aspect (width / height).
+Eigen::Matrix4f projection_matrix(const Camera& camera, float aspect);
+/// Where a world point lands in a width x height image: x right, y down (row 0 = top), pixel centres at +0.5.
+Eigen::Vector2f project_to_pixel(const Camera& camera, int width, int height, const Eigen::Vector3f& world);
+
+}  // namespace surgsim
