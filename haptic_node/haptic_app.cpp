@@ -13,6 +13,7 @@
 #include "error.h"
 #include "rt_loop.h"
 #include "scene_mesh.h"
+#include "tensor_cache.h"
 #include "tool.h"
 
 namespace surgsim {
@@ -143,7 +144,7 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   info.scene_name(scene_.name);
   info.scene_hash(scene_hash_);
   info.mesh_hash(mesh_hash_);
-  info.material_hash(Hasher().value(scene_.material.young_modulus).value(scene_.material.poisson_ratio).digest());
+  info.material_hash(material_hash(scene_.material));
   info.tensor_hash(0);
   info.node_count(static_cast<std::uint32_t>(mesh_.nodes.rows()));
   info.surface_node_count(static_cast<std::uint32_t>(surface_.nodes.size()));

@@ -214,15 +214,19 @@ int VisualApp::run() {
     renderer_->end_frame();
     ++frames_rendered_;
     if (png_every_ > 0 && !options_.headless && frames_rendered_ % static_cast<std::uint64_t>(png_every_) == 0) {
-      Image image;
-      if (renderer_->read_image(image)) {
+      if (renderer_->read_image(image_)) {
         char name[64];
         std::snprintf(name, sizeof name, "frame_%06llu.png", static_cast<unsigned long long>(frames_rendered_));
         const std::string path = options_.out + "/" + name;
-        write_png(path, image);
-        if (first_png_.empty()) first_png_ = path;
-        last_png_ = path;
-        ++pngs_written_;
+        // A full disk must not stop the display: count the failure, keep drawing.
+        try {
+          write_png(path, image_);
+          if (first_png_.empty()) first_png_ = path;
+          last_png_ = path;
+          ++pngs_written_;
+        } catch (const Error& e) {
+          if (png_errors_++ == 0) std::cerr << "visual_node: " << e.what() << " (further PNG errors counted)\n";
+        }
       }
     }
     render_ms_.add(static_cast<double>(monotonic_ns() - r0) * 1e-6);
@@ -259,6 +263,7 @@ void VisualApp::shutdown() {
   j["frames_received"] = dds_->frames.received();
   j["frames_rendered"] = frames_rendered_;
   j["pngs_written"] = pngs_written_;
+  j["png_errors"] = png_errors_;
   j["fps"] = wall_seconds_ > 0 ? static_cast<double>(frames_rendered_) / wall_seconds_ : 0.0;
   j["wall_seconds"] = wall_seconds_;
   j["deform_us"] = to_json(deform);

@@ -6,6 +6,7 @@
 #include <memory>
 #include <string>
 
+#include "image.h"
 #include "mesh.h"
 #include "scene.h"
 #include "stats.h"
@@ -57,6 +58,8 @@ class VisualApp {
   int png_every_ = 5;
   std::uint64_t frames_rendered_ = 0;
   std::uint64_t pngs_written_ = 0;
+  std::uint64_t png_errors_ = 0;
+  Image image_;  // read-back buffer, reused every frame
   double wall_seconds_ = 0;
   SampleRecorder deform_us_{1 << 18};
   SampleRecorder render_ms_{1 << 18};

@@ -1,0 +1,67 @@
+// Generated organs (plate, cylinder, liver-shaped solid) tetrahedralized with Gmsh's C++ API, with a node-count
+// control and an on-disk cache of .msh/.vtk files.
+//
+// Gmsh keeps global state and is not thread-safe: every function here that meshes takes a process-wide lock,
+// initializes Gmsh, and finalizes it before returning. Do not call them while your own code holds a Gmsh session
+// (gmsh::initialize without gmsh::finalize): the two would share, and then destroy, the same global model.
+#pragma once
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "mesh.h"
+
+namespace surgsim {
+
+/// Node counts a spec may ask for (inclusive).
+inline constexpr int kMinOrganNodes = 100;
+inline constexpr int kMaxOrganNodes = 200000;
+
+/// What to generate. Shapes (units m, z up):
+///  - "plate":    0.20 x 0.20 x 0.01 box centred at the origin;
+///  - "cylinder": radius 0.025, height 0.10, axis z, base at z = 0;
+///  - "liver":    smooth lobed solid in about x [-0.13, 0.13], y [-0.08, 0.08], z [-0.036, 0.043]: large right
+///                lobe (x > 0), thinner left lobe tapering towards -x, a notch on the front edge (y < 0) between
+///                them, flat underside near z = -0.035; the top above (0.03, 0) is at z = 0.042.
+struct OrganSpec {
+  std::string shape;        // "liver" | "plate" | "cylinder"
+  int target_nodes = 1500;  // wanted node count, kMinOrganNodes..kMaxOrganNodes; achieved within about +-20 %
+};
+
+/// How a mesh was obtained (filled by generate_organ when asked).
+struct OrganMeshReport {
+  int nodes = 0;              // achieved node count
+  int tets = 0;               // achieved tetrahedron count
+  int attempts = 0;           // Gmsh meshings: 1 + re-meshes for the node count (<= 2) or a flat tet (<= 2)
+  double mesh_size = 0.0;     // m, the characteristic length of the kept attempt
+  double min_quality = 0.0;   // worst tet's 6 sqrt(2) |V| / l_rms^3 (1 regular, 0 flat); about 0.2..0.3 here
+  double seconds = 0.0;       // wall time of the whole generation, s
+};
+
+/// The shapes generate_organ knows, in a stable order.
+const std::vector<std::string>& organ_shapes();
+
+/// Throws surgsim::Error with a one-line reason if the shape is unknown or target_nodes is out of range.
+void check_organ_spec(const OrganSpec& spec);
+
+/// Meshes the organ with linear tetrahedra, with about spec.target_nodes nodes (within +-20 % for targets from 500
+/// up: the characteristic length is chosen from the volume and area, then corrected by up to two re-meshes; below
+/// about 300 nodes the plate and cylinder saturate, e.g. 131 and 110 nodes for 100).
+/// Deterministic: the same spec gives a bit-identical mesh (one thread, fixed seed, no user Gmsh config files).
+/// The result has been through validate_mesh (positively oriented, no degenerate tets, manifold boundary).
+/// `progress`, if given, receives one line per meshing attempt and Gmsh's own log; otherwise Gmsh is silent.
+/// Throws surgsim::Error on a bad spec or when Gmsh fails. Takes a process-wide lock (see the file comment).
+TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress = nullptr, OrganMeshReport* report = nullptr);
+
+/// The cache path of a spec: `<cache_dir>/<shape>-<target_nodes>.msh`.
+std::string organ_mesh_path(const OrganSpec& spec, const std::string& cache_dir);
+
+/// Returns organ_mesh_path(spec, cache_dir), generating the mesh first if that file does not exist (a Gmsh v2.2
+/// .msh, with a VTK .vtk beside it). Files are written to a unique temporary name in cache_dir and renamed into
+/// place, so a concurrent reader or a second process generating the same spec never sees a partial file.
+/// `generated`, if given, is set to true when this call meshed and wrote the file, false when it was cached.
+/// Creates cache_dir if missing. Throws surgsim::Error on a bad spec or when the folder is not writable.
+std::string ensure_organ_mesh(const OrganSpec& spec, const std::string& cache_dir, std::ostream* progress = nullptr,
+                              bool* generated = nullptr);
+
+}  // namespace surgsim
