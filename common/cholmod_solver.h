@@ -1,0 +1,52 @@
+// RAII wrapper over CHOLMOD's supernodal sparse Cholesky: analyse and factor once, then solve any number of
+// right-hand sides in column blocks (libigl's precompute/solve split). One cholmod_common per solver, reused.
+#pragma once
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <cstddef>
+#include <memory>
+
+namespace surgsim {
+
+struct CholmodOptions {
+  bool supernodal = true;   // supernodal (BLAS-3) factor; false = simplicial
+  int block_columns = 192;  // right-hand sides per cholmod_solve2 call in solve()
+};
+
+class CholmodSolver {
+ public:
+  using Options = CholmodOptions;
+
+  CholmodSolver();
+  explicit CholmodSolver(const Options& options);
+  /// analyze(a) then factorize().
+  explicit CholmodSolver(const Eigen::SparseMatrix<double>& a, const Options& options = Options());
+  ~CholmodSolver();
+  CholmodSolver(const CholmodSolver&) = delete;
+  CholmodSolver& operator=(const CholmodSolver&) = delete;
+  CholmodSolver(CholmodSolver&&) noexcept;
+  CholmodSolver& operator=(CholmodSolver&&) noexcept;
+
+  /// Symbolic analysis (fill-reducing ordering) of the symmetric positive definite `a` (square; only the upper
+  /// triangle is read). Throws surgsim::Error if CHOLMOD fails (e.g. out of memory).
+  void analyze(const Eigen::SparseMatrix<double>& a);
+  /// Bytes the numeric factor takes (after analyze: the exact supernodal size, known before factorizing).
+  std::size_t factor_bytes() const;
+  /// Numeric factorization. Throws surgsim::Error naming the column when `a` is not positive definite (for a
+  /// stiffness matrix: a rigid mode is free or an element is inverted) or when memory runs out.
+  void factorize();
+
+  bool factorized() const;
+  int rows() const;
+
+  /// x = A^-1 b for any number of columns (b and x: rows() x k; x must already have that size). Not thread-safe:
+  /// CHOLMOD's workspace is reused between calls. Throws surgsim::Error on a size mismatch or CHOLMOD failure.
+  void solve(const Eigen::Ref<const Eigen::MatrixXd>& b, Eigen::Ref<Eigen::MatrixXd> x);
+  Eigen::MatrixXd solve(const Eigen::MatrixXd& b);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace surgsim

@@ -1,0 +1,315 @@
+// liver_bench: precompute time and memory for organs of ~500 to 20k nodes (direct CHOLMOD against CG per column),
+// and the paper's Table 1: time to evaluate 1, 5, 10, 20 contacts with the tensors against the reference solve of the
+// same load. Prints tables; run by hand (not a ctest). Each precomputation runs in a forked child so that its peak
+// resident memory (getrusage ru_maxrss) is its own.
+#include <CLI/CLI.hpp>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "box_mesh.h"
+#include "fem.h"
+#include "fixed_set.h"
+#include "precompute.h"
+#include "static_solver.h"
+#include "superposition.h"
+#ifdef SURGSIM_HAVE_MESHER
+#include "mesher/organ_mesher.h"
+#endif
+
+namespace {
+
+using namespace surgsim;
+using Clock = std::chrono::steady_clock;
+
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+double rss_now_mib() {
+  long pages = 0, resident = 0;
+  if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
+    if (std::fscanf(f, "%ld %ld", &pages, &resident) != 2) resident = 0;
+    std::fclose(f);
+  }
+  return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
+}
+
+double maxrss_mib() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return static_cast<double>(ru.ru_maxrss) / 1024.0;
+}
+
+// An organ: mesh, material, fixed set (underside z <= -0.025 m, as in config/liver.yaml), model.
+struct Organ {
+  std::string kind;
+  TetMesh mesh;
+  Material material;
+  FixedSet fixed;
+  std::unique_ptr<ElasticModel> model;
+  std::vector<int> contacts;
+  std::vector<RowSet> rows;
+};
+
+std::unique_ptr<Organ> make_organ(int target_nodes, bool box) {
+  auto o = std::make_unique<Organ>();
+#ifdef SURGSIM_HAVE_MESHER
+  if (!box) {
+    o->kind = "liver";
+    o->mesh = generate_organ(OrganSpec{"liver", target_nodes});
+  }
+#endif
+  if (o->mesh.nodes.rows() == 0) {
+    o->kind = "box";
+    o->mesh = make_box_mesh_with_nodes(target_nodes, Eigen::Vector3d(0.26, 0.16, 0.08));
+    o->mesh.nodes.rowwise() -= Eigen::RowVector3d(0.13, 0.08, 0.04);
+  }
+  o->material.young_modulus = 3000;
+  o->material.poisson_ratio = 0.45;
+  FixedRegion r;
+  r.has_plane = true;
+  r.plane_point = Eigen::Vector3d(0, 0, -0.025);
+  r.plane_normal = -Eigen::Vector3d::UnitZ();
+  o->fixed = fixed_set_from_region(o->mesh, r);
+  o->model = std::make_unique<ElasticModel>(build_elastic_model(o->mesh, o->material, o->fixed));
+  o->contacts = contactable_nodes(o->mesh, o->fixed);
+  o->rows = standard_row_sets(o->mesh, o->contacts);
+  return o;
+}
+
+// What a forked precomputation sends back.
+struct ChildResult {
+  int ok = 0;
+  double seconds = 0;          // measured
+  double extrapolated = 0;     // seconds for all columns (= seconds when all columns were solved)
+  int columns_solved = 0;
+  double rss_start_mib = 0, rss_peak_mib = 0, estimate_mib = 0, tensor_mib = 0;
+  int cg_iterations = 0;
+  double cg_error = 0;         // max |G_cg - G_direct| / max |G_direct| over the solved columns
+  char error[200] = {0};
+};
+
+template <typename F>
+ChildResult in_child(F&& work) {
+  int fd[2];
+  if (pipe(fd) != 0) return ChildResult{};
+  std::fflush(nullptr);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    close(fd[0]);
+    ChildResult r;
+    try {
+      r = work();
+      r.ok = 1;
+    } catch (const std::exception& e) {
+      std::snprintf(r.error, sizeof r.error, "%s", e.what());
+    }
+    const ssize_t w = write(fd[1], &r, sizeof r);
+    _exit(w == static_cast<ssize_t>(sizeof r) ? 0 : 1);
+  }
+  close(fd[1]);
+  ChildResult r;
+  const ssize_t got = read(fd[0], &r, sizeof r);
+  close(fd[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  if (got != static_cast<ssize_t>(sizeof r)) {
+    r = ChildResult{};
+    std::snprintf(r.error, sizeof r.error, "child failed (status %d)", status);
+  }
+  return r;
+}
+
+ChildResult run_direct(const Organ& o, int block) {
+  ChildResult r;
+  r.rss_start_mib = rss_now_mib();
+  PrecomputeOptions opts;
+  opts.block_columns = block;
+  opts.memory_limit_mb = 0;
+  r.estimate_mib = static_cast<double>(
+      estimate_precompute_memory(*o.model, static_cast<int>(o.contacts.size()), o.rows, opts).total()) / (1 << 20);
+  PrecomputeReport rep;
+  const Tensors t = precompute_tensors(*o.model, o.contacts, o.rows, opts, &rep);
+  r.seconds = r.extrapolated = rep.total_s;
+  r.columns_solved = 3 * t.column_count();
+  r.tensor_mib = static_cast<double>(t.bytes()) / (1 << 20);
+  r.rss_peak_mib = maxrss_mib();
+  return r;
+}
+
+// CG per column over an evenly spaced subset of the contact nodes (all when `max_columns` allows), extrapolated.
+ChildResult run_cg(const Organ& o, double tol, int max_columns) {
+  ChildResult r;
+  r.rss_start_mib = rss_now_mib();
+  const int s = static_cast<int>(o.contacts.size());
+  const int take = std::max(1, std::min(s, max_columns / 3));
+  std::vector<int> subset;
+  for (int i = 0; i < take; ++i) subset.push_back(o.contacts[static_cast<std::size_t>(static_cast<long>(i) * s / take)]);
+  PrecomputeOptions opts;
+  opts.method = SolveMethod::kCg;
+  opts.cg_tolerance = tol;
+  opts.memory_limit_mb = 0;
+  // Memory: the full run's estimate (the subset run stores fewer columns).
+  r.estimate_mib = static_cast<double>(estimate_precompute_memory(*o.model, s, o.rows, opts).total()) / (1 << 20);
+  PrecomputeReport rep;
+  const Tensors t = precompute_tensors(*o.model, subset, o.rows, opts, &rep);
+  r.seconds = rep.total_s;
+  r.columns_solved = 3 * take;
+  r.extrapolated = rep.total_s * static_cast<double>(s) / take;
+  r.cg_iterations = rep.cg_max_iterations;
+  r.rss_peak_mib = maxrss_mib();
+  r.tensor_mib = static_cast<double>(t.bytes()) / (1 << 20) * s / take;
+  // Error against the direct solution of the same columns.
+  const Tensors d = precompute_tensors(*o.model, subset, o.rows, PrecomputeOptions());
+  const auto& gc = t.find("visual")->g;
+  const auto& gd = d.find("visual")->g;
+  r.cg_error = (gc - gd).cwiseAbs().maxCoeff() / gd.cwiseAbs().maxCoeff();
+  return r;
+}
+
+template <typename F>
+double median_us(int repeats, F&& f) {
+  std::vector<double> t;
+  for (int i = 0; i < repeats; ++i) {
+    const auto t0 = Clock::now();
+    f();
+    t.push_back(since(t0) * 1e6);
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+// Contacts around a random surface node: its m nearest contactable nodes (a tool-sized patch), pushed down 5 mm.
+std::vector<Contact> contact_patch(const Organ& o, int m, std::mt19937& rng) {
+  std::uniform_int_distribution<std::size_t> pick(0, o.contacts.size() - 1);
+  const Eigen::Vector3d c = o.mesh.nodes.row(o.contacts[pick(rng)]).transpose();
+  std::vector<std::pair<double, int>> by_distance;
+  for (int k : o.contacts) by_distance.emplace_back((o.mesh.nodes.row(k).transpose() - c).norm(), k);
+  std::partial_sort(by_distance.begin(), by_distance.begin() + m, by_distance.end());
+  std::vector<Contact> out;
+  for (int i = 0; i < m; ++i)
+    out.push_back({by_distance[static_cast<std::size_t>(i)].second, Eigen::Vector3d(0.0005 * (i % 3), 0, -0.005)});
+  return out;
+}
+
+void table1(const Organ& o, int repeats, double cg_tol) {
+  PrecomputeOptions opts;
+  opts.memory_limit_mb = 0;
+  const auto tp = Clock::now();
+  const Tensors t = precompute_tensors(*o.model, o.contacts, o.rows, opts);
+  const double precompute_s = since(tp);
+  Superposition haptic(t, "haptic", kMaxContacts);
+  const Superposition visual(t, "visual");
+  StaticSolver direct(*o.model);
+  StaticSolverOptions cg_opts;
+  cg_opts.method = SolveMethod::kCg;
+  cg_opts.cg_tolerance = cg_tol;
+  StaticSolver cg(*o.model, cg_opts);
+  Eigen::VectorXd u(3 * visual.block().row_count());
+  std::mt19937 rng(42);
+
+  std::printf("\nTable 1 (paper): time per evaluation, %s of %d nodes, %d contactable, %d visible; tensors precomputed "
+              "in %.2f s (direct, double)\n",
+              o.kind.c_str(), o.model->node_count(), static_cast<int>(o.contacts.size()), visual.block().row_count(),
+              precompute_s);
+  std::printf("%8s | %12s %12s %12s | %12s %14s %12s | %10s\n", "contacts", "haptic us", "visual us", "tensor us",
+              "ref direct ms", "ref+factor ms", "ref CG ms", "rel error");
+  std::printf("%8s | %12s %12s %12s | %12s %14s %12s | %10s\n", "", "(lambda,F,", "(all visible", "(total)",
+              "(K_ff factored)", "(from scratch)", "", "vs direct");
+  for (int m : {1, 5, 10, 20}) {
+    const std::vector<Contact> contacts = contact_patch(o, m, rng);
+    std::vector<ImposedDisplacement> imposed;
+    for (const auto& c : contacts) imposed.push_back({c.node, c.displacement, 7});
+    ContactSolution sol;
+    Eigen::Vector3d near[10];
+    // Haptic: lambda, force, and the displacement of 10 candidate nodes (those the collision test would look at).
+    const double haptic_us = median_us(repeats, [&] {
+      haptic.solve(contacts.data(), m, sol);
+      for (int i = 0; i < 10; ++i) haptic.displacement(o.contacts[static_cast<std::size_t>(i * 7)], sol, near[i]);
+    });
+    const double visual_us = median_us(repeats, [&] { visual.displacements(sol.nodes.data(), sol.lambda.data(), sol.count, u); });
+    const int ref_repeats = std::max(3, std::min(repeats, 15));
+    StaticSolution ref;
+    const double direct_ms = median_us(ref_repeats, [&] { ref = direct.solve(imposed); }) / 1000;
+    const double scratch_ms = median_us(3, [&] {
+                                StaticSolver fresh(*o.model);
+                                fresh.solve(imposed);
+                              }) / 1000;
+    const double cg_ms = median_us(3, [&] { cg.solve(imposed); }) / 1000;
+    // Agreement on the visible nodes.
+    double err = 0, scale = 0;
+    for (int r = 0; r < visual.block().row_count(); ++r) {
+      const int n = visual.block().row_nodes[static_cast<std::size_t>(r)];
+      err = std::max(err, (u.segment<3>(3 * r) - ref.displacement.row(n).transpose()).cwiseAbs().maxCoeff());
+      scale = std::max(scale, ref.displacement.row(n).cwiseAbs().maxCoeff());
+    }
+    std::printf("%8d | %12.2f %12.2f %12.2f | %12.3f %14.3f %12.3f | %10.2e\n", m, haptic_us, visual_us,
+                haptic_us + visual_us, direct_ms, scratch_ms, cg_ms, err / scale);
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<int> sizes = {500, 1500, 5000};
+  bool large = false, box = false, skip_table = false;
+  int cg_columns = 300, repeats = 2000, block = 192, table_nodes = 1500;
+  double cg_tol = 1e-8;
+  CLI::App app{"liver_bench: precompute time and peak memory (direct vs CG) and the paper's Table 1 (tensor evaluation "
+               "vs reference solve)."};
+  app.add_option("--sizes", sizes, "Target node counts")->delimiter(',')->capture_default_str();
+  app.add_flag("--large", large, "Add the 20k-node organ (minutes, GBs)");
+  app.add_flag("--box", box, "Use structured boxes even when the liver mesher is built");
+  app.add_option("--cg-columns", cg_columns, "CG: solve at most this many columns, extrapolate to all")->capture_default_str();
+  app.add_option("--cg-tol", cg_tol, "CG relative residual (precompute columns and reference solve)")->capture_default_str();
+  app.add_option("--block", block, "Direct: right-hand sides per CHOLMOD solve")->capture_default_str();
+  app.add_option("--repeats", repeats, "Repeats per tensor timing (median)")->capture_default_str();
+  app.add_option("--table-nodes", table_nodes, "Organ size for Table 1 (the closest of --sizes)")->capture_default_str();
+  app.add_flag("--skip-table", skip_table, "Only the precompute table");
+  CLI11_PARSE(app, argc, argv);
+  if (large) sizes.push_back(20000);
+
+  try {
+    std::printf("Precompute (G = K_ff^-1 on 3S contactable columns; rows: haptic = contactable, visual = boundary; "
+                "double). CG tol %.0e, Jacobi preconditioner, columns sampled and extrapolated when more than %d.\n",
+                cg_tol, cg_columns);
+    std::printf("%-6s %7s %7s %6s %7s | %9s %9s %9s %9s | %10s %6s %9s %6s %9s %9s\n", "organ", "nodes", "tets", "S",
+                "cols", "direct s", "peak MiB", "+MiB", "est MiB", "CG s", "cols", "CG peak", "iters", "CG err",
+                "tens MiB");
+    std::unique_ptr<Organ> table_organ;
+    for (int n : sizes) {
+      auto o = make_organ(n, box);
+      const ChildResult d = in_child([&] { return run_direct(*o, block); });
+      const ChildResult c = in_child([&] { return run_cg(*o, cg_tol, cg_columns); });
+      if (!d.ok || !c.ok) {
+        std::printf("%-6s %7d: failed: %s %s\n", o->kind.c_str(), o->model->node_count(), d.error, c.error);
+        continue;
+      }
+      char cg_s[32];
+      std::snprintf(cg_s, sizeof cg_s, c.columns_solved < 3 * static_cast<int>(o->contacts.size()) ? "%.1f est" : "%.2f",
+                    c.extrapolated);
+      std::printf("%-6s %7d %7d %6d %7d | %9.3f %9.1f %9.1f %9.1f | %10s %6d %9.1f %6d %9.1e %9.1f\n", o->kind.c_str(),
+                  o->model->node_count(), static_cast<int>(o->mesh.tets.rows()), static_cast<int>(o->contacts.size()),
+                  3 * static_cast<int>(o->contacts.size()), d.seconds, d.rss_peak_mib, d.rss_peak_mib - d.rss_start_mib,
+                  d.estimate_mib, cg_s, c.columns_solved, c.rss_peak_mib, c.cg_iterations, c.cg_error, d.tensor_mib);
+      std::fflush(stdout);
+      if (!table_organ || std::abs(n - table_nodes) < std::abs(static_cast<int>(table_organ->model->node_count()) - table_nodes))
+        table_organ = std::move(o);
+    }
+    std::printf("(peak MiB: the child's ru_maxrss, including the mesh and model inherited at fork; +MiB: above its "
+                "resident size at start; est MiB: estimate_precompute_memory.)\n");
+    if (table_organ && !skip_table) table1(*table_organ, repeats, cg_tol);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "liver_bench: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,138 @@
+// Both real nodes as processes on one host over Fast DDS: frames arrive, PNGs with the organ are written,
+// stats files have the keys of DESIGN.md section 9.
+#include <fcntl.h>
+#include <png.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "process.h"
+
+namespace surgsim {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::Process;
+
+struct Rgb {
+  int width = 0, height = 0;
+  std::vector<unsigned char> data;  // rgb
+};
+
+Rgb read_png_rgb(const std::string& path) {
+  png_image img{};
+  img.version = PNG_IMAGE_VERSION;
+  Rgb out;
+  if (!png_image_begin_read_from_file(&img, path.c_str())) return out;
+  img.format = PNG_FORMAT_RGB;
+  out.width = static_cast<int>(img.width);
+  out.height = static_cast<int>(img.height);
+  out.data.resize(PNG_IMAGE_SIZE(img));
+  if (!png_image_finish_read(&img, nullptr, out.data.data(), 0, nullptr)) out.data.clear();
+  return out;
+}
+
+class TwoNodes : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::path(::testing::TempDir()) / ("surgsim_two_nodes_" + std::to_string(getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    env_ = {"SURGSIM_DOMAIN=" + std::to_string(testing::private_domain()),
+            "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR, "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
+  }
+  std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
+  fs::path dir_;
+  std::vector<std::string> env_;
+};
+
+TEST_F(TwoNodes, FramesArriveAndOrganIsRendered) {
+  const std::string frames = (dir_ / "frames").string();
+  Process visual(bin("visual_node"),
+                 {"--scene", "liver", "--out", frames, "--stats", (dir_ / "visual.json").string(), "--png-every", "10"},
+                 env_, (dir_ / "visual.log").string());
+  Process haptic(bin("haptic_node"),
+                 {"--scene", "liver", "--duration", "2.0", "--wait-for-visual", "60", "--rt-priority", "0",
+                  "--stats", (dir_ / "haptic.json").string()},
+                 env_, (dir_ / "haptic.log").string());
+  ASSERT_EQ(haptic.wait(240), 0) << testing::read_file((dir_ / "haptic.log").string());
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  visual.signal(SIGINT);
+  ASSERT_EQ(visual.wait(60), 0) << testing::read_file((dir_ / "visual.log").string());
+
+  // Haptic stats: every tick of the run, the keys of DESIGN.md section 9.
+  const auto h = nlohmann::json::parse(testing::read_file((dir_ / "haptic.json").string()));
+  for (const char* key : {"rate_hz", "ticks", "achieved_hz", "tick_us", "deadline_misses", "contacts_max",
+                          "force_max_n", "nonfinite_rejected"}) {
+    EXPECT_TRUE(h.contains(key)) << key;
+  }
+  EXPECT_EQ(h["ticks"].get<int>(), static_cast<int>(2.0 * h["rate_hz"].get<double>() + 0.5));
+
+  // Visual stats: frames arrived from the other process and the scene identity matched.
+  const auto v = nlohmann::json::parse(testing::read_file((dir_ / "visual.json").string()));
+  for (const char* key : {"frames_received", "frames_rendered", "fps", "deform_us", "render_ms", "latency_us",
+                          "scene_hash_ok"}) {
+    EXPECT_TRUE(v.contains(key)) << key;
+  }
+  EXPECT_GT(v["frames_received"].get<int>(), 50);
+  EXPECT_GT(v["frames_rendered"].get<int>(), 10);
+  EXPECT_TRUE(v["scene_hash_ok"].get<bool>());
+  EXPECT_GT(v["latency_us"]["count"].get<int>(), 50);
+
+  // A PNG with the organ in it: a good share of reddish organ pixels, not a blank frame.
+  std::vector<fs::path> pngs;
+  for (const auto& e : fs::directory_iterator(frames)) {
+    if (e.path().extension() == ".png") pngs.push_back(e.path());
+  }
+  ASSERT_FALSE(pngs.empty());
+  std::sort(pngs.begin(), pngs.end());
+  const Rgb img = read_png_rgb(pngs.back().string());
+  ASSERT_FALSE(img.data.empty()) << pngs.back();
+  long organ = 0;
+  const long n = static_cast<long>(img.width) * img.height;
+  for (long i = 0; i < n; ++i) {
+    const int r = img.data[3 * i], g = img.data[3 * i + 1], b = img.data[3 * i + 2];
+    if (r > 60 && r > g + 25 && r > b + 25) ++organ;
+  }
+  EXPECT_GT(organ, n / 20) << "too few organ-coloured pixels in " << pngs.back();
+}
+
+TEST_F(TwoNodes, VisualRefusesAnotherScene) {
+  Process visual(bin("visual_node"),
+                 {"--scene", "plate", "--headless", "--stats", (dir_ / "visual.json").string()},
+                 env_, (dir_ / "visual.log").string());
+  Process haptic(bin("haptic_node"),
+                 {"--scene", "liver", "--duration", "1.0", "--wait-for-visual", "60", "--rt-priority", "0",
+                  "--speed", "1"},
+                 env_, (dir_ / "haptic.log").string());
+  ASSERT_EQ(haptic.wait(240), 0) << testing::read_file((dir_ / "haptic.log").string());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  visual.signal(SIGINT);
+  EXPECT_EQ(visual.wait(60), 3);
+  const std::string log = testing::read_file((dir_ / "visual.log").string());
+  EXPECT_NE(log.find("the haptic node runs scene 'liver'"), std::string::npos) << log;
+  const auto v = nlohmann::json::parse(testing::read_file((dir_ / "visual.json").string()));
+  EXPECT_FALSE(v["scene_hash_ok"].get<bool>());
+}
+
+TEST(NodeCli, HelpAndBadArguments) {
+  for (const char* node : {"haptic_node", "visual_node"}) {
+    const std::string b = std::string(SURGSIM_TEST_BIN_DIR) + "/" + node;
+    const std::string log = ::testing::TempDir() + "/cli_" + node + ".log";
+    {
+      Process p(b, {"--help"}, {}, log);
+      EXPECT_EQ(p.wait(30), 0) << node;
+      EXPECT_NE(testing::read_file(log).find("--scene"), std::string::npos);
+    }
+    {
+      Process p(b, {"--scene", "/nonexistent/scene.yaml"}, {"SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR}, log);
+      EXPECT_EQ(p.wait(30), 1) << node;
+      EXPECT_NE(testing::read_file(log).find("/nonexistent/scene.yaml"), std::string::npos) << testing::read_file(log);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace surgsim
