@@ -1173,4 +1173,20 @@ std::uint64_t mesh_hash(const TetMesh& mesh) {
   return h.digest();
 }
 
+void write_vtk_surface(const std::string& path, const Eigen::MatrixX3d& points, const Eigen::MatrixX3i& tris) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) throw_error(path, ": cannot create the VTK file (check that its folder exists and is writable)");
+  std::fprintf(f, "# vtk DataFile Version 3.0\nsurgsim surface\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS %ld double\n",
+               static_cast<long>(points.rows()));
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    std::fprintf(f, "%.9g %.9g %.9g\n", points(i, 0), points(i, 1), points(i, 2));
+  }
+  std::fprintf(f, "CELLS %ld %ld\n", static_cast<long>(tris.rows()), static_cast<long>(4 * tris.rows()));
+  for (Eigen::Index i = 0; i < tris.rows(); ++i) std::fprintf(f, "3 %d %d %d\n", tris(i, 0), tris(i, 1), tris(i, 2));
+  std::fprintf(f, "CELL_TYPES %ld\n", static_cast<long>(tris.rows()));
+  for (Eigen::Index i = 0; i < tris.rows(); ++i) std::fprintf(f, "5\n");
+  const bool ok = std::ferror(f) == 0;
+  if (std::fclose(f) != 0 || !ok) throw_error(path, ": write failed");
+}
+
 }  // namespace surgsim

@@ -34,6 +34,9 @@ TetMesh read_vtk(const std::string& path);
 /// Writes a VTK legacy ASCII unstructured grid; optional per-node vector field (e.g. displacement, #V x 3).
 void write_vtk(const std::string& path, const TetMesh& mesh, const Eigen::MatrixX3d* node_vectors = nullptr,
                const std::string& vector_name = "displacement");
+/// Writes a triangle surface (e.g. the deformed visible surface) as a VTK legacy ASCII unstructured grid of
+/// triangles. points: #P x 3 (m); tris: #F x 3 indices into points. Throws surgsim::Error naming the path.
+void write_vtk_surface(const std::string& path, const Eigen::MatrixX3d& points, const Eigen::MatrixX3i& tris);
 /// Writes a Gmsh v2.2 ASCII mesh (tets only).
 void write_msh(const std::string& path, const TetMesh& mesh);
 

@@ -13,6 +13,7 @@
 #include "error.h"
 #include "rt_loop.h"
 #include "scene_mesh.h"
+#include "liver_setup.h"
 #include "tensor_cache.h"
 #include "tool.h"
 
@@ -76,12 +77,48 @@ class VisualStatusListener : public DataReaderListener {
   std::uint64_t received_ = 0;
 };
 
+// Newest device command. The loop reads it with try_lock, so it never waits on the DDS thread.
+class ToolCommandListener : public DataReaderListener {
+ public:
+  void on_data_available(DataReader* reader) override {
+    SampleInfo info;
+    while (reader->take_next_sample(&incoming_, &info) == eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      std::lock_guard<std::mutex> lock(mutex_);
+      const auto& p = incoming_.pose();
+      pose_ = Pose5{p.pitch(), p.yaw(), p.insertion(), p.roll(), p.jaw()};
+      receive_ns_ = monotonic_ns();
+      ++received_;
+    }
+  }
+  /// Non-blocking: false when the slot is busy (the caller keeps its previous value).
+  bool try_get(Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) {
+    std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+    if (!lock.owns_lock()) return false;
+    pose = pose_;
+    receive_ns = receive_ns_;
+    received = received_;
+    return true;
+  }
+
+ private:
+  std::mutex mutex_;
+  msg::ToolCommand incoming_;
+  Pose5 pose_;
+  std::uint64_t receive_ns_ = 0;
+  std::uint64_t received_ = 0;
+};
+
 }  // namespace
 
 struct HapticApp::Dds {
   explicit Dds(const dds::DdsOptions& o) : participant(o), visual_status(1 << 16) {}
   dds::Participant participant;
   VisualStatusListener visual_status;
+  ToolCommandListener tool_commands;
+  Pose5 last_command;
+  std::uint64_t last_command_ns = 0;
+  std::uint64_t commands_received = 0;
   DataWriter* contact_writer = nullptr;
   DataWriter* force_writer = nullptr;
   DataWriter* scene_writer = nullptr;
@@ -103,14 +140,33 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   mesh_hash_ = mesh_hash(mesh_);
   scene_hash_ = scene_.hash() ^ (mesh_hash_ * 0x9E3779B97F4A7C15ull);
 
-  const std::string replay = options_.replay.empty() ? scene_.trajectory : options_.replay;
-  if (replay.empty()) throw_error(scene_.file, ": no trajectory to replay (give --replay FILE or set 'trajectory')");
-  trajectory_ = Trajectory::load(replay);
-
+  // --- init: tool input ---
+  if (options_.input != "replay" && options_.input != "device") {
+    throw_error("--input '", options_.input, "' is not an input (use replay or device)");
+  }
+  live_ = options_.input == "device";
+  std::string replay;
+  if (!live_) {
+    replay = options_.replay.empty() ? scene_.trajectory : options_.replay;
+    if (replay.empty()) throw_error(scene_.file, ": no trajectory to replay (give --replay FILE or set 'trajectory')");
+    trajectory_ = Trajectory::load(replay);
+    held_pose_ = trajectory_.at(0);
+  }
   double duration = options_.duration;
-  if (duration < 0) duration = trajectory_.duration() + 0.5;
+  if (duration < 0) duration = live_ ? 3600.0 : trajectory_.duration() + 0.5;
   total_ticks_ = static_cast<std::uint64_t>(std::llround(duration * rate_hz_));
   if (total_ticks_ == 0) total_ticks_ = 1;
+
+  // --- init: the organ model this scene names (a liver scene builds tensors, contacts and the bucket grid) ---
+  if (scene_.model == "liver") {
+    const LiverTensorSetup setup = liver_tensor_setup(scene_, mesh_, cache);
+    tensors_ = load_liver_tensors(setup, mesh_, scene_.material, {"haptic"}, options_.quiet ? nullptr : &std::cerr,
+                                  nullptr, scene_.file);
+    tensor_hash_ = setup.key.combined();
+    contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene_.tool);
+  } else {
+    throw_error(scene_.file, ": key 'model': '", scene_.model, "' is not built into this haptic node yet");
+  }
 
   // --- init: outputs ---
   if (!options_.record.empty()) recorder_.open(options_.record);
@@ -134,6 +190,10 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   dds_->contact_writer = p.writer(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()), dds::kStreamWriter);
   dds_->force_writer = p.writer(p.topic(dds::kForceFeedbackTopic, new msg::ForceFeedbackPubSubType()), dds::kStreamWriter);
   dds_->scene_writer = p.writer(p.topic(dds::kSceneInfoTopic, new msg::SceneInfoPubSubType()), dds::kLatchedWriter);
+  if (live_) {
+    p.reader(p.topic(dds::kToolCommandTopic, new msg::ToolCommandPubSubType()), dds::kStreamReader,
+             &dds_->tool_commands);
+  }
   dds_->status_reader = p.reader(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()),
                                  dds::kStreamReader, &dds_->visual_status);
   dds_->frame.contacts().reserve(msg::kMaxContacts);
@@ -145,7 +205,7 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   info.scene_hash(scene_hash_);
   info.mesh_hash(mesh_hash_);
   info.material_hash(material_hash(scene_.material));
-  info.tensor_hash(0);
+  info.tensor_hash(tensor_hash_);
   info.node_count(static_cast<std::uint32_t>(mesh_.nodes.rows()));
   info.surface_node_count(static_cast<std::uint32_t>(surface_.nodes.size()));
   info.haptic_rate_hz(rate_hz_);
@@ -156,7 +216,8 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   if (!options_.quiet) {
     std::cerr << "haptic_node: scene '" << scene_.name << "' (" << scene_.file << "), " << mesh_.nodes.rows()
               << " nodes, " << mesh_.tets.rows() << " tets, " << surface_.nodes.size() << " surface nodes; "
-              << rate_hz_ << " Hz for " << total_ticks_ << " ticks; replaying " << replay << "\n";
+              << rate_hz_ << " Hz for " << total_ticks_ << " ticks; "
+              << (live_ ? std::string("live input from the device topic") : "replaying " + replay) << "\n";
   }
 }
 
@@ -164,39 +225,89 @@ HapticApp::~HapticApp() {
   if (log_ != nullptr) std::fclose(log_);
 }
 
+bool HapticApp::input_pose(double t, Pose5& pose) {
+  if (!live_) {
+    pose = trajectory_.at(t);
+    return true;
+  }
+  dds_->tool_commands.try_get(dds_->last_command, dds_->last_command_ns, dds_->commands_received);
+  const bool fresh = dds_->commands_received > 0 &&
+                     static_cast<double>(monotonic_ns() - dds_->last_command_ns) * 1e-9 <= options_.input_timeout;
+  pose = fresh ? dds_->last_command : held_pose_;
+  return fresh;
+}
+
 void HapticApp::tick(std::uint64_t k) {
   const double t = static_cast<double>(k) * dt_;
-  const Pose5 pose = trajectory_.at(t);
+
+  // --- input: a lost device drops every contact, zeroes the force and holds the tool where it was ---
+  Pose5 pose;
+  const bool input_ok = input_pose(t, pose);
+  ContactTick result;
+  std::uint32_t flags = 0;
   const ToolGeometry tool = tool_geometry(scene_.tool, pose);
-  if (recorder_.is_open()) recorder_.append(t, pose);
+  if (input_ok) {
+    held_pose_ = pose;
+    if (recorder_.is_open()) recorder_.append(t, pose);
+    contacts_->step(tool, pose.jaw, result);
+  } else {
+    ++input_lost_ticks_;
+    flags |= msg::kFlagInputLost;
+    contacts_->reset();
+  }
+  const ContactSolution& solution = contacts_->solution();
+  if (result.nonfinite) {
+    ++nonfinite_rejected_;
+    flags |= msg::kFlagNonFiniteHeld;
+  }
+  if (result.over_capacity) {
+    ++over_capacity_events_;
+    flags |= msg::kFlagOverCapacity;
+  }
+  if (result.saturated) {
+    ++saturated_ticks_;
+    flags |= msg::kFlagSaturated;
+  }
+  if (result.grasp) flags |= msg::kFlagGrasp;
 
-  // Contact detection and force evaluation plug in here (issue 4); the walking skeleton publishes the tool only.
-  const Eigen::Vector3d force = Eigen::Vector3d::Zero();
-  const int contacts = 0;
-
+  // --- publish: contact frame (visual node) and force (device) ---
   auto& frame = dds_->frame;
   frame.seq(k);
   frame.sim_time(t);
   frame.pose(to_msg(pose));
   frame.tip(to_msg(tool.tip));
-  frame.contacts().clear();
-  frame.force(to_msg(force));
-  frame.flags(0);
+  auto& entries = frame.contacts();
+  entries.resize(static_cast<std::size_t>(solution.count));  // within the reserved capacity: no allocation
+  for (int l = 0; l < solution.count; ++l) {
+    auto& e = entries[static_cast<std::size_t>(l)];
+    e.node(static_cast<std::uint32_t>(solution.nodes[static_cast<std::size_t>(l)]));
+    e.lambda(to_msg(solution.lambda[static_cast<std::size_t>(l)]));
+    e.u_tilde(to_msg(contacts_->corrected(l)));
+  }
+  frame.direction(to_msg(result.direction));
+  frame.force(to_msg(result.force));
+  frame.contact_points(static_cast<std::uint32_t>(result.points_in_contact));
+  frame.flags(flags);
   frame.stamp_ns(monotonic_ns());
   dds_->contact_writer->write(&frame);
 
   auto& ff = dds_->force;
   ff.seq(k);
   ff.stamp_ns(frame.stamp_ns());
-  ff.force(to_msg(force));
-  ff.saturated(false);
-  ff.flags(0);
+  ff.force(to_msg(result.device_force));
+  ff.saturated(result.saturated);
+  ff.flags(flags);
   dds_->force_writer->write(&ff);
 
-  if (log_ != nullptr) std::fprintf(log_, "%llu,%.9f,%.9g,%.9g,%.9g,%d\n", static_cast<unsigned long long>(k), t,
-                                    force.x(), force.y(), force.z(), contacts);
-  if (contacts > contacts_max_) contacts_max_ = contacts;
-  force_max_n_ = std::max(force_max_n_, force.norm());
+  // --- log and statistics ---
+  const Eigen::Vector3d& f = result.device_force;
+  if (log_ != nullptr) {
+    std::fprintf(log_, "%llu,%.9f,%.17g,%.17g,%.17g,%d\n", static_cast<unsigned long long>(k), t, f.x(), f.y(), f.z(),
+                 solution.count);
+  }
+  if (solution.count > contacts_max_) contacts_max_ = solution.count;
+  if (solution.count > 0) ++contact_ticks_;
+  force_max_n_ = std::max(force_max_n_, f.norm());
 }
 
 int HapticApp::run() {
@@ -257,6 +368,13 @@ void HapticApp::shutdown() {
   j["contacts_max"] = contacts_max_;
   j["force_max_n"] = force_max_n_;
   j["nonfinite_rejected"] = nonfinite_rejected_;
+  j["over_capacity_events"] = over_capacity_events_;
+  j["saturated_ticks"] = saturated_ticks_;
+  j["contact_ticks"] = contact_ticks_;
+  j["input"] = live_ ? "device" : "replay";
+  j["input_lost_ticks"] = input_lost_ticks_;
+  j["commands_received"] = dds_->commands_received;
+  j["tensor_hash"] = std::to_string(tensor_hash_);
   j["round_trip_us"] = to_json(rtt);
   j["visual_status_received"] = dds_->visual_status.received();
   j["realtime"] = realtime_note_;
@@ -266,7 +384,8 @@ void HapticApp::shutdown() {
   if (!options_.quiet) {
     std::cerr << "haptic_node: " << ticks_done_ << " ticks at " << achieved << " Hz (target "
               << rate_hz_ * (options_.speed > 0 ? options_.speed : 0) << "), tick p50 " << tick.p50 << " us p99 "
-              << tick.p99 << " us, " << deadline_misses_ << " missed deadlines, round trip p50 " << rtt.p50
+              << tick.p99 << " us, " << deadline_misses_ << " missed deadlines, contacts max " << contacts_max_
+              << ", force max " << force_max_n_ << " N, round trip p50 " << rtt.p50
               << " us (" << rtt.count << " echoes)\n";
   }
 }

@@ -6,7 +6,9 @@
 #include <memory>
 #include <string>
 
+#include "liver_contacts.h"
 #include "mesh.h"
+#include "precompute.h"
 #include "scene.h"
 #include "stats.h"
 #include "trajectory.h"
@@ -17,7 +19,9 @@ struct HapticOptions {
   std::string scene = "liver";      // scene YAML path or shipped scene name
   double duration = -1;             // s of simulated time; < 0: the replayed trajectory's length (+0.5 s), else until stopped
   double rate_hz = 0;               // > 0 overrides the scene's haptic rate
+  std::string input = "replay";     // "replay" (trajectory file) | "device" (live ToolCommand topic)
   std::string replay;               // trajectory to replay; empty = the scene's default trajectory
+  double input_timeout = 0.1;       // s without a ToolCommand before live input counts as lost
   std::string record;               // write the input used as a trajectory file
   double speed = 1.0;               // replay speed; <= 0 means "max" (no pacing, tick-exact)
   std::string log;                  // per-tick CSV
@@ -46,10 +50,15 @@ class HapticApp {
   /// Writes the stats JSON (when asked) and prints the summary line.
   void shutdown();
 
+  /// One loop iteration (tick k): input, contacts, force, publish, log. No allocation. Public for tests.
+  void tick(std::uint64_t k);
+  std::uint64_t total_ticks() const { return total_ticks_; }
+
  private:
   struct Dds;
 
-  void tick(std::uint64_t k);
+  /// The pose to use this tick: trajectory sample, or the newest device command (held when lost).
+  bool input_pose(double t, Pose5& pose);
 
   HapticOptions options_;
   Scene scene_;
@@ -58,7 +67,12 @@ class HapticApp {
   Trajectory trajectory_;
   TrajectoryRecorder recorder_;
   std::FILE* log_ = nullptr;
+  Tensors tensors_;                        // "haptic" block only
+  std::unique_ptr<LiverContacts> contacts_;
+  std::uint64_t tensor_hash_ = 0;
   std::unique_ptr<Dds> dds_;
+  Pose5 held_pose_;                         // last good pose (held while device input is lost)
+  bool live_ = false;
   std::atomic<bool> stop_requested_{false};
 
   double rate_hz_ = 300;
@@ -76,6 +90,10 @@ class HapticApp {
   int contacts_max_ = 0;
   double force_max_n_ = 0;
   std::uint64_t nonfinite_rejected_ = 0;
+  std::uint64_t over_capacity_events_ = 0;
+  std::uint64_t saturated_ticks_ = 0;
+  std::uint64_t input_lost_ticks_ = 0;
+  std::uint64_t contact_ticks_ = 0;
   double wall_seconds_ = 0;
 };
 

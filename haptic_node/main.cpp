@@ -21,6 +21,10 @@ int main(int argc, char** argv) {
   cli.add_option("--scene", o.scene, "Scene YAML file or shipped scene name")->capture_default_str();
   cli.add_option("--duration", o.duration, "Stop after S seconds of simulated time (default: trajectory length + 0.5 s)");
   cli.add_option("--rate", o.rate_hz, "Haptic rate override, Hz");
+  cli.add_option("--input", o.input, "Tool input: replay (a trajectory file) or device (live ToolCommand topic)")
+      ->capture_default_str();
+  cli.add_option("--input-timeout", o.input_timeout, "Seconds without a device command before the input counts as lost "
+                 "(force zeroed, tool held)")->capture_default_str();
   cli.add_option("--replay", o.replay, "Tool trajectory to replay (default: the scene's)");
   cli.add_option("--record", o.record, "Write the tool input used to this trajectory file");
   cli.add_option("--speed", speed, "Replay speed factor, or 'max' (as fast as possible, tick-exact)")->capture_default_str();

@@ -17,6 +17,7 @@
 #include "error.h"
 #include "image.h"
 #include "renderer.h"
+#include "liver_setup.h"
 #include "scene_mesh.h"
 #include "tool.h"
 
@@ -33,11 +34,20 @@ namespace {
 // Keeps the newest ContactFrame and the one-way latency of each (same-host clocks).
 class ContactFrameListener : public DataReaderListener {
  public:
+  /// Every received frame's stamp is echoed at once on `echo` (VisualStatus), so the haptic node measures the
+  /// network round trip on its own clock, independent of the frame rate.
+  void set_echo(DataWriter* echo) { echo_ = echo; }
   void on_data_available(DataReader* reader) override {
     SampleInfo info;
     while (reader->take_next_sample(&incoming_, &info) == ReturnCode_t::RETCODE_OK) {
       if (!info.valid_data) continue;
       const std::uint64_t now = monotonic_ns();
+      if (echo_ != nullptr) {
+        echo_msg_.stamp_ns(now);
+        echo_msg_.echoed_stamp_ns(incoming_.stamp_ns());
+        echo_msg_.last_seq_shown(incoming_.seq());
+        echo_->write(&echo_msg_);
+      }
       std::lock_guard<std::mutex> lock(mutex_);
       latency_us_.add(static_cast<double>(now - incoming_.stamp_ns()) * 1e-3);
       newest_ = incoming_;
@@ -69,6 +79,8 @@ class ContactFrameListener : public DataReaderListener {
 
  private:
   std::mutex mutex_;
+  DataWriter* echo_ = nullptr;
+  msg::VisualStatus echo_msg_;
   msg::ContactFrame incoming_;
   msg::ContactFrame newest_;
   SampleRecorder latency_us_{1 << 20};
@@ -136,6 +148,37 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
   surface_ = boundary_surface(mesh_);
   scene_hash_ = scene_.hash() ^ (mesh_hash(mesh_) * 0x9E3779B97F4A7C15ull);
 
+  // The visible surface, compacted to its own vertices (the GPU never sees interior nodes).
+  visible_nodes_ = surface_.nodes;
+  std::vector<int> vertex_of_node(static_cast<std::size_t>(mesh_.nodes.rows()), -1);
+  for (std::size_t v = 0; v < visible_nodes_.size(); ++v) vertex_of_node[static_cast<std::size_t>(visible_nodes_[v])] = static_cast<int>(v);
+  visible_tris_.resize(surface_.tris.rows(), 3);
+  for (int f = 0; f < surface_.tris.rows(); ++f) {
+    for (int e = 0; e < 3; ++e) visible_tris_(f, e) = vertex_of_node[static_cast<std::size_t>(surface_.tris(f, e))];
+  }
+  rest_.resize(static_cast<Eigen::Index>(visible_nodes_.size()), 3);
+  for (std::size_t v = 0; v < visible_nodes_.size(); ++v) {
+    rest_.row(static_cast<Eigen::Index>(v)) = mesh_.nodes.row(visible_nodes_[v]).cast<float>();
+  }
+  positions_ = rest_;
+  markers_.resize(0, 3);
+
+  // --- init: the visual rows of the tensors (visible x surface), from the cache both nodes share ---
+  if (scene_.model == "liver") {
+    const LiverTensorSetup setup = liver_tensor_setup(scene_, mesh_, cache);
+    tensors_ = load_liver_tensors(setup, mesh_, scene_.material, {"visual"}, options_.quiet ? nullptr : &std::cerr,
+                                  nullptr, scene_.file);
+    tensor_hash_ = setup.key.combined();
+    superposition_ = std::make_unique<Superposition>(tensors_, "visual", 64);
+    const TensorBlock& block = superposition_->block();
+    u_.setZero(3 * block.row_count());
+    block_row_.assign(visible_nodes_.size(), -1);
+    for (std::size_t v = 0; v < visible_nodes_.size(); ++v) {
+      block_row_[v] = block.row_of_node[static_cast<std::size_t>(visible_nodes_[v])];
+    }
+    markers_.resize(64, 3);
+  }
+
   // --- init: renderer (no GL context at all when headless) ---
   renderer_ = make_renderer(options_.headless ? "null" : "osmesa", scene_.visual.width, scene_.visual.height);
   if (!options_.headless && png_every_ > 0) {
@@ -157,6 +200,7 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
   dds_->frame_reader = p.reader(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()),
                                 dds::kStreamReader, &dds_->frames);
   dds_->status_writer = p.writer(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()), dds::kStreamWriter);
+  dds_->frames.set_echo(dds_->status_writer);
 
   if (!options_.quiet) {
     std::cerr << "visual_node: scene '" << scene_.name << "', " << surface_.tris.rows() << " surface triangles, "
@@ -173,8 +217,6 @@ int VisualApp::run() {
   const std::uint64_t wall_start = monotonic_ns();
   auto next = clock::now();
 
-  // Rest positions of the visible surface (float for the GPU); deformation is applied per frame.
-  Eigen::MatrixX3f positions = mesh_.nodes.cast<float>();
   msg::ContactFrame frame;
   bool have_frame = false;
   bool hash_checked = false;
@@ -192,25 +234,63 @@ int VisualApp::run() {
     msg::SceneInfo info;
     if (!hash_checked && dds_->scene_info.get(info)) {
       hash_checked = true;
-      hash_ok = info.scene_hash() == scene_hash_;
-      if (!hash_ok) {
+      const bool scene_ok = info.scene_hash() == scene_hash_;
+      const bool tensors_ok = info.tensor_hash() == tensor_hash_;
+      hash_ok = scene_ok && tensors_ok;
+      if (!scene_ok) {
         std::cerr << "visual_node: the haptic node runs scene '" << info.scene_name() << "' (hash " << info.scene_hash()
                   << ", mesh hash " << info.mesh_hash() << ") but this node loaded '" << scene_.name << "' (hash "
                   << scene_hash_ << "): start both nodes with the same scene and mesh; contact frames are ignored\n";
+      } else if (!tensors_ok) {
+        std::cerr << "visual_node: the haptic node's tensors (hash " << info.tensor_hash() << ") differ from this "
+                  << "node's (hash " << tensor_hash_ << ") for the same scene: both must use the same tensor settings; "
+                  << "contact frames are ignored\n";
       }
     }
 
     std::uint64_t received = 0;
-    if (dds_->frames.newest(frame, received) && hash_ok) have_frame = true;
+    const bool fresh = dds_->frames.newest(frame, received) && hash_ok;
+    if (fresh) have_frame = true;
 
-    // Deformation of the visible mesh plugs in here (issue 5); the walking skeleton draws the rest shape.
-    const std::uint64_t d0 = monotonic_ns();
-    deform_us_.add(static_cast<double>(monotonic_ns() - d0) * 1e-3);
+    // Deformation of the visible mesh from the newest contacts: u_n = sum_k G_nk lambda_k over the visible rows.
+    int marker_count = 0;
+    if (fresh && superposition_ != nullptr) {
+      const std::uint64_t d0 = monotonic_ns();
+      const int m = std::min<int>(static_cast<int>(frame.contacts().size()), 64);
+      for (int l = 0; l < m; ++l) {
+        const auto& e = frame.contacts()[static_cast<std::size_t>(l)];
+        contact_nodes_[static_cast<std::size_t>(l)] = static_cast<int>(e.node());
+        contact_lambda_[static_cast<std::size_t>(l)] = from_msg(e.lambda());
+      }
+      if (m == 0) {
+        positions_ = rest_;
+      } else if (superposition_->displacements(contact_nodes_.data(), contact_lambda_.data(), m, u_) ==
+                 ContactStatus::kOk) {
+        for (Eigen::Index v = 0; v < rest_.rows(); ++v) {
+          const int r = block_row_[static_cast<std::size_t>(v)];
+          positions_.row(v) = rest_.row(v);
+          if (r >= 0) positions_.row(v) += u_.segment<3>(3 * r).cast<float>().transpose();
+        }
+      } else {
+        ++deform_errors_;  // a frame naming nodes this scene does not have: keep the last good shape
+      }
+      deform_us_.add(static_cast<double>(monotonic_ns() - d0) * 1e-3);
+    }
+    if (have_frame && superposition_ != nullptr) {
+      const int m = std::min<int>(static_cast<int>(frame.contacts().size()), 64);
+      for (int l = 0; l < m; ++l) {
+        const int r = superposition_->block().row_of_node[static_cast<std::size_t>(contact_nodes_[static_cast<std::size_t>(l)])];
+        Eigen::Vector3d x = mesh_.nodes.row(contact_nodes_[static_cast<std::size_t>(l)]).transpose();
+        if (r >= 0) x += u_.segment<3>(3 * r);
+        markers_.row(marker_count++) = x.cast<float>().transpose();
+      }
+    }
 
     const std::uint64_t r0 = monotonic_ns();
     renderer_->begin_frame(scene_.visual.camera);
-    renderer_->draw_surface(positions, surface_.tris, organ_rgb);
+    renderer_->draw_surface(positions_, visible_tris_, organ_rgb);
     if (have_frame) renderer_->draw_tool(tool_geometry(scene_.tool, from_msg(frame.pose())), scene_.tool.shaft_radius);
+    if (marker_count > 0) renderer_->draw_points(markers_.topRows(marker_count), 0.0015f, kMarkerRgb);
     renderer_->end_frame();
     ++frames_rendered_;
     if (png_every_ > 0 && !options_.headless && frames_rendered_ % static_cast<std::uint64_t>(png_every_) == 0) {
@@ -221,6 +301,10 @@ int VisualApp::run() {
         // A full disk must not stop the display: count the failure, keep drawing.
         try {
           write_png(path, image_);
+          if (scene_.visual.vtk) {
+            write_vtk_surface(path.substr(0, path.size() - 4) + ".vtk", positions_.cast<double>(), visible_tris_);
+            ++vtk_written_;
+          }
           if (first_png_.empty()) first_png_ = path;
           last_png_ = path;
           ++pngs_written_;
@@ -237,7 +321,7 @@ int VisualApp::run() {
     st.fps(rate_hz_);
     st.lod(0);
     st.last_seq_shown(have_frame ? frame.seq() : 0);
-    st.echoed_stamp_ns(have_frame ? frame.stamp_ns() : 0);
+    st.echoed_stamp_ns(0);  // round trips are echoed by the frame listener, on arrival
     st.frames_rendered(frames_rendered_);
     dds_->status_writer->write(&st);
 
@@ -264,6 +348,10 @@ void VisualApp::shutdown() {
   j["frames_rendered"] = frames_rendered_;
   j["pngs_written"] = pngs_written_;
   j["png_errors"] = png_errors_;
+  j["vtk_written"] = vtk_written_;
+  j["deform_errors"] = deform_errors_;
+  j["visible_nodes"] = visible_nodes_.size();
+  j["tensor_rows"] = superposition_ ? superposition_->block().row_count() : 0;
   j["fps"] = wall_seconds_ > 0 ? static_cast<double>(frames_rendered_) / wall_seconds_ : 0.0;
   j["wall_seconds"] = wall_seconds_;
   j["deform_us"] = to_json(deform);
@@ -271,6 +359,7 @@ void VisualApp::shutdown() {
   j["latency_us"] = to_json(latency);
   j["scene_info_received"] = have_info;
   j["scene_hash_ok"] = have_info && info.scene_hash() == scene_hash_;
+  j["tensor_hash_ok"] = have_info && info.tensor_hash() == tensor_hash_;
   j["out"] = options_.out;
   j["first_png"] = first_png_;
   j["last_png"] = last_png_;

@@ -1,6 +1,7 @@
 // The visual node: init (scene, mesh, renderer, DDS), run (frame-paced loop drawing the newest contact frame),
 // shutdown (video, stats).
 #pragma once
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -8,6 +9,8 @@
 
 #include "image.h"
 #include "mesh.h"
+#include "precompute.h"
+#include "superposition.h"
 #include "scene.h"
 #include "stats.h"
 
@@ -50,6 +53,21 @@ class VisualApp {
   TetMesh mesh_;
   SurfaceMesh surface_;
   std::uint64_t scene_hash_ = 0;
+  std::uint64_t tensor_hash_ = 0;
+  // Visible surface, compacted: vertex v is mesh node visible_nodes_[v]; tris index vertices.
+  std::vector<int> visible_nodes_;
+  std::vector<int> block_row_;              // per visible vertex: its row in the "visual" block (-1: none)
+  Eigen::MatrixX3i visible_tris_;
+  Eigen::MatrixX3f rest_;                   // #visible x 3, m
+  Eigen::MatrixX3f positions_;              // #visible x 3, m, deformed
+  Tensors tensors_;                         // "visual" block only (no interior rows)
+  std::unique_ptr<Superposition> superposition_;
+  Eigen::VectorXd u_;                       // 3R displacements of the block rows
+  std::array<int, 64> contact_nodes_{};
+  std::array<Eigen::Vector3d, 64> contact_lambda_{};
+  Eigen::MatrixX3f markers_;                // contact points drawn as markers
+  std::uint64_t deform_errors_ = 0;
+  std::uint64_t vtk_written_ = 0;
   std::unique_ptr<Renderer> renderer_;
   std::unique_ptr<Dds> dds_;
   std::atomic<bool> stop_requested_{false};
