@@ -104,9 +104,11 @@ uniform vec3 u_albedo;     // linear: the display colour squared
 uniform vec3 u_specular;   // linear
 uniform float u_shininess;
 out vec4 frag_color;
-// Directions towards the lights, view space: key from the upper left in front of the viewer, fill from the right.
+// Directions towards the lights, view space: key raking from the upper left, fill from the right. The key is kept
+// well away from the usual surface normals (a camera looking down on an organ at about 45 degrees) so that a dent
+// changes the shading at first order; a light along the normal hides shallow dents.
 // The fill is diffuse only: one specular highlight, one pow per fragment.
-const vec3 kKeyDir = normalize(vec3(-0.4, 0.55, 0.75));
+const vec3 kKeyDir = normalize(vec3(-0.75, 0.45, 0.5));
 const vec3 kFillDir = normalize(vec3(0.75, -0.25, 0.65));
 const float kKey = 0.9;
 const float kFill = 0.3;

@@ -148,36 +148,15 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
   surface_ = boundary_surface(mesh_);
   scene_hash_ = scene_.hash() ^ (mesh_hash(mesh_) * 0x9E3779B97F4A7C15ull);
 
-  // The visible surface, compacted to its own vertices (the GPU never sees interior nodes).
-  visible_nodes_ = surface_.nodes;
-  std::vector<int> vertex_of_node(static_cast<std::size_t>(mesh_.nodes.rows()), -1);
-  for (std::size_t v = 0; v < visible_nodes_.size(); ++v) vertex_of_node[static_cast<std::size_t>(visible_nodes_[v])] = static_cast<int>(v);
-  visible_tris_.resize(surface_.tris.rows(), 3);
-  for (int f = 0; f < surface_.tris.rows(); ++f) {
-    for (int e = 0; e < 3; ++e) visible_tris_(f, e) = vertex_of_node[static_cast<std::size_t>(surface_.tris(f, e))];
-  }
-  rest_.resize(static_cast<Eigen::Index>(visible_nodes_.size()), 3);
-  for (std::size_t v = 0; v < visible_nodes_.size(); ++v) {
-    rest_.row(static_cast<Eigen::Index>(v)) = mesh_.nodes.row(visible_nodes_[v]).cast<float>();
-  }
-  positions_ = rest_;
-  markers_.resize(0, 3);
-
   // --- init: the visual rows of the tensors (visible x surface), from the cache both nodes share ---
   if (scene_.model == "liver") {
     const LiverTensorSetup setup = liver_tensor_setup(scene_, mesh_, cache);
     tensors_ = load_liver_tensors(setup, mesh_, scene_.material, {"visual"}, options_.quiet ? nullptr : &std::cerr,
                                   nullptr, scene_.file);
     tensor_hash_ = setup.key.combined();
-    superposition_ = std::make_unique<Superposition>(tensors_, "visual", 64);
-    const TensorBlock& block = superposition_->block();
-    u_.setZero(3 * block.row_count());
-    block_row_.assign(visible_nodes_.size(), -1);
-    for (std::size_t v = 0; v < visible_nodes_.size(); ++v) {
-      block_row_[v] = block.row_of_node[static_cast<std::size_t>(visible_nodes_[v])];
-    }
-    markers_.resize(64, 3);
   }
+  deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, scene_.model == "liver" ? &tensors_ : nullptr);
+  markers_.resize(kMaxContacts, 3);
 
   // --- init: renderer (no GL context at all when headless) ---
   renderer_ = make_renderer(options_.headless ? "null" : "osmesa", scene_.visual.width, scene_.visual.height);
@@ -185,6 +164,10 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
     std::error_code ec;
     std::filesystem::create_directories(options_.out, ec);
     if (ec) throw_error(options_.out, ": cannot create the output folder (", ec.message(), ")");
+    // Index of the written frames, so a reader knows what each PNG shows.
+    index_ = std::fopen((options_.out + "/frames.csv").c_str(), "w");
+    if (index_ == nullptr) throw_error(options_.out, "/frames.csv: cannot create the frame index");
+    std::fprintf(index_, "png,seq,sim_time,contacts,max_displacement_m\n");
   }
 
   // --- init: DDS ---
@@ -209,7 +192,9 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
   }
 }
 
-VisualApp::~VisualApp() = default;
+VisualApp::~VisualApp() {
+  if (index_ != nullptr) std::fclose(index_);
+}
 
 int VisualApp::run() {
   using clock = std::chrono::steady_clock;
@@ -219,6 +204,7 @@ int VisualApp::run() {
 
   msg::ContactFrame frame;
   bool have_frame = false;
+  if (index_ != nullptr) std::fflush(index_);
   bool hash_checked = false;
   bool hash_ok = true;
   const Eigen::Vector3f organ_rgb = kLiverRgb;
@@ -253,42 +239,29 @@ int VisualApp::run() {
     if (fresh) have_frame = true;
 
     // Deformation of the visible mesh from the newest contacts: u_n = sum_k G_nk lambda_k over the visible rows.
-    int marker_count = 0;
-    if (fresh && superposition_ != nullptr) {
+    const int m = have_frame ? std::min<int>(static_cast<int>(frame.contacts().size()), kMaxContacts) : 0;
+    if (fresh) {
       const std::uint64_t d0 = monotonic_ns();
-      const int m = std::min<int>(static_cast<int>(frame.contacts().size()), 64);
       for (int l = 0; l < m; ++l) {
         const auto& e = frame.contacts()[static_cast<std::size_t>(l)];
         contact_nodes_[static_cast<std::size_t>(l)] = static_cast<int>(e.node());
         contact_lambda_[static_cast<std::size_t>(l)] = from_msg(e.lambda());
       }
-      if (m == 0) {
-        positions_ = rest_;
-      } else if (superposition_->displacements(contact_nodes_.data(), contact_lambda_.data(), m, u_) ==
-                 ContactStatus::kOk) {
-        for (Eigen::Index v = 0; v < rest_.rows(); ++v) {
-          const int r = block_row_[static_cast<std::size_t>(v)];
-          positions_.row(v) = rest_.row(v);
-          if (r >= 0) positions_.row(v) += u_.segment<3>(3 * r).cast<float>().transpose();
-        }
-      } else {
+      if (deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), m) != ContactStatus::kOk) {
         ++deform_errors_;  // a frame naming nodes this scene does not have: keep the last good shape
       }
       deform_us_.add(static_cast<double>(monotonic_ns() - d0) * 1e-3);
     }
-    if (have_frame && superposition_ != nullptr) {
-      const int m = std::min<int>(static_cast<int>(frame.contacts().size()), 64);
-      for (int l = 0; l < m; ++l) {
-        const int r = superposition_->block().row_of_node[static_cast<std::size_t>(contact_nodes_[static_cast<std::size_t>(l)])];
-        Eigen::Vector3d x = mesh_.nodes.row(contact_nodes_[static_cast<std::size_t>(l)]).transpose();
-        if (r >= 0) x += u_.segment<3>(3 * r);
-        markers_.row(marker_count++) = x.cast<float>().transpose();
-      }
+    // Contact nodes as markers (visual feedback only).
+    int marker_count = 0;
+    for (int l = 0; l < m; ++l) {
+      const int v = deformer_->vertex_of(contact_nodes_[static_cast<std::size_t>(l)]);
+      if (v >= 0) markers_.row(marker_count++) = deformer_->positions().row(v);
     }
 
     const std::uint64_t r0 = monotonic_ns();
     renderer_->begin_frame(scene_.visual.camera);
-    renderer_->draw_surface(positions_, visible_tris_, organ_rgb);
+    renderer_->draw_surface(deformer_->positions(), deformer_->tris(), organ_rgb);
     if (have_frame) renderer_->draw_tool(tool_geometry(scene_.tool, from_msg(frame.pose())), scene_.tool.shaft_radius);
     if (marker_count > 0) renderer_->draw_points(markers_.topRows(marker_count), 0.0015f, kMarkerRgb);
     renderer_->end_frame();
@@ -302,8 +275,13 @@ int VisualApp::run() {
         try {
           write_png(path, image_);
           if (scene_.visual.vtk) {
-            write_vtk_surface(path.substr(0, path.size() - 4) + ".vtk", positions_.cast<double>(), visible_tris_);
+            write_vtk_surface(path.substr(0, path.size() - 4) + ".vtk", deformer_->positions().cast<double>(),
+                              deformer_->tris());
             ++vtk_written_;
+          }
+          if (index_ != nullptr) {
+            std::fprintf(index_, "%s,%llu,%.6f,%d,%.9g\n", name, static_cast<unsigned long long>(frame.seq()),
+                         have_frame ? frame.sim_time() : -1.0, m, deformer_->max_displacement());
           }
           if (first_png_.empty()) first_png_ = path;
           last_png_ = path;
@@ -350,8 +328,8 @@ void VisualApp::shutdown() {
   j["png_errors"] = png_errors_;
   j["vtk_written"] = vtk_written_;
   j["deform_errors"] = deform_errors_;
-  j["visible_nodes"] = visible_nodes_.size();
-  j["tensor_rows"] = superposition_ ? superposition_->block().row_count() : 0;
+  j["visible_nodes"] = deformer_->visible_nodes().size();
+  j["tensor_rows"] = tensors_.find("visual") != nullptr ? tensors_.find("visual")->row_count() : 0;
   j["fps"] = wall_seconds_ > 0 ? static_cast<double>(frames_rendered_) / wall_seconds_ : 0.0;
   j["wall_seconds"] = wall_seconds_;
   j["deform_us"] = to_json(deform);

@@ -3,6 +3,7 @@
 #pragma once
 #include <array>
 #include <atomic>
+#include <cstdio>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -10,7 +11,7 @@
 #include "image.h"
 #include "mesh.h"
 #include "precompute.h"
-#include "superposition.h"
+#include "surface_deformer.h"
 #include "scene.h"
 #include "stats.h"
 
@@ -54,15 +55,9 @@ class VisualApp {
   SurfaceMesh surface_;
   std::uint64_t scene_hash_ = 0;
   std::uint64_t tensor_hash_ = 0;
-  // Visible surface, compacted: vertex v is mesh node visible_nodes_[v]; tris index vertices.
-  std::vector<int> visible_nodes_;
-  std::vector<int> block_row_;              // per visible vertex: its row in the "visual" block (-1: none)
-  Eigen::MatrixX3i visible_tris_;
-  Eigen::MatrixX3f rest_;                   // #visible x 3, m
-  Eigen::MatrixX3f positions_;              // #visible x 3, m, deformed
   Tensors tensors_;                         // "visual" block only (no interior rows)
-  std::unique_ptr<Superposition> superposition_;
-  Eigen::VectorXd u_;                       // 3R displacements of the block rows
+  std::unique_ptr<SurfaceDeformer> deformer_;
+  std::FILE* index_ = nullptr;              // frames.csv: which contact frame each PNG shows
   std::array<int, 64> contact_nodes_{};
   std::array<Eigen::Vector3d, 64> contact_lambda_{};
   Eigen::MatrixX3f markers_;                // contact points drawn as markers

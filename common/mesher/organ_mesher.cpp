@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <ostream>
@@ -277,6 +278,34 @@ void mesh_bottom_differently(double z) {
   for (const auto& face : faces) gmsh::model::mesh::setAlgorithm(2, face.second, 5);  // Delaunay
 }
 
+// Gmsh node tag of a TriSurface vertex (0-based), and the coordinates of a list of node tags.
+std::size_t tag_of(int vertex) { return static_cast<std::size_t>(vertex) + 1; }
+
+std::vector<double> node_coords(const TriSurface& s, const std::vector<std::size_t>& tags) {
+  std::vector<double> xyz;
+  xyz.reserve(3 * tags.size());
+  for (std::size_t t : tags)
+    for (std::size_t k = 0; k < 3; ++k) xyz.push_back(s.xyz[3 * (t - 1) + k]);
+  return xyz;
+}
+
+// Puts on discrete surface `surface` the vertices of `s` for which has_node(vertex) holds (the nodes classified on
+// it) and the triangles for which has_triangle(triangle) holds, numbering elements from element_tag on.
+void add_discrete_triangles(int surface, const TriSurface& s, const std::function<bool(std::size_t)>& has_node,
+                            const std::function<bool(std::size_t)>& has_triangle, std::size_t& element_tag) {
+  std::vector<std::size_t> nodes, tri_tags, tri_nodes;
+  const std::size_t vertex_count = s.xyz.size() / 3;
+  for (std::size_t i = 0; i < vertex_count; ++i)
+    if (has_node(i)) nodes.push_back(tag_of(static_cast<int>(i)));
+  gmsh::model::mesh::addNodes(2, surface, nodes, node_coords(s, nodes));
+  for (std::size_t f = 0; f < s.tris.size() / 3; ++f) {
+    if (!has_triangle(f)) continue;
+    tri_tags.push_back(element_tag++);
+    for (std::size_t k = 0; k < 3; ++k) tri_nodes.push_back(tag_of(s.tris[3 * f + k]));
+  }
+  gmsh::model::mesh::addElementsByType(surface, 2, tri_tags, tri_nodes);
+}
+
 // Builds the shape's geometry in a fresh Gmsh model (`liver` is used for "liver" only).
 void build_geometry(const std::string& shape, const TriSurface& liver) {
   gmsh::model::add(shape);
@@ -298,14 +327,7 @@ void build_geometry(const std::string& shape, const TriSurface& liver) {
   // disks so that Gmsh can remesh them at size h. (Gmsh's createTopology would find the same curve, but starts it
   // at a node that varies from call to call within a process, which changed the mesh.)
   std::size_t element_tag = 1;
-  auto coords_of = [&liver](const std::vector<std::size_t>& tags) {
-    std::vector<double> xyz;
-    xyz.reserve(3 * tags.size());
-    for (std::size_t t : tags)
-      for (std::size_t k = 0; k < 3; ++k) xyz.push_back(liver.xyz[3 * (t - 1) + k]);
-    return xyz;
-  };
-  auto tag_of = [](int vertex) { return static_cast<std::size_t>(vertex) + 1; };
+  auto coords_of = [&liver](const std::vector<std::size_t>& tags) { return node_coords(liver, tags); };
 
   const int point = gmsh::model::addDiscreteEntity(0);
   const std::vector<std::size_t> point_node = {tag_of(liver.loop.front())};
@@ -327,18 +349,14 @@ void build_geometry(const std::string& shape, const TriSurface& liver) {
   for (int sg : {1, -1}) {
     const int surface = gmsh::model::addDiscreteEntity(2, -1, {curve});
     surfaces.push_back(surface);
-    std::vector<std::size_t> nodes, tri_tags, tri_nodes;
-    for (std::size_t i = 0; i < liver.side.size(); ++i)
-      if (liver.side[i] == sg) nodes.push_back(tag_of(static_cast<int>(i)));
-    gmsh::model::mesh::addNodes(2, surface, nodes, coords_of(nodes));
     // A triangle belongs to the side of its off-loop vertices (at most two of its vertices are on the loop).
-    for (std::size_t f = 0; f < liver.tris.size(); f += 3) {
-      const int sum = liver.side[liver.tris[f]] + liver.side[liver.tris[f + 1]] + liver.side[liver.tris[f + 2]];
-      if (sum * sg <= 0) continue;
-      tri_tags.push_back(element_tag++);
-      for (int k = 0; k < 3; ++k) tri_nodes.push_back(tag_of(liver.tris[f + k]));
-    }
-    gmsh::model::mesh::addElementsByType(surface, 2, tri_tags, tri_nodes);
+    add_discrete_triangles(
+        surface, liver, [&liver, sg](std::size_t v) { return liver.side[v] == sg; },
+        [&liver, sg](std::size_t f) {
+          return (liver.side[liver.tris[3 * f]] + liver.side[liver.tris[3 * f + 1]] + liver.side[liver.tris[3 * f + 2]]) *
+                     sg > 0;
+        },
+        element_tag);
   }
   gmsh::model::addDiscreteEntity(3, -1, surfaces);
   gmsh::model::mesh::createGeometry();
@@ -375,17 +393,25 @@ TetMesh extract_tets() {
   return mesh;
 }
 
-// Expected node count at characteristic length h (m), times `scale` (measured over modelled, from attempts).
-double model_nodes(double volume, double area, double h, double scale) {
-  return scale * (kNodesPerVolume * volume / (h * h * h) + kNodesPerArea * area / (h * h));
+// Node-count model: about `fixed` nodes that do not depend on h (a kept surface mesh) plus
+// scale * (kNodesPerVolume * volume / h^3 + kNodesPerArea * area / h^2) for characteristic length h (m); `scale` is
+// measured over modelled, from attempts.
+struct NodeModel {
+  double volume = 0.0;  // m^3
+  double area = 0.0;    // m^2 of the surface Gmsh meshes at size h (0 when the surface mesh is kept)
+  double fixed = 0.0;   // nodes of a kept surface mesh
+};
+
+double model_nodes(const NodeModel& model, double h, double scale) {
+  return model.fixed + scale * (kNodesPerVolume * model.volume / (h * h * h) + kNodesPerArea * model.area / (h * h));
 }
 
 // The h at which model_nodes equals `target` (model_nodes decreases with h; bisection in log h).
-double solve_mesh_size(double volume, double area, double target, double scale) {
+double solve_mesh_size(const NodeModel& model, double target, double scale) {
   double lo = std::log(1e-5), hi = std::log(1.0);
   for (int it = 0; it < 100; ++it) {
     const double m = 0.5 * (lo + hi);
-    (model_nodes(volume, area, std::exp(m), scale) > target ? lo : hi) = m;
+    (model_nodes(model, std::exp(m), scale) > target ? lo : hi) = m;
   }
   return std::exp(0.5 * (lo + hi));
 }
@@ -405,6 +431,77 @@ double min_tet_quality(const TetMesh& mesh) {
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Meshes the current Gmsh model (geometry already built) with about `target` nodes: the characteristic length h
+// comes from the node model, then each attempt rescales the model by the count it measured (at most
+// kMaxCountAttempts meshings for the count); an attempt whose worst tet is below kMinQuality is re-meshed at a 1 %
+// smaller h (at most kMaxQualityRetries times). `reset` clears what an attempt meshed. Returns the attempt closest
+// to the target; fills report (all but seconds) if given.
+TetMesh mesh_to_node_count(GmshSession& gmsh_session, const std::string& context, double target,
+                           const NodeModel& model, const std::function<void()>& reset, std::ostream* progress,
+                           OrganMeshReport* report) {
+  double scale = 1.0;
+  double h = solve_mesh_size(model, target, scale);
+  // Closest attempts so far with more (`above`) and fewer (`below`) nodes than the target: (h, nodes).
+  std::pair<double, double> above{0.0, 0.0}, below{0.0, 0.0};
+  TetMesh best;
+  double best_error = 0.0, best_h = 0.0, best_quality = 0.0;
+  int attempts = 0, count_attempts = 0, quality_retries = 0;
+  while (count_attempts < kMaxCountAttempts) {
+    ++attempts;
+    const auto t0 = std::chrono::steady_clock::now();
+    reset();
+    set_mesh_options(h);
+    gmsh::model::mesh::generate(3);
+    gmsh_session.check(context);
+    TetMesh mesh = extract_tets();
+    if (mesh.tets.rows() == 0) throw_error(context, ": Gmsh produced no tetrahedra at h = ", h, " m");
+    const double nodes = static_cast<double>(mesh.nodes.rows());
+    const double quality = min_tet_quality(mesh);
+    if (progress != nullptr) {
+      *progress << context << ": attempt " << attempts << ", h = " << h * 1000.0 << " mm: " << mesh.nodes.rows()
+                << " nodes, " << mesh.tets.rows() << " tets, worst quality " << quality << " (" << seconds_since(t0)
+                << " s)\n";
+    }
+    if (quality < kMinQuality) {
+      if (++quality_retries > kMaxQualityRetries)
+        throw_error(context, ": Gmsh keeps producing flat tetrahedra (worst quality ", quality, " at h = ", h, " m)");
+      h *= 0.99;
+      continue;
+    }
+    ++count_attempts;
+    // Keep the attempt closest to the target in relative (log) terms; the earlier one wins ties.
+    const double error = std::fabs(std::log(nodes / target));
+    if (best.tets.rows() == 0 || error < best_error) {
+      best = std::move(mesh);
+      best_error = error;
+      best_h = h;
+      best_quality = quality;
+    }
+    if (std::fabs(nodes / target - 1.0) <= kAcceptRelError) break;
+
+    // Next h: the model rescaled by this attempt. Once attempts bracket the target, interpolate between them in
+    // log-log instead (the count is a step function of h at coarse sizes, so the model alone can oscillate).
+    if (nodes > target && (above.first == 0.0 || h > above.first)) above = {h, nodes};
+    if (nodes < target && (below.first == 0.0 || h < below.first)) below = {h, nodes};
+    // Only the part that depends on h is rescaled (a kept surface's nodes are fixed); a count at or below the
+    // fixed part says nothing about h and leaves the scale as it is.
+    if (nodes > model.fixed) scale *= (nodes - model.fixed) / (model_nodes(model, h, scale) - model.fixed);
+    h = solve_mesh_size(model, target, scale);
+    if (above.first > 0.0 && below.first > 0.0) {
+      const double w = std::log(above.second / target) / std::log(above.second / below.second);
+      h = std::exp(std::log(above.first) + w * (std::log(below.first) - std::log(above.first)));
+    }
+  }
+  if (report != nullptr) {
+    report->nodes = static_cast<int>(best.nodes.rows());
+    report->tets = static_cast<int>(best.tets.rows());
+    report->attempts = attempts;
+    report->mesh_size = best_h;
+    report->min_quality = best_quality;
+  }
+  return best;
 }
 
 }  // namespace
@@ -431,92 +528,102 @@ TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress, OrganMeshR
   // Volume and area give the first characteristic length. The liver's are those of its sampled surface, first
   // sampled coarsely to estimate h, then at the resolution that h asks for (fixed across re-meshes).
   TriSurface liver;
-  double volume = 0.0, area = 0.0;
+  NodeModel model;
   if (spec.shape == "plate") {
-    volume = kPlateSide * kPlateSide * kPlateThickness;
-    area = 2 * kPlateSide * kPlateSide + 4 * kPlateSide * kPlateThickness;
+    model.volume = kPlateSide * kPlateSide * kPlateThickness;
+    model.area = 2 * kPlateSide * kPlateSide + 4 * kPlateSide * kPlateThickness;
   } else if (spec.shape == "cylinder") {
-    volume = kPi * kCylinderRadius * kCylinderRadius * kCylinderHeight;
-    area = 2 * kPi * kCylinderRadius * (kCylinderRadius + kCylinderHeight);
+    model.volume = kPi * kCylinderRadius * kCylinderRadius * kCylinderHeight;
+    model.area = 2 * kPi * kCylinderRadius * (kCylinderRadius + kCylinderHeight);
   } else {
     liver = liver_surface(kLiverMinCells);
-    std::tie(volume, area) = volume_and_area(liver);
-    const int cells = liver_cells(solve_mesh_size(volume, area, target, 1.0));
+    std::tie(model.volume, model.area) = volume_and_area(liver);
+    const int cells = liver_cells(solve_mesh_size(model, target, 1.0));
     if (cells != kLiverMinCells) {
       liver = liver_surface(cells);
-      std::tie(volume, area) = volume_and_area(liver);
+      std::tie(model.volume, model.area) = volume_and_area(liver);
     }
   }
 
-  double scale = 1.0;
-  double h = solve_mesh_size(volume, area, target, scale);
-  // Closest attempts so far with more (`above`) and fewer (`below`) nodes than the target: (h, nodes).
-  std::pair<double, double> above{0.0, 0.0}, below{0.0, 0.0};
   TetMesh best;
-  double best_error = 0.0, best_h = 0.0, best_quality = 0.0;
-  int attempts = 0, count_attempts = 0, quality_retries = 0;
   try {
     GmshSession gmsh_session(progress);
     build_geometry(spec.shape, liver);
     gmsh_session.check(context);
-    while (count_attempts < kMaxCountAttempts) {
-      ++attempts;
-      const auto t0 = std::chrono::steady_clock::now();
-      gmsh::model::mesh::clear();
-      set_mesh_options(h);
-      gmsh::model::mesh::generate(3);
-      gmsh_session.check(context);
-      TetMesh mesh = extract_tets();
-      if (mesh.tets.rows() == 0) throw_error(context, ": Gmsh produced no tetrahedra at h = ", h, " m");
-      const double nodes = static_cast<double>(mesh.nodes.rows());
-      const double quality = min_tet_quality(mesh);
-      if (progress != nullptr) {
-        *progress << "organ " << spec.shape << ": attempt " << attempts << ", h = " << h * 1000.0 << " mm: "
-                  << mesh.nodes.rows() << " nodes, " << mesh.tets.rows() << " tets, worst quality " << quality
-                  << " (" << seconds_since(t0) << " s)\n";
-      }
-      if (quality < kMinQuality) {
-        if (++quality_retries > kMaxQualityRetries)
-          throw_error(context, ": Gmsh keeps producing flat tetrahedra (worst quality ", quality, " at h = ", h,
-                      " m)");
-        h *= 0.99;
-        continue;
-      }
-      ++count_attempts;
-      // Keep the attempt closest to the target in relative (log) terms; the earlier one wins ties.
-      const double error = std::fabs(std::log(nodes / target));
-      if (best.tets.rows() == 0 || error < best_error) {
-        best = std::move(mesh);
-        best_error = error;
-        best_h = h;
-        best_quality = quality;
-      }
-      if (std::fabs(nodes / target - 1.0) <= kAcceptRelError) break;
-
-      // Next h: the model rescaled by this attempt. Once attempts bracket the target, interpolate between them in
-      // log-log instead (the count is a step function of h at coarse sizes, so the model alone can oscillate).
-      if (nodes > target && (above.first == 0.0 || h > above.first)) above = {h, nodes};
-      if (nodes < target && (below.first == 0.0 || h < below.first)) below = {h, nodes};
-      scale *= nodes / model_nodes(volume, area, h, scale);
-      h = solve_mesh_size(volume, area, target, scale);
-      if (above.first > 0.0 && below.first > 0.0) {
-        const double w = std::log(above.second / target) / std::log(above.second / below.second);
-        h = std::exp(std::log(above.first) + w * (std::log(below.first) - std::log(above.first)));
-      }
-    }
+    best = mesh_to_node_count(gmsh_session, context, target, model, [] { gmsh::model::mesh::clear(); }, progress,
+                              report);
   } catch (const std::string& what) {  // Gmsh 4.8 throws its error message as a std::string
     throw_error(context, ": Gmsh: ", what);
   }
-
   validate_mesh(best);
-  if (report != nullptr) {
-    report->nodes = static_cast<int>(best.nodes.rows());
-    report->tets = static_cast<int>(best.tets.rows());
-    report->attempts = attempts;
-    report->mesh_size = best_h;
-    report->min_quality = best_quality;
-    report->seconds = seconds_since(start);
+  if (report != nullptr) report->seconds = seconds_since(start);
+  return best;
+}
+
+int closed_surface_nodes(double volume, double area, int target_nodes) {
+  if (!(volume > 0.0) || !(area > 0.0) || target_nodes <= 0) return 0;
+  const double h = solve_mesh_size(NodeModel{volume, area, 0.0}, target_nodes, 1.0);
+  return static_cast<int>(std::lround(kNodesPerArea * area / (h * h)));
+}
+
+TetMesh mesh_closed_surface(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tris, int target_nodes,
+                            std::ostream* progress, OrganMeshReport* report) {
+  const auto start = std::chrono::steady_clock::now();
+  const std::string context = "closed surface (" + std::to_string(vertices.rows()) + " vertices, " +
+                              std::to_string(target_nodes) + " nodes wanted)";
+  if (target_nodes < kMinOrganNodes || target_nodes > kMaxOrganNodes)
+    throw_error(context, ": node count out of range ", kMinOrganNodes, "..", kMaxOrganNodes);
+  if (tris.rows() < 4 || vertices.rows() < 4) throw_error(context, ": too few triangles for a closed surface");
+  if (!vertices.allFinite()) throw_error(context, ": non-finite vertex coordinates");
+  if (tris.minCoeff() < 0 || tris.maxCoeff() >= vertices.rows()) throw_error(context, ": triangle index out of range");
+  // The surface's own numbers: volume and area by the divergence theorem, vertices used.
+  TriSurface surface;
+  surface.xyz.resize(static_cast<std::size_t>(3 * vertices.rows()));
+  for (Eigen::Index v = 0; v < vertices.rows(); ++v)
+    for (int c = 0; c < 3; ++c) surface.xyz[static_cast<std::size_t>(3 * v + c)] = vertices(v, c);
+  surface.tris.resize(static_cast<std::size_t>(3 * tris.rows()));
+  for (Eigen::Index f = 0; f < tris.rows(); ++f)
+    for (int c = 0; c < 3; ++c) surface.tris[static_cast<std::size_t>(3 * f + c)] = tris(f, c);
+  NodeModel model;
+  double area = 0.0;
+  std::tie(model.volume, area) = volume_and_area(surface);
+  if (!(model.volume > 0.0)) throw_error(context, ": the surface encloses no volume or faces inward");
+  std::vector<int> used(surface.tris);
+  std::sort(used.begin(), used.end());
+  model.fixed = static_cast<double>(std::unique(used.begin(), used.end()) - used.begin());
+  if (model.fixed >= target_nodes)
+    throw_error(context, ": the surface alone has ", static_cast<int>(model.fixed), " vertices, not fewer than the ",
+                target_nodes, " nodes wanted (reduce the surface first)");
+
+  TetMesh best;
+  try {
+    GmshSession gmsh_session(progress);
+    gmsh::model::add("closed_surface");
+    const int surface_tag = gmsh::model::addDiscreteEntity(2);
+    std::size_t element_tag = 1;
+    std::vector<char> used_vertex(surface.xyz.size() / 3, 0);
+    for (int v : surface.tris) used_vertex[static_cast<std::size_t>(v)] = 1;
+    add_discrete_triangles(
+        surface_tag, surface, [&used_vertex](std::size_t v) { return used_vertex[v] != 0; },
+        [](std::size_t) { return true; }, element_tag);
+    // The volume is a built-in-kernel volume bounded by the discrete surface: Gmsh meshes it with its 3D
+    // Delaunay and leaves the surface's triangles as they are (a surface without a parametrization is not remeshed).
+    const int loop = gmsh::model::geo::addSurfaceLoop({surface_tag});
+    const int volume_tag = gmsh::model::geo::addVolume({loop});
+    gmsh::model::geo::synchronize();
+    gmsh_session.check(context);
+    // Each attempt clears the tets only: the surface mesh is kept as given.
+    best = mesh_to_node_count(gmsh_session, context, target_nodes, model,
+                              [volume_tag] { gmsh::model::mesh::clear({{3, volume_tag}}); }, progress, report);
+  } catch (const std::string& what) {  // Gmsh 4.8 throws its error message as a std::string
+    throw_error(context, ": Gmsh: ", what);
   }
+  validate_mesh(best);
+  const SurfaceMesh boundary = boundary_surface(best);
+  if (boundary.tris.rows() != tris.rows())
+    throw_error(context, ": Gmsh changed the surface (", boundary.tris.rows(), " boundary triangles for ", tris.rows(),
+                " given)");
+  if (report != nullptr) report->seconds = seconds_since(start);
   return best;
 }
 

@@ -1,5 +1,6 @@
 // Launching real node processes from tests: spawn with arguments and extra environment, wait with a timeout.
 #pragma once
+#include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>

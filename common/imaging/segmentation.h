@@ -1,0 +1,93 @@
+// From a segmented volume to a simulation-ready organ (Cotin et al. 1998, section 2): select the organ's label,
+// extract its boundary (marching cubes), smooth away the staircase while staying within a stated distance of the
+// voxel boundary, reduce the triangle count adaptively, tetrahedralize at a requested node count (Gmsh, through the
+// mesher) and write the mesh and a scene that uses it.
+//
+// Stages and their libraries: marching cubes, Taubin smoothing and quadric/curvature edge collapse are this
+// folder's own (see their headers); the tetrahedralization is Gmsh's 3D Delaunay inside the kept surface
+// (mesh_closed_surface). Init-time code: allocates and throws surgsim::Error with the file named.
+#pragma once
+#include <cstdint>
+#include <iosfwd>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "mesh.h"
+#include "organ_mesher.h"
+#include "surface_decimation.h"
+#include "surface_smoothing.h"
+#include "tri_mesh.h"
+#include "volume.h"
+
+namespace surgsim {
+
+struct SegmentOptions {
+  std::optional<std::int32_t> label;  // organ label; empty: the only non-zero label
+  int target_nodes = 1500;            // tetrahedral mesh nodes, kMinOrganNodes..kMaxOrganNodes (about +-20 %)
+  double max_distance = 1.0;          // voxels (of the smallest spacing): smoothing and reduction stay this close to
+                                      // the voxel boundary; (0, 4]
+  double surface_error = 0.25;        // voxels: the reduced surface stops where the next collapse would move it
+                                      // more than this (quadric + curvature estimate); (0, max_distance]
+  int smoothing_iterations = 30;      // Taubin lambda|mu pairs, 0..1000
+  bool clean = true;                  // keep the largest component and fill cavities (clean_mask)
+};
+
+/// Throws surgsim::Error with a one-line reason when an option is out of range.
+void check_segment_options(const SegmentOptions& options);
+
+/// Wall time of one stage.
+struct StageTime {
+  std::string name;
+  double seconds = 0.0;
+};
+
+struct SegmentReport {
+  std::int32_t label = 0;
+  std::int64_t voxels = 0;               // in the volume
+  std::int64_t organ_voxels = 0;         // of the selected label, after clean-up
+  MaskCleanup cleanup;
+  int mc_vertices = 0, mc_triangles = 0;  // plain marching cubes
+  SmoothingReport smoothing;
+  DecimationReport surface;              // error-driven reduction: the smooth, light surface
+  DecimationReport boundary;             // further reduction to the node budget's surface vertex count
+  int boundary_target = 0;               // that vertex count (closed_surface_nodes)
+  OrganMeshReport mesh;                  // tetrahedralization
+  double voxel_volume = 0.0;             // m^3, organ voxels x voxel volume
+  double mc_volume = 0.0;                // m^3, enclosed by each surface / the tets
+  double surface_volume = 0.0;
+  double mesh_volume = 0.0;
+  double voxel_unit = 0.0;               // m, the "voxel" of distances (smallest spacing)
+  std::vector<StageTime> stages;         // select, marching cubes, smooth, reduce, tetrahedralize
+};
+
+/// Everything the pipeline made, in world coordinates (m).
+struct Segmentation {
+  TriMesh marching_cubes;  // plain marching cubes of the cleaned mask
+  TriMesh surface;         // smoothed and reduced (error-driven): the smooth, light surface
+  TetMesh mesh;            // the tetrahedral mesh (its boundary: `surface` reduced to the node budget)
+  SegmentReport report;
+  std::string source;      // the volume's file or folder
+};
+
+/// Runs the pipeline. `progress`, if given, gets a line per stage as it ends; `mesher_log`, if given, each meshing
+/// attempt and Gmsh's log. Deterministic.
+Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& options, std::ostream* progress = nullptr,
+                            std::ostream* mesher_log = nullptr);
+
+/// Files written by write_segmentation.
+struct SegmentationFiles {
+  std::string msh, vtk, surface_vtk, scene;
+};
+
+/// Writes PREFIX.msh (Gmsh v2.2), PREFIX.vtk (tets), PREFIX_surface.vtk (the smooth, light surface) and
+/// PREFIX.yaml: a liver-type scene (liver.yaml's structure) whose mesh is `file: <PREFIX name>.msh`, whose fixed
+/// region is the mesh's lowest 14 % (as the liver's underside), whose tool comes straight down onto the mesh's
+/// highest point and whose camera frames the mesh. Throws surgsim::Error naming the file that cannot be written.
+SegmentationFiles write_segmentation(const Segmentation& segmentation, const std::string& prefix);
+
+/// The scene text write_segmentation writes (mesh file name as given).
+std::string segmentation_scene_yaml(const TetMesh& mesh, const std::string& name, const std::string& mesh_file,
+                                    const std::string& source);
+
+}  // namespace surgsim

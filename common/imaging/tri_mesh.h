@@ -1,0 +1,41 @@
+// A triangle surface with its own vertices (the imaging pipeline's surfaces, before they become a TetMesh's
+// boundary), and the checks and measures the pipeline reports on it.
+#pragma once
+#include <Eigen/Core>
+#include <string>
+
+namespace surgsim {
+
+struct TriMesh {
+  Eigen::MatrixX3d vertices;  // #V x 3, m
+  Eigen::MatrixX3i tris;      // #F x 3, indices into vertices, counter-clockwise seen from outside
+};
+
+/// Topology of a triangle surface.
+struct TriMeshTopology {
+  int vertices = 0;          // referenced vertices
+  int edges = 0;             // undirected edges
+  int boundary_edges = 0;    // edges used by one triangle (0 when closed)
+  int nonmanifold_edges = 0; // edges used by more than two triangles, or twice in the same direction
+  int nonmanifold_vertices = 0;  // vertices whose triangles form more than one fan
+  int components = 0;        // connected components (through shared edges)
+  int euler = 0;             // V - E + F
+  bool closed_manifold() const { return boundary_edges == 0 && nonmanifold_edges == 0 && nonmanifold_vertices == 0; }
+};
+TriMeshTopology tri_mesh_topology(const TriMesh& mesh);
+
+/// Enclosed volume by the divergence theorem (m^3; positive when the triangles face outward) and area (m^2).
+double tri_mesh_volume(const TriMesh& mesh);
+double tri_mesh_area(const TriMesh& mesh);
+
+/// Smallest triangle quality 4 sqrt(3) A / (l1^2 + l2^2 + l3^2) (1 equilateral, 0 degenerate).
+double tri_mesh_min_quality(const TriMesh& mesh);
+
+/// Drops vertices no triangle uses and renumbers (order kept).
+void compact_tri_mesh(TriMesh& mesh);
+
+/// Throws surgsim::Error "<what>: ..." unless the surface is closed, 2-manifold, consistently oriented and
+/// connected, with finite coordinates and a positive enclosed volume.
+void check_closed_surface(const TriMesh& mesh, const std::string& what);
+
+}  // namespace surgsim

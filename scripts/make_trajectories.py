@@ -1,0 +1,81 @@
+#!/usr/bin/python3
+"""Writes the shipped liver tool trajectories (config/trajectories/liver_*.csv) from smooth scripted motions.
+
+Geometry (config/liver.yaml): trocar at (0.03, 0, 0.20), shaft straight down at pitch = yaw = 0; the generated liver's
+top surface under the trocar is at z ~ 0.042, i.e. insertion ~ 0.158 m touches it. Units: s, rad, m.
+Run: /usr/bin/python3 scripts/make_trajectories.py   (stdlib only)
+"""
+import math
+import os
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+OUT = os.path.join(HERE, "..", "config", "trajectories")
+RATE = 100.0  # samples per second
+
+
+def ramp(t, t0, t1, a, b):
+    """Half-cosine from a (t <= t0) to b (t >= t1)."""
+    if t <= t0:
+        return a
+    if t >= t1:
+        return b
+    s = 0.5 - 0.5 * math.cos(math.pi * (t - t0) / (t1 - t0))
+    return a + (b - a) * s
+
+
+def write(name, duration, pose, note):
+    path = os.path.join(OUT, name)
+    n = int(round(duration * RATE))
+    with open(path, "w") as f:
+        f.write("# surgsim-trajectory v1\n")
+        f.write("# %s\n" % note)
+        f.write("# made by scripts/make_trajectories.py\n")
+        f.write("t,pitch,yaw,insertion,roll,jaw\n")
+        for i in range(n + 1):
+            t = i / RATE
+            p = pose(t)
+            f.write("%.2f,%.6f,%.6f,%.6f,%.6f,%.6f\n" % ((t,) + tuple(p)))
+    print("wrote", path)
+
+
+def press_and_slide(t):
+    # Press 1 cm in, slide 4 cm sideways (yaw) while pressed, come back out.
+    ins = ramp(t, 0.5, 1.5, 0.13, 0.168) if t < 4.0 else ramp(t, 4.0, 5.0, 0.168, 0.13)
+    yaw = ramp(t, 1.8, 3.6, 0.0, 0.22)
+    return (0.0, yaw, ins, 0.0, 0.5)
+
+
+def grasp_and_pull(t):
+    # Approach with the jaw open, press 4 mm, close the jaw, pull 1.5 cm up, hold, open, withdraw.
+    if t < 1.6:
+        ins = ramp(t, 0.3, 1.5, 0.13, 0.162)
+    elif t < 3.6:
+        ins = ramp(t, 2.2, 3.4, 0.162, 0.147)
+    else:
+        ins = ramp(t, 4.3, 5.0, 0.147, 0.12)
+    jaw = 0.5 if t < 1.7 else (ramp(t, 1.7, 2.0, 0.5, 0.0) if t < 3.8 else ramp(t, 3.8, 4.1, 0.0, 0.5))
+    return (0.0, 0.0, ins, 0.0, jaw)
+
+
+def sweep(t):
+    # Touch several points: three dips at different pitch/yaw, each 8 mm deep.
+    targets = [(0.0, -0.18), (0.12, 0.0), (-0.10, 0.15)]
+    seg = 2.0
+    k = min(int(t // seg), len(targets) - 1)
+    local = t - k * seg
+    pitch, yaw = targets[k]
+    ins = ramp(local, 0.2, 0.8, 0.13, 0.166) if local < 1.0 else ramp(local, 1.1, 1.8, 0.166, 0.13)
+    return (pitch, yaw, ins, 0.0, 0.5)
+
+
+def fast_stab(t):
+    # 0.10 m -> 0.17 m in 20 ms (3.5 m/s: several triangles per 300 Hz tick), hold, withdraw slowly.
+    ins = ramp(t, 0.50, 0.52, 0.10, 0.17) if t < 1.0 else ramp(t, 1.5, 2.5, 0.17, 0.10)
+    return (0.0, 0.0, ins, 0.0, 0.5)
+
+
+if __name__ == "__main__":
+    write("liver_press_slide.csv", 5.5, press_and_slide, "press 1 cm into the liver top, slide 4 cm (yaw), withdraw")
+    write("liver_grasp_pull.csv", 5.5, grasp_and_pull, "press, close the jaw (grasp), pull 1.5 cm up, open, withdraw")
+    write("liver_sweep.csv", 6.0, sweep, "three 8 mm dips at different pitch/yaw")
+    write("liver_fast_stab.csv", 3.0, fast_stab, "stab at 3.5 m/s to 1.2 cm deep, hold, withdraw")

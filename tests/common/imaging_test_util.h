@@ -1,0 +1,91 @@
+// Shared by the imaging tests and imaging_bench: the project's own test volumes (the generated liver, voxelized)
+// and the round-trip figures (distances to the original surface in voxels, triangle counts, volume error).
+#pragma once
+#include <Eigen/Core>
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <utility>
+#include <vector>
+
+#include "mesh.h"
+#include "organ_mesher.h"
+#include "segmentation.h"
+#include "surface_distance.h"
+#include "tri_mesh.h"
+#include "volume.h"
+
+namespace surgsim::test {
+
+/// A tetrahedral mesh's boundary as a compact triangle surface (outward).
+inline TriMesh boundary_tri_mesh(const TetMesh& mesh) {
+  const SurfaceMesh s = boundary_surface(mesh);
+  TriMesh out;
+  out.vertices = mesh.nodes;
+  out.tris = s.tris;
+  compact_tri_mesh(out);
+  return out;
+}
+
+inline double tets_volume(const TetMesh& mesh) {
+  double v = 0.0;
+  for (int t = 0; t < mesh.tets.rows(); ++t) v += tet_volume(mesh, t);
+  return v;
+}
+
+/// The original organ: the generated liver (generate_organ) and its boundary.
+struct ReferenceOrgan {
+  TetMesh mesh;
+  TriMesh surface;
+  double volume = 0.0;  // m^3
+};
+
+inline ReferenceOrgan reference_liver(int nodes) {
+  ReferenceOrgan r;
+  r.mesh = generate_organ(OrganSpec{"liver", nodes});
+  r.surface = boundary_tri_mesh(r.mesh);
+  r.volume = tets_volume(r.mesh);
+  return r;
+}
+
+/// A test volume: the reference voxelized at `spacing` (m), label `label`, optionally with seeded noise
+/// (boundary voxels flipped with probability `noise`, plus `speckles` stray voxels).
+inline LabelVolume liver_volume(const ReferenceOrgan& reference, double spacing, double noise = 0.0,
+                                int speckles = 0, std::uint32_t seed = 1, std::int32_t label = 1) {
+  LabelVolume v = voxelize(reference.surface.vertices, reference.surface.tris, spacing, 2, label);
+  if (noise > 0.0 || speckles > 0) add_label_noise(v, noise, speckles, seed);
+  return v;
+}
+
+/// Round-trip figures against the original surface; distances in voxels of `spacing`.
+struct RoundTrip {
+  double surface_hausdorff = 0.0, surface_mean = 0.0;  // light surface vs original, voxels
+  double mesh_hausdorff = 0.0, mesh_mean = 0.0;        // tet mesh boundary vs original, voxels
+  double mc_hausdorff = 0.0, mc_mean = 0.0;            // plain marching cubes vs original, voxels
+  int mc_triangles = 0, surface_triangles = 0, mesh_triangles = 0;
+  double mc_volume_error = 0.0, surface_volume_error = 0.0, mesh_volume_error = 0.0;  // relative, signed
+};
+
+inline RoundTrip round_trip(const ReferenceOrgan& reference, const Segmentation& s, double spacing) {
+  RoundTrip r;
+  const double step = 0.25 * spacing;  // sampling of the surfaces for the distances
+  const SurfaceDistance ds = surface_distance(s.surface, reference.surface, step);
+  const TriMesh boundary = boundary_tri_mesh(s.mesh);
+  const SurfaceDistance dm = surface_distance(boundary, reference.surface, step);
+  const SurfaceDistance dc = surface_distance(s.marching_cubes, reference.surface, step);
+  r.surface_hausdorff = ds.hausdorff / spacing;
+  r.surface_mean = ds.mean / spacing;
+  r.mesh_hausdorff = dm.hausdorff / spacing;
+  r.mesh_mean = dm.mean / spacing;
+  r.mc_hausdorff = dc.hausdorff / spacing;
+  r.mc_mean = dc.mean / spacing;
+  r.mc_triangles = static_cast<int>(s.marching_cubes.tris.rows());
+  r.surface_triangles = static_cast<int>(s.surface.tris.rows());
+  r.mesh_triangles = static_cast<int>(boundary.tris.rows());
+  r.mc_volume_error = tri_mesh_volume(s.marching_cubes) / reference.volume - 1.0;
+  r.surface_volume_error = tri_mesh_volume(s.surface) / reference.volume - 1.0;
+  r.mesh_volume_error = tets_volume(s.mesh) / reference.volume - 1.0;
+  return r;
+}
+
+}  // namespace surgsim::test

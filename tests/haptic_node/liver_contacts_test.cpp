@@ -1,0 +1,183 @@
+#include "liver_contacts.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "../common/alloc_counter.h"
+#include "box_mesh.h"
+#include "fem.h"
+#include "fixed_set.h"
+#include "precompute.h"
+
+namespace surgsim {
+namespace {
+
+// A 20 x 20 x 4 cm block fixed on its bottom face, poked from above by a tool through a trocar at (0.1, 0.1, 0.2).
+class LiverContactsTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    mesh_ = new TetMesh(make_box_mesh(8, 8, 2, {0.2, 0.2, 0.04}));
+    surface_ = new SurfaceMesh(boundary_surface(*mesh_));
+    FixedRegion region;
+    region.has_plane = true;
+    region.plane_point = {0, 0, 0.001};
+    region.plane_normal = {0, 0, -1};
+    const FixedSet fixed = fixed_set_from_region(*mesh_, region);
+    const ElasticModel model = build_elastic_model(*mesh_, Material{3000.0, 0.45}, fixed);
+    const std::vector<int> contacts = contactable_nodes(*mesh_, fixed);
+    tensors_ = new Tensors(precompute_tensors(model, contacts, standard_row_sets(*mesh_, contacts), {}));
+  }
+  static void TearDownTestSuite() {
+    delete tensors_;
+    delete surface_;
+    delete mesh_;
+  }
+  void SetUp() override {
+    spec_.trocar = {0.1031, 0.0977, 0.2};  // off the grid lines, so the tip lands inside a triangle
+    spec_.axis = {0, 0, -1};
+    spec_.shaft_points = 1;
+    spec_.force_limit = 100.0;
+    spec_.contact_capacity = 20;
+  }
+  // Insertion that puts the tip `depth` (m) below the top face (z = 0.04).
+  static Pose5 pose_at_depth(double depth, double jaw = 0.5) {
+    Pose5 p;
+    p.insertion = 0.2 - 0.04 + depth;
+    p.jaw = jaw;
+    return p;
+  }
+  ContactTick step(LiverContacts& c, const Pose5& p) {
+    ContactTick t;
+    c.step(tool_geometry(spec_, p), p.jaw, t);
+    return t;
+  }
+
+  static TetMesh* mesh_;
+  static SurfaceMesh* surface_;
+  static Tensors* tensors_;
+  ToolSpec spec_;
+};
+TetMesh* LiverContactsTest::mesh_ = nullptr;
+SurfaceMesh* LiverContactsTest::surface_ = nullptr;
+Tensors* LiverContactsTest::tensors_ = nullptr;
+
+TEST_F(LiverContactsTest, PokePushesBackAndReleases) {
+  LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+  EXPECT_EQ(step(c, pose_at_depth(-0.01)).points_in_contact, 0);
+  double previous = 0;
+  for (double depth = 0.001; depth <= 0.008; depth += 0.001) {
+    const ContactTick t = step(c, pose_at_depth(depth));
+    ASSERT_EQ(t.points_in_contact, 1) << depth;
+    EXPECT_GT(t.force.z(), previous) << "the reaction grows with the indentation";
+    EXPECT_LT(std::abs(t.force.x()) + std::abs(t.force.y()), 0.2 * t.force.z());
+    previous = t.force.z();
+  }
+  // The imposed displacement holds at the contact point: the deformed triangle passes through the tip.
+  const PointContact& pc = c.point(0);
+  Eigen::Vector3d x = Eigen::Vector3d::Zero();
+  for (int v = 0; v < 3; ++v) x += pc.bary[v] * c.deformed(pc.nodes[static_cast<std::size_t>(v)]);
+  EXPECT_NEAR(x.z(), 0.04 - 0.008, 1e-9);
+  // Back out: released, no force.
+  const ContactTick out = step(c, pose_at_depth(-0.002));
+  EXPECT_EQ(out.points_in_contact, 0);
+  EXPECT_EQ(out.force.norm(), 0.0);
+  EXPECT_EQ(c.solution().count, 0);
+}
+
+TEST_F(LiverContactsTest, FastStabIsCaughtInOneTick) {
+  LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+  step(c, pose_at_depth(-0.10));
+  const ContactTick t = step(c, pose_at_depth(0.005));  // 10.5 cm in one tick
+  EXPECT_EQ(t.points_in_contact, 1);
+  EXPECT_GT(t.force.z(), 0.0);
+}
+
+TEST_F(LiverContactsTest, GraspPullsAndLetsGoWhenTheJawOpens) {
+  LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+  step(c, pose_at_depth(-0.005, 0.5));
+  step(c, pose_at_depth(0.003, 0.5));
+  ContactTick t = step(c, pose_at_depth(0.003, 0.0));  // close the jaw on the tissue
+  EXPECT_TRUE(t.grasp);
+  t = step(c, pose_at_depth(-0.004, 0.0));  // pull 4 mm above the rest surface
+  ASSERT_EQ(t.points_in_contact, 1) << "a grasp holds when pulled out";
+  EXPECT_LT(t.force.z(), 0.0) << "the tissue pulls the tool back";
+  t = step(c, pose_at_depth(-0.004, 0.5));  // open the jaw
+  EXPECT_FALSE(t.grasp);
+  EXPECT_EQ(t.points_in_contact, 0);
+}
+
+TEST_F(LiverContactsTest, DeviceForceIsClampedWithItsDirection) {
+  spec_.force_limit = 0.01;
+  LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+  step(c, pose_at_depth(-0.005));
+  const ContactTick t = step(c, pose_at_depth(0.01));
+  ASSERT_GT(t.force.norm(), 0.01);
+  EXPECT_TRUE(t.saturated);
+  EXPECT_NEAR(t.device_force.norm(), 0.01, 1e-12);
+  EXPECT_NEAR(t.device_force.normalized().dot(t.force.normalized()), 1.0, 1e-12);
+}
+
+TEST_F(LiverContactsTest, NonFiniteInputIsRefusedAndZeroed) {
+  LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+  step(c, pose_at_depth(-0.005));
+  step(c, pose_at_depth(0.004));
+  Pose5 bad = pose_at_depth(0.004);
+  bad.insertion = std::numeric_limits<double>::quiet_NaN();
+  const ContactTick t = step(c, bad);
+  EXPECT_TRUE(t.nonfinite);
+  EXPECT_TRUE(t.device_force.allFinite());
+  EXPECT_EQ(t.device_force.norm(), 0.0);
+  EXPECT_EQ(c.solution().count, 0);
+  // The next good pose starts again from scratch (no stale contact).
+  EXPECT_FALSE(step(c, pose_at_depth(-0.002)).nonfinite);
+}
+
+TEST_F(LiverContactsTest, ShaftPointsAddContactsUpToCapacity) {
+  spec_.shaft_points = 4;
+  spec_.shaft_spacing = 0.004;
+  spec_.contact_capacity = 3;
+  LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+  step(c, pose_at_depth(-0.005));
+  const ContactTick t = step(c, pose_at_depth(0.014));  // tip and shaft points below the surface
+  EXPECT_TRUE(t.over_capacity) << "more constrained nodes than the capacity of 3";
+  EXPECT_LE(c.solution().count, 3);
+  EXPECT_TRUE(t.device_force.allFinite());
+}
+
+TEST_F(LiverContactsTest, StepAllocatesNothing) {
+  LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+  step(c, pose_at_depth(-0.005));
+  step(c, pose_at_depth(0.002));
+  long allocations = 0;
+  {
+    test::AllocationCounter counter;
+    for (int k = 0; k < 200; ++k) {
+      Pose5 p = pose_at_depth(0.006 * std::sin(0.05 * k), k % 50 < 25 ? 0.5 : 0.0);
+      p.pitch = 0.02 * std::sin(0.03 * k);
+      ContactTick t;
+      c.step(tool_geometry(spec_, p), p.jaw, t);
+    }
+    allocations = counter.count();
+  }
+  EXPECT_EQ(allocations, 0);
+}
+
+TEST_F(LiverContactsTest, SameInputSameForcesBitForBit) {
+  auto run = [&] {
+    LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+    std::vector<double> out;
+    for (int k = 0; k < 120; ++k) {
+      Pose5 p = pose_at_depth(-0.004 + 0.01 * std::sin(0.04 * k));
+      p.yaw = 0.03 * std::cos(0.05 * k);
+      const ContactTick t = step(c, p);
+      out.insert(out.end(), {t.force.x(), t.force.y(), t.force.z()});
+    }
+    return out;
+  };
+  EXPECT_EQ(run(), run());
+}
+
+}  // namespace
+}  // namespace surgsim

@@ -1,0 +1,124 @@
+// The haptic node as a real process: replays are bit-identical at --speed max, the live device path (device
+// simulator -> haptic node over DDS) gives the same contacts as the replay of the same motion, and --record writes a
+// trajectory that replays to the same log.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "process.h"
+
+namespace surgsim {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::Process;
+
+class HapticProcess : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::path(::testing::TempDir()) / ("surgsim_haptic_" + std::to_string(getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    env_ = {"SURGSIM_DOMAIN=" + std::to_string(testing::private_domain(3)),
+            "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR, "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
+  }
+  std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  std::string traj(const std::string& name) const { return std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/" + name; }
+  int run_haptic(const std::vector<std::string>& args, const std::string& log_name) {
+    Process p(bin("haptic_node"), args, env_, path(log_name));
+    return p.wait(300);
+  }
+  fs::path dir_;
+  std::vector<std::string> env_;
+};
+
+TEST_F(HapticProcess, ReplayAtMaxSpeedIsBitIdentical) {
+  for (const char* run : {"a", "b"}) {
+    ASSERT_EQ(run_haptic({"--scene", "liver", "--replay", traj("liver_press_slide.csv"), "--speed", "max",
+                          "--rt-priority", "0", "--log", path(std::string("log_") + run + ".csv")},
+                         std::string("out_") + run + ".txt"),
+              0)
+        << testing::read_file(path(std::string("out_") + run + ".txt"));
+  }
+  const std::string a = testing::read_file(path("log_a.csv"));
+  const std::string b = testing::read_file(path("log_b.csv"));
+  ASSERT_GT(a.size(), 1000u);
+  EXPECT_TRUE(a == b) << "the two --speed max replays differ";
+  // The replay did touch the organ (a log of zeros would also be identical).
+  std::istringstream in(a);
+  std::string line;
+  int touching = 0;
+  std::getline(in, line);
+  while (std::getline(in, line)) touching += line.back() != '0';
+  EXPECT_GT(touching, 100);
+}
+
+TEST_F(HapticProcess, RecordThenReplayGivesTheSameLog) {
+  ASSERT_EQ(run_haptic({"--scene", "liver", "--replay", traj("liver_poke.csv"), "--speed", "max", "--rt-priority", "0",
+                        "--record", path("recorded.csv"), "--log", path("log_1.csv")},
+                       "out_1.txt"),
+            0);
+  ASSERT_EQ(run_haptic({"--scene", "liver", "--replay", path("recorded.csv"), "--speed", "max", "--rt-priority", "0",
+                        "--log", path("log_2.csv")},
+                       "out_2.txt"),
+            0)
+      << testing::read_file(path("out_2.txt"));
+  // The recording has one sample per tick, so the replay of it logs the same ticks (it then runs 0.5 s longer, past
+  // its own last sample): compare every tick of the first run, line by line.
+  std::istringstream a(testing::read_file(path("log_1.csv")));
+  std::istringstream b(testing::read_file(path("log_2.csv")));
+  std::string la, lb;
+  int lines = 0;
+  while (std::getline(a, la)) {
+    ASSERT_TRUE(std::getline(b, lb)) << "the replay of the recording is shorter, at line " << lines;
+    ASSERT_EQ(la, lb) << "first difference at line " << lines;
+    ++lines;
+  }
+  EXPECT_GT(lines, 1000);
+}
+
+TEST_F(HapticProcess, LiveDevicePathMatchesReplay) {
+  // Replay of the poke.
+  ASSERT_EQ(run_haptic({"--scene", "liver", "--replay", traj("liver_poke.csv"), "--speed", "max", "--rt-priority", "0",
+                        "--stats", path("replay.json")},
+                       "replay.txt"),
+            0);
+  // The same motion from a device process, in real time over DDS.
+  Process haptic(bin("haptic_node"),
+                 {"--scene", "liver", "--input", "device", "--duration", "6", "--rt-priority", "0", "--stats",
+                  path("live.json"), "--record", path("live_record.csv")},
+                 env_, path("live.txt"));
+  Process device(bin("surgsim-device-sim"),
+                 {"--trajectory", traj("liver_poke.csv"), "--rate", "1000", "--wait-for-haptic", "60", "--stats",
+                  path("device.json")},
+                 env_, path("device.txt"));
+  ASSERT_EQ(device.wait(120), 0) << testing::read_file(path("device.txt"));
+  ASSERT_EQ(haptic.wait(120), 0) << testing::read_file(path("live.txt"));
+
+  const auto replay = nlohmann::json::parse(testing::read_file(path("replay.json")));
+  const auto live = nlohmann::json::parse(testing::read_file(path("live.json")));
+  const auto dev = nlohmann::json::parse(testing::read_file(path("device.json")));
+  EXPECT_EQ(live["input"], "device");
+  EXPECT_GT(live["commands_received"].get<long>(), 1000);
+  // Same contacts: same largest contact set, about the same time in contact and the same peak force.
+  EXPECT_EQ(live["contacts_max"], replay["contacts_max"]);
+  const double t_replay = replay["contact_ticks"].get<double>();
+  const double t_live = live["contact_ticks"].get<double>();
+  EXPECT_NEAR(t_live, t_replay, 0.05 * t_replay);
+  EXPECT_NEAR(live["force_max_n"].get<double>(), replay["force_max_n"].get<double>(),
+              0.05 * replay["force_max_n"].get<double>());
+  // The device got the forces back, all finite.
+  EXPECT_GT(dev["forces_received"].get<long>(), 100);
+  EXPECT_EQ(dev["nonfinite"].get<long>(), 0);
+  EXPECT_NEAR(dev["force_max_n"].get<double>(), live["force_max_n"].get<double>(), 1e-9);
+  // Before the first command and after the last, the input is lost: zero force, counted.
+  EXPECT_GT(live["input_lost_ticks"].get<long>(), 0);
+  // What was used was recorded.
+  EXPECT_GT(testing::read_file(path("live_record.csv")).size(), 1000u);
+}
+
+}  // namespace
+}  // namespace surgsim

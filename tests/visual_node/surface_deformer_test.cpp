@@ -1,0 +1,162 @@
+// The visual node's deformation equals the reference solve, and a rendered dent changes pixels near the contact only.
+#include "surface_deformer.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "box_mesh.h"
+#include "fem.h"
+#include "fixed_set.h"
+#include "precompute.h"
+#include "renderer.h"
+#include "static_solver.h"
+
+namespace surgsim {
+namespace {
+
+class SurfaceDeformerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    mesh_ = new TetMesh(make_box_mesh(8, 8, 3, {0.2, 0.2, 0.06}, {-0.1, -0.1, -0.06}));
+    surface_ = new SurfaceMesh(boundary_surface(*mesh_));
+    FixedRegion region;
+    region.has_plane = true;
+    region.plane_point = {0, 0, -0.059};
+    region.plane_normal = {0, 0, -1};
+    fixed_ = new FixedSet(fixed_set_from_region(*mesh_, region));
+    model_ = new ElasticModel(build_elastic_model(*mesh_, Material{3000.0, 0.45}, *fixed_));
+    const std::vector<int> contacts = contactable_nodes(*mesh_, *fixed_);
+    tensors_ = new Tensors(precompute_tensors(*model_, contacts, standard_row_sets(*mesh_, contacts), {}));
+  }
+  static void TearDownTestSuite() {
+    delete tensors_;
+    delete model_;
+    delete fixed_;
+    delete surface_;
+    delete mesh_;
+  }
+  // Top-face node closest to (x, y).
+  static int top_node(double x, double y) {
+    int best = -1;
+    double d = 1e9;
+    for (int n = 0; n < mesh_->nodes.rows(); ++n) {
+      if (mesh_->nodes(n, 2) < -1e-9) continue;
+      const double e = std::hypot(mesh_->nodes(n, 0) - x, mesh_->nodes(n, 1) - y);
+      if (e < d) d = e, best = n;
+    }
+    return best;
+  }
+  static TetMesh* mesh_;
+  static SurfaceMesh* surface_;
+  static FixedSet* fixed_;
+  static ElasticModel* model_;
+  static Tensors* tensors_;
+};
+TetMesh* SurfaceDeformerTest::mesh_ = nullptr;
+SurfaceMesh* SurfaceDeformerTest::surface_ = nullptr;
+FixedSet* SurfaceDeformerTest::fixed_ = nullptr;
+ElasticModel* SurfaceDeformerTest::model_ = nullptr;
+Tensors* SurfaceDeformerTest::tensors_ = nullptr;
+
+TEST_F(SurfaceDeformerTest, VisibleShapeEqualsReferenceSolve) {
+  // The haptic side's lambda for imposed displacements, then the visual side's deformation from (node, lambda).
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-0.004, 0.004);
+  const std::vector<int> nodes = {top_node(-0.03, 0.02), top_node(0.04, -0.01), top_node(0.0, 0.05)};
+  std::vector<Contact> contacts;
+  std::vector<ImposedDisplacement> imposed;
+  for (int n : nodes) {
+    const Eigen::Vector3d d(u(rng), u(rng), -0.005 + u(rng));
+    contacts.push_back({n, d});
+    imposed.push_back({n, d, 7});
+  }
+  Superposition haptic(*tensors_, "haptic", 8);
+  ContactSolution sol;
+  ASSERT_EQ(haptic.solve(contacts.data(), static_cast<int>(contacts.size()), sol), ContactStatus::kOk);
+
+  Tensors visual_only = *tensors_;
+  visual_only.blocks.erase(std::remove_if(visual_only.blocks.begin(), visual_only.blocks.end(),
+                                          [](const TensorBlock& b) { return b.name != "visual"; }),
+                           visual_only.blocks.end());
+  SurfaceDeformer deformer(*mesh_, *surface_, &visual_only);
+  ASSERT_EQ(deformer.apply(sol.nodes.data(), sol.lambda.data(), sol.count), ContactStatus::kOk);
+
+  StaticSolver reference(*model_, {});
+  const StaticSolution ref = reference.solve(imposed);
+  double max_err = 0, max_u = 0;
+  for (std::size_t v = 0; v < deformer.visible_nodes().size(); ++v) {
+    const int n = deformer.visible_nodes()[v];
+    const Eigen::Vector3d got = (deformer.positions().row(static_cast<Eigen::Index>(v)).cast<double>() -
+                                 mesh_->nodes.row(n)).transpose();
+    max_err = std::max(max_err, (got - ref.displacement.row(n).transpose()).norm());
+    max_u = std::max(max_u, ref.displacement.row(n).norm());
+  }
+  // Positions are stored as float for the GPU: agreement to float precision of the coordinates (~1e-8 m here).
+  EXPECT_LT(max_err, 2e-8) << "max |u| " << max_u;
+  EXPECT_GT(max_u, 0.004);
+  EXPECT_NEAR(deformer.max_displacement(), max_u, 1e-6);
+
+  // No contacts: the rest shape again.
+  ASSERT_EQ(deformer.apply(nullptr, nullptr, 0), ContactStatus::kOk);
+  EXPECT_EQ(deformer.positions(), deformer.rest());
+}
+
+TEST_F(SurfaceDeformerTest, BadFrameKeepsTheLastShape) {
+  SurfaceDeformer deformer(*mesh_, *surface_, tensors_);
+  const int node = top_node(0, 0);
+  const Eigen::Vector3d lambda(0, 0, -0.5);
+  ASSERT_EQ(deformer.apply(&node, &lambda, 1), ContactStatus::kOk);
+  const Eigen::MatrixX3f before = deformer.positions();
+  const int interior = 0;  // a fixed bottom node: no column
+  EXPECT_NE(deformer.apply(&interior, &lambda, 1), ContactStatus::kOk);
+  const Eigen::Vector3d nan(std::nan(""), 0, 0);
+  EXPECT_NE(deformer.apply(&node, &nan, 1), ContactStatus::kOk);
+  EXPECT_EQ(deformer.positions(), before);
+}
+
+TEST_F(SurfaceDeformerTest, RenderedDentChangesPixelsNearTheContactOnly) {
+  SurfaceDeformer deformer(*mesh_, *surface_, tensors_);
+  auto renderer = make_renderer("osmesa", 320, 240);
+  Camera cam;
+  cam.eye = {0.0, -0.25, 0.22};
+  cam.target = {0, 0, -0.02};
+  cam.up = {0, 0, 1};
+  cam.fov_deg = 40;
+  auto draw = [&](Image& img) {
+    renderer->begin_frame(cam);
+    renderer->draw_surface(deformer.positions(), deformer.tris(), kLiverRgb);
+    renderer->end_frame();
+    ASSERT_TRUE(renderer->read_image(img));
+  };
+  Image rest, dented;
+  draw(rest);
+  const int node = top_node(0.0, 0.0);
+  const Eigen::Vector3d lambda(0, 0, -1.3);  // pushes the top centre down by about a centimetre
+  ASSERT_EQ(deformer.apply(&node, &lambda, 1), ContactStatus::kOk);
+  ASSERT_GT(deformer.max_displacement(), 0.008);
+  draw(dented);
+
+  const Eigen::Vector2f c = project_to_pixel(cam, 320, 240, mesh_->nodes.row(node).cast<float>().transpose());
+  long near_changed = 0, far_changed = 0, far_total = 0;
+  for (int y = 0; y < 240; ++y) {
+    for (int x = 0; x < 320; ++x) {
+      int diff = 0;
+      for (int ch = 0; ch < 3; ++ch) {
+        diff = std::max(diff, std::abs(int(rest.rgb[3 * (y * 320 + x) + ch]) - int(dented.rgb[3 * (y * 320 + x) + ch])));
+      }
+      const float r = std::hypot(x + 0.5f - c.x(), y + 0.5f - c.y());
+      // With smooth normals on 25 mm cells the dent changes the shading by a few levels over a 2-cell radius.
+      if (r < 60 && diff >= 2) ++near_changed;
+      if (r > 110) {
+        ++far_total;
+        if (diff >= 2) ++far_changed;
+      }
+    }
+  }
+  EXPECT_GT(near_changed, 500) << "the dent is visible around the contact at " << c.transpose();
+  EXPECT_LT(far_changed, far_total / 100) << "far from the contact the image is (almost) unchanged";
+}
+
+}  // namespace
+}  // namespace surgsim

@@ -1,0 +1,46 @@
+// Deformation of the visible surface from received contact forces: u_n = sum_k G_nk lambda_k over the "visual"
+// rows of the tensors (visible x surface; no interior rows are held), applied to a compacted copy of the boundary
+// surface that the renderer draws. apply() allocates nothing.
+#pragma once
+#include <Eigen/Core>
+#include <memory>
+#include <vector>
+
+#include "mesh.h"
+#include "precompute.h"
+#include "superposition.h"
+
+namespace surgsim {
+
+class SurfaceDeformer {
+ public:
+  /// `tensors` (may be null: rest shape only) must hold the "visual" block and outlive this object.
+  SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors* tensors);
+
+  /// Deforms for forces lambda (N) on m contact nodes (mesh indices). m = 0 restores the rest shape. On a bad
+  /// input (unknown node, non-finite lambda) the previous shape is kept and the status says why.
+  ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m) noexcept;
+
+  const Eigen::MatrixX3f& positions() const { return positions_; }  // #visible x 3, m, deformed
+  const Eigen::MatrixX3f& rest() const { return rest_; }            // #visible x 3, m
+  const Eigen::MatrixX3i& tris() const { return tris_; }            // #F x 3 into positions
+  const std::vector<int>& visible_nodes() const { return visible_nodes_; }  // vertex v -> mesh node
+  /// Vertex of a mesh node, or -1 when the node is not visible.
+  int vertex_of(int node) const { return vertex_of_node_[static_cast<std::size_t>(node)]; }
+  /// Largest displacement of any visible vertex in the current shape (m).
+  double max_displacement() const { return max_displacement_; }
+  bool has_tensors() const { return superposition_ != nullptr; }
+
+ private:
+  std::vector<int> visible_nodes_;
+  std::vector<int> vertex_of_node_;
+  std::vector<int> block_row_;
+  Eigen::MatrixX3i tris_;
+  Eigen::MatrixX3f rest_;
+  Eigen::MatrixX3f positions_;
+  std::unique_ptr<Superposition> superposition_;
+  Eigen::VectorXd u_;
+  double max_displacement_ = 0;
+};
+
+}  // namespace surgsim
