@@ -163,7 +163,9 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
     tensors_ = load_liver_tensors(setup, mesh_, scene_.material, {"haptic"}, options_.quiet ? nullptr : &std::cerr,
                                   nullptr, scene_.file);
     tensor_hash_ = setup.key.combined();
-    contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene_.tool);
+    law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene_.nonlinear, scene_.material));
+    contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene_.tool,
+                                                law_->identity() ? nullptr : law_.get());
   } else {
     throw_error(scene_.file, ": key 'model': '", scene_.model, "' is not built into this haptic node yet");
   }
@@ -375,6 +377,7 @@ void HapticApp::shutdown() {
   j["input_lost_ticks"] = input_lost_ticks_;
   j["commands_received"] = dds_->commands_received;
   j["tensor_hash"] = std::to_string(tensor_hash_);
+  j["nonlinear_law"] = law_ != nullptr && !law_->identity();
   j["round_trip_us"] = to_json(rtt);
   j["visual_status_received"] = dds_->visual_status.received();
   j["realtime"] = realtime_note_;

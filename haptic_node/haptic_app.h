@@ -8,6 +8,7 @@
 
 #include "liver_contacts.h"
 #include "mesh.h"
+#include "nonlinear_law.h"
 #include "precompute.h"
 #include "scene.h"
 #include "stats.h"
@@ -68,6 +69,7 @@ class HapticApp {
   TrajectoryRecorder recorder_;
   std::FILE* log_ = nullptr;
   Tensors tensors_;                        // "haptic" block only
+  std::unique_ptr<NonlinearLaw> law_;      // identity when the scene has no curves
   std::unique_ptr<LiverContacts> contacts_;
   std::uint64_t tensor_hash_ = 0;
   std::unique_ptr<Dds> dds_;

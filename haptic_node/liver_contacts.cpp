@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "error.h"
+#include "nonlinear_law.h"
 
 namespace surgsim {
 
@@ -157,6 +158,13 @@ void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& 
   Eigen::Vector3d force = solution_.tool_force;
   const double dn = dir_sum.norm();
   out.direction = dn > 0 ? Eigen::Vector3d(dir_sum / dn) : Eigen::Vector3d::Zero();
+  if (!force.allFinite()) {
+    out.nonfinite = true;
+    solution_ = ContactSolution{};
+    return;
+  }
+  // --- quasi non-linear law: Q on the force component along the mean imposed displacement ---
+  if (law_ != nullptr && dn > 0 && !law_->apply_force(force, out.direction, force)) out.nonfinite = true;
   if (!force.allFinite()) {
     out.nonfinite = true;
     solution_ = ContactSolution{};

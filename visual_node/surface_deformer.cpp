@@ -2,9 +2,13 @@
 
 #include <cmath>
 
+#include "nonlinear_law.h"
+
 namespace surgsim {
 
-SurfaceDeformer::SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors* tensors) {
+SurfaceDeformer::SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors* tensors,
+                                 const NonlinearLaw* law)
+    : law_(law) {
   // Compact the boundary to its own vertices (the GPU never sees interior nodes).
   visible_nodes_ = surface.nodes;
   vertex_of_node_.assign(static_cast<std::size_t>(mesh.nodes.rows()), -1);
@@ -31,7 +35,8 @@ SurfaceDeformer::SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface
   }
 }
 
-ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* lambda, int m) noexcept {
+ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
+                                     const Eigen::Vector3d& direction) noexcept {
   if (m == 0 || superposition_ == nullptr) {
     positions_ = rest_;
     max_displacement_ = 0;
@@ -40,6 +45,10 @@ ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* la
   if (m > kMaxContacts) return ContactStatus::kOverCapacity;
   const ContactStatus status = superposition_->displacements(nodes, lambda, m, u_);
   if (status != ContactStatus::kOk) return status;
+  // Quasi non-linear law: P on the amplitude orthogonal to the constraint direction, every row in place.
+  if (law_ != nullptr && direction.squaredNorm() > 0.5 && !law_->apply_displacements(u_, direction)) {
+    return ContactStatus::kNonFinite;
+  }
   double max2 = 0;
   for (Eigen::Index v = 0; v < rest_.rows(); ++v) {
     const int r = block_row_[static_cast<std::size_t>(v)];

@@ -12,14 +12,20 @@
 
 namespace surgsim {
 
+class NonlinearLaw;
+
 class SurfaceDeformer {
  public:
   /// `tensors` (may be null: rest shape only) must hold the "visual" block and outlive this object.
-  SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors* tensors);
+  /// `law` (may be null: linear) applies P to the displacements orthogonal to the constraint direction.
+  SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors* tensors,
+                  const NonlinearLaw* law = nullptr);
 
   /// Deforms for forces lambda (N) on m contact nodes (mesh indices). m = 0 restores the rest shape. On a bad
-  /// input (unknown node, non-finite lambda) the previous shape is kept and the status says why.
-  ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m) noexcept;
+  /// input (unknown node, non-finite lambda) the previous shape is kept and the status says why. `direction`
+  /// (unit; the ContactFrame's mean imposed displacement) is the axis of the non-linear law; zero skips it.
+  ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
+                      const Eigen::Vector3d& direction = Eigen::Vector3d::Zero()) noexcept;
 
   const Eigen::MatrixX3f& positions() const { return positions_; }  // #visible x 3, m, deformed
   const Eigen::MatrixX3f& rest() const { return rest_; }            // #visible x 3, m
@@ -39,6 +45,7 @@ class SurfaceDeformer {
   Eigen::MatrixX3f rest_;
   Eigen::MatrixX3f positions_;
   std::unique_ptr<Superposition> superposition_;
+  const NonlinearLaw* law_ = nullptr;
   Eigen::VectorXd u_;
   double max_displacement_ = 0;
 };

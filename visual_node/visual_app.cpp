@@ -155,7 +155,9 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
                                   nullptr, scene_.file);
     tensor_hash_ = setup.key.combined();
   }
-  deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, scene_.model == "liver" ? &tensors_ : nullptr);
+  law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene_.nonlinear, scene_.material));
+  deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, scene_.model == "liver" ? &tensors_ : nullptr,
+                                                law_->identity() ? nullptr : law_.get());
   markers_.resize(kMaxContacts, 3);
 
   // --- init: renderer (no GL context at all when headless) ---
@@ -247,7 +249,8 @@ int VisualApp::run() {
         contact_nodes_[static_cast<std::size_t>(l)] = static_cast<int>(e.node());
         contact_lambda_[static_cast<std::size_t>(l)] = from_msg(e.lambda());
       }
-      if (deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), m) != ContactStatus::kOk) {
+      if (deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), m, from_msg(frame.direction())) !=
+          ContactStatus::kOk) {
         ++deform_errors_;  // a frame naming nodes this scene does not have: keep the last good shape
       }
       deform_us_.add(static_cast<double>(monotonic_ns() - d0) * 1e-3);

@@ -11,6 +11,7 @@
 #include "image.h"
 #include "mesh.h"
 #include "precompute.h"
+#include "nonlinear_law.h"
 #include "surface_deformer.h"
 #include "scene.h"
 #include "stats.h"
@@ -56,6 +57,7 @@ class VisualApp {
   std::uint64_t scene_hash_ = 0;
   std::uint64_t tensor_hash_ = 0;
   Tensors tensors_;                         // "visual" block only (no interior rows)
+  std::unique_ptr<NonlinearLaw> law_;
   std::unique_ptr<SurfaceDeformer> deformer_;
   std::FILE* index_ = nullptr;              // frames.csv: which contact frame each PNG shows
   std::array<int, 64> contact_nodes_{};
