@@ -4,6 +4,8 @@
 #include <png.h>
 
 #include <cstdio>
+#include <fstream>
+#include <sstream>
 #include <filesystem>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -54,7 +56,7 @@ TEST_F(TwoNodes, FramesArriveAndOrganIsRendered) {
                  {"--scene", "liver", "--out", frames, "--stats", (dir_ / "visual.json").string(), "--png-every", "10"},
                  env_, (dir_ / "visual.log").string());
   Process haptic(bin("haptic_node"),
-                 {"--scene", "liver", "--duration", "2.0", "--wait-for-visual", "60", "--rt-priority", "0",
+                 {"--scene", "liver", "--wait-for-visual", "60", "--rt-priority", "0",
                   "--stats", (dir_ / "haptic.json").string()},
                  env_, (dir_ / "haptic.log").string());
   ASSERT_EQ(haptic.wait(240), 0) << testing::read_file((dir_ / "haptic.log").string());
@@ -68,7 +70,11 @@ TEST_F(TwoNodes, FramesArriveAndOrganIsRendered) {
                           "force_max_n", "nonfinite_rejected"}) {
     EXPECT_TRUE(h.contains(key)) << key;
   }
-  EXPECT_EQ(h["ticks"].get<int>(), static_cast<int>(2.0 * h["rate_hz"].get<double>() + 0.5));
+  // The default poke (4 s) plus 0.5 s of hold.
+  EXPECT_EQ(h["ticks"].get<int>(), static_cast<int>(4.5 * h["rate_hz"].get<double>() + 0.5));
+  EXPECT_GT(h["contacts_max"].get<int>(), 0);
+  EXPECT_GT(h["force_max_n"].get<double>(), 0.1);
+  EXPECT_EQ(h["nonfinite_rejected"].get<int>(), 0);
 
   // Visual stats: frames arrived from the other process and the scene identity matched.
   const auto v = nlohmann::json::parse(testing::read_file((dir_ / "visual.json").string()));
@@ -80,6 +86,35 @@ TEST_F(TwoNodes, FramesArriveAndOrganIsRendered) {
   EXPECT_GT(v["frames_rendered"].get<int>(), 10);
   EXPECT_TRUE(v["scene_hash_ok"].get<bool>());
   EXPECT_GT(v["latency_us"]["count"].get<int>(), 50);
+
+  // The frame index: the organ is dented while the tool presses, and back at rest after release.
+  std::ifstream index(frames + "/frames.csv");
+  std::string line;
+  std::getline(index, line);
+  double max_pressed = 0, last_released = -1, last_time = 0;
+  int pressed_frames = 0;
+  while (std::getline(index, line)) {
+    std::stringstream ss(line);
+    std::string png, seq, t, contacts, u;
+    std::getline(ss, png, ',');
+    std::getline(ss, seq, ',');
+    std::getline(ss, t, ',');
+    std::getline(ss, contacts, ',');
+    std::getline(ss, u, ',');
+    ASSERT_TRUE(fs::exists(frames + "/" + png)) << png;
+    const double time = std::stod(t), disp = std::stod(u);
+    if (std::stoi(contacts) > 0) {
+      ++pressed_frames;
+      max_pressed = std::max(max_pressed, disp);
+    } else if (time > 3.0) {
+      last_released = disp;  // after the tool has come back out
+    }
+    last_time = time;
+  }
+  EXPECT_GT(pressed_frames, 5);
+  EXPECT_GT(max_pressed, 0.005) << "a visible dent (m) while the tool presses";
+  EXPECT_EQ(last_released, 0.0) << "the rest shape after release";
+  EXPECT_GT(last_time, 3.0);
 
   // A PNG with the organ in it: a good share of reddish organ pixels, not a blank frame.
   std::vector<fs::path> pngs;
