@@ -324,7 +324,7 @@ int HapticApp::run() {
     }
   }
 
-  const RealtimeStatus rt = enter_realtime(options_.speed > 0 ? options_.rt_priority : 0, options_.lock_memory);
+  const RealtimeStatus rt = enter_realtime(options_.speed > 0 ? options_.rt_priority : 0, options_.lock_memory, options_.cpu);
   realtime_note_ = rt.note;
   if (!options_.quiet) std::cerr << "haptic_node: " << rt.note << "\n";
 

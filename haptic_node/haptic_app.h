@@ -33,6 +33,7 @@ struct HapticOptions {
   std::string dds_participant = "surgsim_default";
   int rt_priority = 80;             // SCHED_FIFO priority; 0 = normal scheduling
   bool lock_memory = true;
+  int cpu = -1;                     // pin the loop thread to this CPU (-1: don't)
   double wait_for_visual = 0;       // s to wait for a visual node to match before starting (0 = don't wait)
   bool quiet = false;
 };

@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
   cli.add_option("--dds-participant", o.dds_participant, "Participant profile: surgsim_default, surgsim_shm, surgsim_udp")->capture_default_str();
   cli.add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority for the loop (0 = normal scheduling)")->capture_default_str();
   cli.add_flag("!--no-mlock", o.lock_memory, "Do not lock memory");
+  cli.add_option("--cpu", o.cpu, "Pin the loop thread to this CPU (default: not pinned)");
   cli.add_option("--wait-for-visual", o.wait_for_visual, "Wait up to S seconds for a visual node before starting");
   cli.add_flag("--quiet", o.quiet, "Print nothing but errors");
   CLI11_PARSE(cli, argc, argv);

@@ -12,9 +12,16 @@
 
 namespace surgsim {
 
-RealtimeStatus enter_realtime(int priority, bool lock_memory) {
+RealtimeStatus enter_realtime(int priority, bool lock_memory, int cpu) {
   RealtimeStatus s;
   std::string note;
+  if (cpu >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(cpu, &set);
+    note += sched_setaffinity(0, sizeof set, &set) == 0 ? "pinned to CPU " + std::to_string(cpu) + ", "
+                                                        : "CPU " + std::to_string(cpu) + " refused, ";
+  }
   if (priority > 0) {
     sched_param sp{};
     sp.sched_priority = priority;

@@ -13,9 +13,10 @@ struct RealtimeStatus {
   std::string note;      // human-readable summary, e.g. "SCHED_FIFO 80, memory locked"
 };
 
-/// Asks for SCHED_FIFO at `priority` (0 = don't), locked memory and 1 ns timer slack. Never fails: what was refused
-/// is reported in the note. Call from the thread that will run the loop, during init.
-RealtimeStatus enter_realtime(int priority, bool lock_memory);
+/// Asks for SCHED_FIFO at `priority` (0 = don't), locked memory, 1 ns timer slack and, when `cpu` >= 0, pins the
+/// calling thread to that CPU. Never fails: what was refused is reported in the note. Call from the thread that will
+/// run the loop, during init.
+RealtimeStatus enter_realtime(int priority, bool lock_memory, int cpu = -1);
 
 /// Paces a loop at a fixed period on absolute deadlines. Tick k is due at start + k * period. wait() sleeps with
 /// clock_nanosleep(TIMER_ABSTIME) until `spin_ns` before the deadline, then spins. A tick that has not finished
