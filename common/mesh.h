@@ -37,6 +37,18 @@ void write_vtk(const std::string& path, const TetMesh& mesh, const Eigen::Matrix
 /// Writes a triangle surface (e.g. the deformed visible surface) as a VTK legacy ASCII unstructured grid of
 /// triangles. points: #P x 3 (m); tris: #F x 3 indices into points. Throws surgsim::Error naming the path.
 void write_vtk_surface(const std::string& path, const Eigen::MatrixX3d& points, const Eigen::MatrixX3i& tris);
+/// A triangle surface with its own vertices (e.g. a finer visual surface).
+struct TriSurface {
+  Eigen::MatrixX3d vertices;  // #V x 3, m
+  Eigen::MatrixX3i tris;      // #F x 3, 0-based
+  std::string source;
+};
+
+/// Reads a Wavefront .obj surface (v and f lines; polygons are fanned into triangles; vt/vn/other lines ignored;
+/// negative (relative) indices accepted). Throws surgsim::Error "FILE:LINE: ..." on a bad number, an index out of
+/// range, non-finite coordinates, or a file without faces.
+TriSurface read_obj(const std::string& path);
+
 /// Writes a Gmsh v2.2 ASCII mesh (tets only).
 void write_msh(const std::string& path, const TetMesh& mesh);
 

@@ -1,6 +1,10 @@
 #include "surface_deformer.h"
 
+#include <Eigen/Geometry>
 #include <cmath>
+
+#include "collision.h"
+#include "error.h"
 
 #include "nonlinear_law.h"
 
@@ -35,11 +39,61 @@ SurfaceDeformer::SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface
   }
 }
 
+void SurfaceDeformer::embed(const TriSurface& fine, const TetMesh& mesh, const SurfaceMesh& surface,
+                            double max_distance) {
+  const BucketGrid grid(mesh, surface);
+  const Eigen::Index n = fine.vertices.rows();
+  fine_anchor_.resize(n, 3);
+  fine_bary_.resize(n, 3);
+  fine_offset_.resize(n);
+  // Vertices no face uses are never drawn: tie them to the first boundary vertex and skip the search.
+  std::vector<char> used(static_cast<std::size_t>(n), 0);
+  for (Eigen::Index t = 0; t < fine.tris.rows(); ++t) {
+    for (int k = 0; k < 3; ++k) used[static_cast<std::size_t>(fine.tris(t, k))] = 1;
+  }
+  for (Eigen::Index v = 0; v < n; ++v) {
+    if (!used[static_cast<std::size_t>(v)]) {
+      fine_anchor_.row(v).setZero();
+      fine_bary_.row(v) << 1.0f, 0.0f, 0.0f;
+      fine_offset_[v] = 0.0f;
+      continue;
+    }
+    const Eigen::Vector3d p = fine.vertices.row(v).transpose();
+    const SurfaceProjection proj = grid.project_rest(p, 4);
+    if (!proj.found || proj.distance > max_distance) {
+      throw_error(fine.source, ": vertex ", v + 1, " at (", p.transpose(), ") is ",
+                  proj.found ? std::to_string(proj.distance) + " m" : std::string("far"),
+                  " from the organ's boundary (limit ", max_distance,
+                  " m): the visual surface must lie on the mechanical mesh (same units and placement)");
+    }
+    for (int k = 0; k < 3; ++k) fine_anchor_(v, k) = vertex_of(proj.nodes[static_cast<std::size_t>(k)]);
+    fine_bary_.row(v) = proj.bary.cast<float>().transpose();
+    fine_offset_[v] = static_cast<float>((p - proj.point).dot(proj.normal));
+  }
+  fine_tris_ = fine.tris;
+  fine_positions_.resize(n, 3);
+  update_fine();
+}
+
+void SurfaceDeformer::update_fine() noexcept {
+  for (Eigen::Index v = 0; v < fine_anchor_.rows(); ++v) {
+    const Eigen::Vector3f a = positions_.row(fine_anchor_(v, 0)).transpose();
+    const Eigen::Vector3f b = positions_.row(fine_anchor_(v, 1)).transpose();
+    const Eigen::Vector3f c = positions_.row(fine_anchor_(v, 2)).transpose();
+    Eigen::Vector3f normal = (b - a).cross(c - a);
+    const float len = normal.norm();
+    if (len > 0) normal /= len;
+    fine_positions_.row(v) =
+        (fine_bary_(v, 0) * a + fine_bary_(v, 1) * b + fine_bary_(v, 2) * c + fine_offset_[v] * normal).transpose();
+  }
+}
+
 ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
                                      const Eigen::Vector3d& direction) noexcept {
   if (m == 0 || superposition_ == nullptr) {
     positions_ = rest_;
     max_displacement_ = 0;
+    update_fine();
     return m == 0 ? ContactStatus::kOk : ContactStatus::kNotContactable;
   }
   if (m > kMaxContacts) return ContactStatus::kOverCapacity;
@@ -61,6 +115,7 @@ ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* la
     positions_.row(v) = rest_.row(v) + u.cast<float>().transpose();
   }
   max_displacement_ = std::sqrt(max2);
+  update_fine();
   return ContactStatus::kOk;
 }
 

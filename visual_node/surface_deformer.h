@@ -27,6 +27,16 @@ class SurfaceDeformer {
   ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
                       const Eigen::Vector3d& direction = Eigen::Vector3d::Zero()) noexcept;
 
+  /// Embeds a finer visual surface: each of its vertices is tied to the closest point of the mechanical boundary
+  /// (triangle, barycentric coordinates, offset along the triangle's normal) and follows it. Only boundary rows are
+  /// used, so the visual node still holds no interior rows. Throws surgsim::Error naming the file and the first
+  /// vertex further than `max_distance` (m) from the boundary.
+  void embed(const TriSurface& fine, const TetMesh& mesh, const SurfaceMesh& surface, double max_distance);
+  bool embedded() const { return fine_tris_.rows() > 0; }
+  /// What the renderer draws: the embedded surface when there is one, else the boundary.
+  const Eigen::MatrixX3f& drawn_positions() const { return embedded() ? fine_positions_ : positions_; }
+  const Eigen::MatrixX3i& drawn_tris() const { return embedded() ? fine_tris_ : tris_; }
+
   const Eigen::MatrixX3f& positions() const { return positions_; }  // #visible x 3, m, deformed
   const Eigen::MatrixX3f& rest() const { return rest_; }            // #visible x 3, m
   const Eigen::MatrixX3i& tris() const { return tris_; }            // #F x 3 into positions
@@ -46,6 +56,13 @@ class SurfaceDeformer {
   Eigen::MatrixX3f positions_;
   std::unique_ptr<Superposition> superposition_;
   const NonlinearLaw* law_ = nullptr;
+  // Embedded surface: per fine vertex, the boundary triangle's vertices, barycentrics and normal offset (m).
+  Eigen::MatrixX3i fine_tris_;
+  Eigen::MatrixX3i fine_anchor_;
+  Eigen::MatrixX3f fine_bary_;
+  Eigen::VectorXf fine_offset_;
+  Eigen::MatrixX3f fine_positions_;
+  void update_fine() noexcept;
   Eigen::VectorXd u_;
   double max_displacement_ = 0;
 };

@@ -1,6 +1,7 @@
 #include "visual_app.h"
 
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
@@ -8,6 +9,7 @@
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <thread>
 
 #include "Surgsim.h"
@@ -159,6 +161,15 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
   deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, scene_.model == "liver" ? &tensors_ : nullptr,
                                                 law_->identity() ? nullptr : law_.get());
   markers_.resize(kMaxContacts, 3);
+  if (!scene_.visual.surface.empty()) {
+    // A finer visual surface embedded in the mechanical boundary (within 1 % of the organ's size).
+    const double size = (mesh_.nodes.colwise().maxCoeff() - mesh_.nodes.colwise().minCoeff()).norm();
+    try {
+      deformer_->embed(read_obj(scene_.visual.surface), mesh_, surface_, 0.01 * size);
+    } catch (const Error& e) {
+      throw_error(scene_.file, ": key 'visual.surface': ", e.what());
+    }
+  }
 
   // --- init: renderer (no GL context at all when headless) ---
   renderer_ = make_renderer(options_.headless ? "null" : "osmesa", scene_.visual.width, scene_.visual.height);
@@ -264,7 +275,7 @@ int VisualApp::run() {
 
     const std::uint64_t r0 = monotonic_ns();
     renderer_->begin_frame(scene_.visual.camera);
-    renderer_->draw_surface(deformer_->positions(), deformer_->tris(), organ_rgb);
+    renderer_->draw_surface(deformer_->drawn_positions(), deformer_->drawn_tris(), organ_rgb);
     if (have_frame) renderer_->draw_tool(tool_geometry(scene_.tool, from_msg(frame.pose())), scene_.tool.shaft_radius);
     if (marker_count > 0) renderer_->draw_points(markers_.topRows(marker_count), 0.0015f, kMarkerRgb);
     renderer_->end_frame();
@@ -278,8 +289,8 @@ int VisualApp::run() {
         try {
           write_png(path, image_);
           if (scene_.visual.vtk) {
-            write_vtk_surface(path.substr(0, path.size() - 4) + ".vtk", deformer_->positions().cast<double>(),
-                              deformer_->tris());
+            write_vtk_surface(path.substr(0, path.size() - 4) + ".vtk", deformer_->drawn_positions().cast<double>(),
+                              deformer_->drawn_tris());
             ++vtk_written_;
           }
           if (index_ != nullptr) {
@@ -315,7 +326,34 @@ int VisualApp::run() {
   return hash_ok ? 0 : 3;
 }
 
+namespace {
+// Finds a program on PATH.
+bool on_path(const std::string& name) {
+  const char* path = std::getenv("PATH");
+  if (path == nullptr) return false;
+  std::stringstream ss(path);
+  std::string dir;
+  while (std::getline(ss, dir, ':')) {
+    if (!dir.empty() && ::access((dir + "/" + name).c_str(), X_OK) == 0) return true;
+  }
+  return false;
+}
+}  // namespace
+
 void VisualApp::shutdown() {
+  // The PNG frames as an MP4 when asked and Debian's ffmpeg is there (never required).
+  if ((options_.video || scene_.visual.video) && pngs_written_ > 1) {
+    if (!on_path("ffmpeg")) {
+      video_ = "skipped: ffmpeg not found (apt-get install ffmpeg, or SURGSIM_WITH_VIDEO=1 scripts/setup.sh)";
+    } else {
+      const double fps = rate_hz_ / std::max(1, png_every_);
+      const std::string out = options_.out + "/video.mp4";
+      const std::string cmd = "ffmpeg -y -loglevel error -framerate " + std::to_string(fps) + " -pattern_type glob -i '" +
+                              options_.out + "/frame_*.png' -c:v libx264 -pix_fmt yuv420p '" + out + "'";
+      video_ = std::system(cmd.c_str()) == 0 ? out : "failed: " + cmd;
+    }
+    if (!options_.quiet) std::cerr << "visual_node: video " << video_ << "\n";
+  }
   msg::SceneInfo info;
   const bool have_info = dds_->scene_info.get(info);
   const Percentiles latency = dds_->frames.latency();
@@ -330,6 +368,7 @@ void VisualApp::shutdown() {
   j["pngs_written"] = pngs_written_;
   j["png_errors"] = png_errors_;
   j["vtk_written"] = vtk_written_;
+  j["video"] = video_;
   j["deform_errors"] = deform_errors_;
   j["visible_nodes"] = deformer_->visible_nodes().size();
   j["tensor_rows"] = tensors_.find("visual") != nullptr ? tensors_.find("visual")->row_count() : 0;

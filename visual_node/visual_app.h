@@ -33,6 +33,7 @@ struct VisualOptions {
   std::string dds_participant = "surgsim_default";
   double rate_hz = 0;            // > 0 overrides the scene's visual rate
   int png_every = -1;            // >= 0 overrides the scene's png_every
+  bool video = false;            // assemble out/video.mp4 with ffmpeg at exit (also when the scene asks)
   bool quiet = false;
 };
 
@@ -78,6 +79,7 @@ class VisualApp {
   double wall_seconds_ = 0;
   SampleRecorder deform_us_{1 << 18};
   SampleRecorder render_ms_{1 << 18};
+  std::string video_;            // path of the MP4 written, or why not
   std::string first_png_;
   std::string last_png_;
 };

@@ -6,6 +6,7 @@
 #include <random>
 
 #include "box_mesh.h"
+#include "error.h"
 #include "fem.h"
 #include "fixed_set.h"
 #include "precompute.h"
@@ -156,6 +157,96 @@ TEST_F(SurfaceDeformerTest, RenderedDentChangesPixelsNearTheContactOnly) {
   }
   EXPECT_GT(near_changed, 500) << "the dent is visible around the contact at " << c.transpose();
   EXPECT_LT(far_changed, far_total / 100) << "far from the contact the image is (almost) unchanged";
+}
+
+}  // namespace
+}  // namespace surgsim
+
+namespace surgsim {
+namespace {
+
+// A finer visual surface (the boundary of a finer box) embedded in the coarse mechanical boundary.
+TEST_F(SurfaceDeformerTest, EmbeddedFineSurfaceFollowsTheBoundary) {
+  const TetMesh fine_mesh = make_box_mesh(16, 16, 6, {0.2, 0.2, 0.06}, {-0.1, -0.1, -0.06});
+  const SurfaceMesh fine_boundary = boundary_surface(fine_mesh);
+  // Write it as OBJ and read it back (the path the scene key takes).
+  const std::string obj = ::testing::TempDir() + "/fine_box.obj";
+  {
+    std::FILE* f = std::fopen(obj.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    for (int n = 0; n < fine_mesh.nodes.rows(); ++n) {
+      std::fprintf(f, "v %.17g %.17g %.17g\n", fine_mesh.nodes(n, 0), fine_mesh.nodes(n, 1), fine_mesh.nodes(n, 2));
+    }
+    for (int t = 0; t < fine_boundary.tris.rows(); ++t) {
+      std::fprintf(f, "f %d %d %d\n", fine_boundary.tris(t, 0) + 1, fine_boundary.tris(t, 1) + 1,
+                   fine_boundary.tris(t, 2) + 1);
+    }
+    std::fclose(f);
+  }
+  const TriSurface fine = read_obj(obj);
+  SurfaceDeformer deformer(*mesh_, *surface_, tensors_);
+  deformer.embed(fine, *mesh_, *surface_, 0.001);
+  ASSERT_TRUE(deformer.embedded());
+  EXPECT_EQ(deformer.drawn_tris().rows(), fine.tris.rows());
+  // At rest the fine vertices are where they were (they lie on the coarse faces).
+  double rest_err = 0;
+  for (int v : fine_boundary.nodes) {
+    rest_err = std::max(rest_err, (deformer.drawn_positions().row(v).cast<double>() - fine.vertices.row(v)).norm());
+  }
+  EXPECT_LT(rest_err, 1e-7);
+
+  // Deformed: fine vertices that sit on coarse nodes move exactly with them.
+  const int node = top_node(0.0, 0.0);
+  const Eigen::Vector3d lambda(0, 0, -1.0);
+  ASSERT_EQ(deformer.apply(&node, &lambda, 1), ContactStatus::kOk);
+  const int v_coarse = deformer.vertex_of(node);
+  int v_fine = -1;
+  for (int v = 0; v < fine.vertices.rows(); ++v) {
+    if ((fine.vertices.row(v) - mesh_->nodes.row(node)).norm() < 1e-12) v_fine = v;
+  }
+  ASSERT_GE(v_fine, 0);
+  EXPECT_LT((deformer.drawn_positions().row(v_fine) - deformer.positions().row(v_coarse)).norm(), 1e-6);
+  EXPECT_GT((deformer.drawn_positions().row(v_fine).cast<double>() - fine.vertices.row(v_fine)).norm(), 0.005);
+}
+
+TEST_F(SurfaceDeformerTest, SurfaceFarFromTheOrganIsRefused) {
+  TriSurface far;
+  far.source = "far.obj";
+  far.vertices.resize(3, 3);
+  far.vertices << 0, 0, 0.5, 0.01, 0, 0.5, 0, 0.01, 0.5;  // 50 cm above the block
+  far.tris.resize(1, 3);
+  far.tris << 0, 1, 2;
+  SurfaceDeformer deformer(*mesh_, *surface_, tensors_);
+  try {
+    deformer.embed(far, *mesh_, *surface_, 0.002);
+    FAIL() << "a surface off the organ was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("far.obj: vertex 1"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ReadObj, PolygonsAreFannedAndErrorsNameTheLine) {
+  const std::string ok = ::testing::TempDir() + "/quad.obj";
+  {
+    std::FILE* f = std::fopen(ok.c_str(), "w");
+    std::fprintf(f, "# a quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\n");
+    std::fclose(f);
+  }
+  const TriSurface s = read_obj(ok);
+  EXPECT_EQ(s.vertices.rows(), 4);
+  EXPECT_EQ(s.tris.rows(), 2);
+  const std::string bad = ::testing::TempDir() + "/bad.obj";
+  {
+    std::FILE* f = std::fopen(bad.c_str(), "w");
+    std::fprintf(f, "v 0 0 0\nv 1 0 0\nf 1 2 7\n");
+    std::fclose(f);
+  }
+  try {
+    read_obj(bad);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.obj:3: face index 7"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
