@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -82,6 +83,10 @@ int main(int argc, char** argv) {
                  "Error bound of the triangle reduction, in voxels, (0, max-distance]")
       ->capture_default_str();
   app.add_option("--smoothing", options.smoothing_iterations, "Taubin lambda|mu iterations, 0..1000")
+      ->capture_default_str();
+  app.add_option("--denoise", options.denoise,
+                 "3x3x3 majority-filter passes on the organ's voxels before meshing (removes flipped voxels and "
+                 "one-voxel tunnels of a noisy segmentation; 0 keeps the voxels as they are), 0..10")
       ->capture_default_str();
   app.add_flag("--no-clean", [&options](std::int64_t) { options.clean = false; },
                "Keep stray pieces and cavities (default: keep the largest piece, fill cavities)");

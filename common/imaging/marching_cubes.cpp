@@ -29,6 +29,19 @@ int edge_between(int c0, int c1) {
   return 4 * axis + ((base >> u) & 1) + 2 * ((base >> v) & 1);
 }
 
+// True when two cube edges lie on a common face (a face is a corner bit held fixed).
+bool share_face(int e0, int e1) {
+  const int a0 = edge_corner(e0, 0), b0 = edge_corner(e0, 1), a1 = edge_corner(e1, 0), b1 = edge_corner(e1, 1);
+  for (int axis = 0; axis < 3; ++axis) {
+    const int bit = 1 << axis;
+    for (int side = 0; side < 2; ++side) {
+      const int want = side ? bit : 0;
+      if ((a0 & bit) == want && (b0 & bit) == want && (a1 & bit) == want && (b1 & bit) == want) return true;
+    }
+  }
+  return false;
+}
+
 Eigen::Vector3d corner_position(int c) { return Eigen::Vector3d(c & 1, (c >> 1) & 1, (c >> 2) & 1); }
 
 Eigen::Vector3d edge_midpoint(int e) {
@@ -90,7 +103,18 @@ Table build_table() {
         done[edge] = true;
         loop.push_back(edge);
       }
-      for (std::size_t k = 1; k + 1 < loop.size(); ++k) entries.insert(entries.end(), {loop[0], loop[k], loop[k + 1]});
+      // Fan apex: the first loop vertex none of whose diagonals lies on a cube face. A diagonal on a face would be
+      // an edge the neighbouring cube might also draw (four triangles on one edge) and a triangle lying in the face.
+      const std::size_t n = loop.size();
+      std::size_t apex = n;
+      for (std::size_t a = 0; a < n && apex == n; ++a) {
+        bool ok = true;
+        for (std::size_t k = 2; k + 1 < n && ok; ++k) ok = !share_face(loop[a], loop[(a + k) % n]);
+        if (ok) apex = a;
+      }
+      if (apex == n) throw_error("marching cubes table: no fan for a loop of case ", config, " (internal error)");
+      for (std::size_t k = 1; k + 1 < n; ++k)
+        entries.insert(entries.end(), {loop[apex], loop[(apex + k) % n], loop[(apex + k + 1) % n]});
     }
     if (entries.size() + 1 > kMaxCaseEntries)
       throw_error("marching cubes table: case ", config, " needs ", entries.size() / 3, " triangles (internal error)");

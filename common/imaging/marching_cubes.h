@@ -3,12 +3,14 @@
 // The cube is the one of Lorensen & Cline: its corners are 8 neighbouring voxel centres, a vertex sits where an
 // edge joins an inside and an outside corner (at the edge's midpoint: the mask is binary, so that is exactly on the
 // face shared by the two voxels), and each of the 256 corner configurations gives triangles. Instead of a
-// hand-typed 256-entry table (Lorensen-Cline's 15 cases, or Bourke's "Polygonising a scalar field" table, whose
-// complementary cases resolve the ambiguous faces differently and can leave cracks) the table is generated when
-// first used from one face rule: on a face with two diagonal inside corners, the inside corners are separated
-// (foreground 6-connected, as clean_mask assumes). A face's cut therefore depends on that face alone, so the two
-// cubes sharing it always agree: the surface is closed and 2-manifold. Each configuration's face cuts are chained
-// into loops and fanned into (loop size - 2) triangles, as many as the classic tables give.
+// hand-typed 256-entry table (Lorensen-Cline's 15 cases extended by symmetry, as in P. Bourke's "Polygonising a
+// scalar field", 1994, where a face with two diagonal inside corners is not always cut the same way in the two
+// cubes sharing it: the cracks M. Duerst pointed out, Computer Graphics 22(5), 1988) the table is generated when
+// first used from one face rule: on such an ambiguous face, the inside corners are separated (foreground
+// 6-connected, as clean_mask assumes). A face's cut then depends on that face alone, so the two cubes sharing it
+// always agree: the surface is closed and 2-manifold. Each configuration's face cuts are chained into loops and
+// fanned into (loop size - 2) triangles, as many as the classic tables give, from a loop vertex none of whose
+// diagonals lies on a cube face.
 #pragma once
 #include <cstdint>
 

@@ -11,6 +11,7 @@
 
 #include "error.h"
 #include "marching_cubes.h"
+#include "scene.h"
 #include "voxel_boundary.h"
 
 namespace surgsim {
@@ -48,6 +49,16 @@ std::string num(double x) {
   return buf;
 }
 
+// A YAML double-quoted scalar.
+std::string quoted(const std::string& text) {
+  std::string out = "\"";
+  for (char c : text) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
 std::string vec(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
 
 }  // namespace
@@ -59,6 +70,7 @@ void check_segment_options(const SegmentOptions& o) {
     throw_error("maximum distance to the voxel boundary ", o.max_distance, " voxels out of range (0, 4]");
   if (!(o.surface_error > 0.0 && o.surface_error <= o.max_distance))
     throw_error("surface error ", o.surface_error, " voxels out of range (0, maximum distance = ", o.max_distance, "]");
+  if (o.denoise < 0 || o.denoise > 10) throw_error("majority filter passes ", o.denoise, " out of range 0..10");
   if (o.smoothing_iterations < 0 || o.smoothing_iterations > 1000)
     throw_error("smoothing iterations ", o.smoothing_iterations, " out of range 0..1000");
 }
@@ -81,13 +93,18 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   // Select: the organ's voxels, cleaned to one solid piece.
   auto t0 = std::chrono::steady_clock::now();
   VoxelMask mask = select_label(volume, options.label);
+  if (options.denoise > 0) report.denoised_voxels = majority_filter(mask, options.denoise);
   if (options.clean) report.cleanup = clean_mask(mask);
+  if (mask.count() == 0)
+    throw_error(volume.source, ": nothing of label ", mask.label, " is left after the majority filter (the organ is ",
+                "thinner than two voxels: skip the filter, --denoise 0)");
   report.label = mask.label;
   report.organ_voxels = mask.count();
   report.voxel_volume = static_cast<double>(report.organ_voxels) * grid.spacing.prod();
   {
     std::ostringstream what;
     what << "label " << report.label << ", " << report.organ_voxels << " of " << report.voxels << " voxels";
+    if (options.denoise > 0) what << "; majority filter changed " << report.denoised_voxels << " voxels";
     if (options.clean)
       what << "; dropped " << report.cleanup.removed_voxels << " voxels in " << report.cleanup.components - 1
            << " stray pieces, filled " << report.cleanup.filled_voxels << " voxels in " << report.cleanup.cavities
@@ -101,10 +118,12 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   check_closed_surface(grid_surface, volume.source + ": marching cubes");
   report.mc_vertices = static_cast<int>(grid_surface.vertices.rows());
   report.mc_triangles = static_cast<int>(grid_surface.tris.rows());
+  report.genus = (2 - tri_mesh_topology(grid_surface).euler) / 2;
   out.marching_cubes = to_world(grid_surface, grid);
   report.mc_volume = tri_mesh_volume(grid_surface);
   stage_done("marching cubes", t0,
-             std::to_string(report.mc_triangles) + " triangles, " + std::to_string(report.mc_vertices) + " vertices");
+             std::to_string(report.mc_triangles) + " triangles, " + std::to_string(report.mc_vertices) +
+                 " vertices, genus " + std::to_string(report.genus));
 
   // Smooth: Taubin lambda|mu, clamped to the voxel boundary.
   t0 = std::chrono::steady_clock::now();
@@ -126,6 +145,9 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   reduce.max_distance = options.max_distance * unit;
   reduce.max_error = options.surface_error * unit;
   report.surface = decimate_surface(grid_surface, &boundary, reduce);
+  ImprovementOptions improve;
+  improve.max_distance = options.max_distance * unit;
+  improve_surface(grid_surface, &boundary, improve);
   check_closed_surface(grid_surface, volume.source + ": reduced surface");
   out.surface = to_world(grid_surface, grid);
   report.surface_volume = tri_mesh_volume(grid_surface);
@@ -135,7 +157,11 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
     DecimationOptions budget;
     budget.max_distance = options.max_distance * unit;
     budget.target_vertices = report.boundary_target;
+    // Rounder triangles than the error-driven pass needs: Gmsh keeps them as the tets' faces, and tets against
+    // long thin boundary triangles come out flat.
+    budget.min_quality = 0.4;
     report.boundary = decimate_surface(mesh_surface, &boundary, budget);
+    improve_surface(mesh_surface, &boundary, improve);
     check_closed_surface(mesh_surface, volume.source + ": mesh boundary");
   } else {
     report.boundary.vertices = static_cast<int>(mesh_surface.vertices.rows());
@@ -152,6 +178,10 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
 
   // Tetrahedralize inside the kept boundary.
   t0 = std::chrono::steady_clock::now();
+  if (mesh_surface.vertices.rows() >= options.target_nodes)
+    throw_error(volume.source, ": the surface cannot be reduced below ", mesh_surface.vertices.rows(),
+                " vertices within ", options.max_distance, " voxels of the voxel boundary, too many for ",
+                options.target_nodes, " nodes: ask for more nodes or allow a larger maximum distance");
   const TriMesh world_boundary = to_world(mesh_surface, grid);
   try {
     out.mesh = mesh_closed_surface(world_boundary.vertices, world_boundary.tris, options.target_nodes, mesher_log,
@@ -180,18 +210,29 @@ std::string segmentation_scene_yaml(const TetMesh& mesh, const std::string& name
   const Eigen::Vector3d top_point = mesh.nodes.row(top).transpose();
   // The liver scene's camera, scaled by the mesh's size against the liver's (bounding-box diagonal ~0.31 m).
   const double scale = (hi - lo).norm() / 0.31;
-  const Eigen::Vector3d eye = centre + scale * Eigen::Vector3d(0.22, -0.30, 0.25);
+  const Eigen::Vector3d eye = centre + scale * Eigen::Vector3d(0.16, -0.24, 0.19);
+  // The liver scene's quasi non-linear law, when its curve files are at hand (absolute paths: the scene is written
+  // elsewhere than config/).
+  const std::string curves = config_dir() + "/curves/";
+  const bool nonlinear = std::filesystem::exists(curves + "liver_dr.csv") && std::filesystem::exists(curves + "liver_force.csv");
   std::ostringstream y;
   y << "# Organ rebuilt from a segmented volume by surgsim-segment (source: " << source << ").\n"
     << "# Same structure as config/liver.yaml; the fixed region, tool and camera are placed from the mesh's extent.\n"
-    << "name: " << name << "\n"
+    << "name: " << quoted(name) << "\n"
     << "model: liver\n"
     << "mesh:\n"
-    << "  file: " << mesh_file << "  # spans " << vec(lo) << " .. " << vec(hi) << " m\n"
+    << "  file: " << quoted(mesh_file) << "  # spans " << vec(lo) << " .. " << vec(hi) << " m\n"
     << "material:\n"
     << "  young_modulus: 3000.0     # Pa\n"
-    << "  poisson_ratio: 0.45\n"
-    << "fixed:\n"
+    << "  poisson_ratio: 0.45\n";
+  if (nonlinear) {
+    y << "nonlinear:\n"
+      << "  # quasi non-linear law of config/liver.yaml (neo-Hookean cylinder of the same material)\n"
+      << "  displacement_curve: " << quoted(curves + "liver_dr.csv") << "\n"
+      << "  force_curve: " << quoted(curves + "liver_force.csv") << "\n"
+      << "  degree: 6\n";
+  }
+  y << "fixed:\n"
     << "  # the underside: nodes in the lowest " << static_cast<int>(kFixedFraction * 100) << " % of the height\n"
     << "  plane: {point: " << vec(Eigen::Vector3d(centre.x(), centre.y(), lo.z() + kFixedFraction * height))
     << ", normal: [0, 0, -1]}\n"

@@ -1,11 +1,17 @@
-// From a segmented volume to a simulation-ready organ (Cotin et al. 1998, section 2): select the organ's label,
-// extract its boundary (marching cubes), smooth away the staircase while staying within a stated distance of the
-// voxel boundary, reduce the triangle count adaptively, tetrahedralize at a requested node count (Gmsh, through the
-// mesher) and write the mesh and a scene that uses it.
-//
-// Stages and their libraries: marching cubes, Taubin smoothing and quadric/curvature edge collapse are this
-// folder's own (see their headers); the tetrahedralization is Gmsh's 3D Delaunay inside the kept surface
-// (mesh_closed_surface). Init-time code: allocates and throws surgsim::Error with the file named.
+// From a segmented volume to a simulation-ready organ (Cotin et al. 1998, section 2). Stages:
+//  1. select: the organ's label, a 3x3x3 majority filter against segmentation noise, the largest piece kept and
+//     cavities filled (volume.h);
+//  2. marching cubes: the voxel boundary's triangulation (marching_cubes.h), the reference triangle count;
+//  3. smooth: Taubin lambda|mu smoothing, every vertex kept within max_distance of the voxel boundary
+//     (surface_smoothing.h);
+//  4. reduce: quadric + curvature edge collapse under the same bound, error-driven (the smooth, light surface),
+//     then on to the surface vertex count the node budget calls for, each followed by flips and tangential
+//     relaxation for the triangles' shape (surface_decimation.h);
+//  5. tetrahedralize: Gmsh's 3D Delaunay inside that surface, kept as the mesh boundary, at the requested node
+//     count (mesh_closed_surface in the mesher).
+// Stages 1-4 are this folder's own code (VTK is not available and CGAL is not installed; surface_decimation.h
+// says why Gmsh's surface remeshing was not used); Gmsh, the project's mesher already, does stage 5.
+// Init-time code: allocates and throws surgsim::Error with the file named.
 #pragma once
 #include <cstdint>
 #include <iosfwd>
@@ -30,6 +36,7 @@ struct SegmentOptions {
   double surface_error = 0.25;        // voxels: the reduced surface stops where the next collapse would move it
                                       // more than this (quadric + curvature estimate); (0, max_distance]
   int smoothing_iterations = 30;      // Taubin lambda|mu pairs, 0..1000
+  int denoise = 1;                    // majority_filter passes before the clean-up, 0..10 (0: voxels as given)
   bool clean = true;                  // keep the largest component and fill cavities (clean_mask)
 };
 
@@ -46,7 +53,9 @@ struct SegmentReport {
   std::int32_t label = 0;
   std::int64_t voxels = 0;               // in the volume
   std::int64_t organ_voxels = 0;         // of the selected label, after clean-up
+  std::int64_t denoised_voxels = 0;      // changed by the majority filter
   MaskCleanup cleanup;
+  int genus = 0;                         // handles of the marching-cubes surface (0: sphere-like)
   int mc_vertices = 0, mc_triangles = 0;  // plain marching cubes
   SmoothingReport smoothing;
   DecimationReport surface;              // error-driven reduction: the smooth, light surface
@@ -83,7 +92,8 @@ struct SegmentationFiles {
 /// Writes PREFIX.msh (Gmsh v2.2), PREFIX.vtk (tets), PREFIX_surface.vtk (the smooth, light surface) and
 /// PREFIX.yaml: a liver-type scene (liver.yaml's structure) whose mesh is `file: <PREFIX name>.msh`, whose fixed
 /// region is the mesh's lowest 14 % (as the liver's underside), whose tool comes straight down onto the mesh's
-/// highest point and whose camera frames the mesh. Throws surgsim::Error naming the file that cannot be written.
+/// highest point, whose camera frames the mesh, and which uses liver.yaml's non-linear curves (absolute paths into
+/// config_dir()) when they exist. Throws surgsim::Error naming the file that cannot be written.
 SegmentationFiles write_segmentation(const Segmentation& segmentation, const std::string& prefix);
 
 /// The scene text write_segmentation writes (mesh file name as given).

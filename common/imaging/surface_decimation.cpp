@@ -5,7 +5,9 @@
 #include <cmath>
 #include <array>
 #include <iterator>
+#include <map>
 #include <queue>
+#include <set>
 #include <tuple>
 #include <vector>
 
@@ -318,7 +320,155 @@ class Decimator {
   DecimationReport report_;
 };
 
+// Flips and relaxation on a closed manifold surface (see the header).
+class Improver {
+ public:
+  Improver(TriMesh& mesh, const VoxelBoundaryDistance* boundary, const ImprovementOptions& options)
+      : mesh_(mesh), boundary_(boundary), options_(options) {
+    cos_flip_ = std::cos(options.max_flip_angle_deg * kPi / 180.0);
+    cos_turn_ = std::cos(options.max_normal_turn_deg * kPi / 180.0);
+  }
+
+  ImprovementReport run() {
+    ImprovementReport report;
+    report.min_quality_before = tri_mesh_min_quality(mesh_);
+    for (int round = 0; round < options_.rounds; ++round) {
+      const int flips = flip_pass();
+      const int moves = relax_pass();
+      report.flips += flips;
+      report.moves += moves;
+      if (flips == 0 && moves == 0) break;
+    }
+    report.min_quality_after = tri_mesh_min_quality(mesh_);
+    return report;
+  }
+
+ private:
+  Eigen::Vector3d p(int v) const { return mesh_.vertices.row(v).transpose(); }
+  Eigen::Vector3d normal(int a, int b, int c) const { return (p(b) - p(a)).cross(p(c) - p(a)); }
+  double quality(int a, int b, int c) const { return triangle_quality(p(a), p(b), p(c)); }
+  bool within(const Eigen::Vector3d& x) const {
+    return boundary_ == nullptr || options_.max_distance <= 0.0 || boundary_->within(x, options_.max_distance);
+  }
+  bool turned(const Eigen::Vector3d& n_old, const Eigen::Vector3d& n_new) const {
+    return n_new.dot(n_old) <= cos_turn_ * n_new.norm() * n_old.norm();
+  }
+
+  // One sweep over the edges in a fixed order; returns the number of flips.
+  int flip_pass() {
+    const int nf = static_cast<int>(mesh_.tris.rows());
+    // Half-edge (a, b) -> face; the twin of (a, b) is (b, a).
+    std::map<std::pair<int, int>, int> face_of;
+    for (int f = 0; f < nf; ++f)
+      for (int k = 0; k < 3; ++k) face_of[{mesh_.tris(f, k), mesh_.tris(f, (k + 1) % 3)}] = f;
+    std::set<std::pair<int, int>> edges;
+    for (const auto& [e, f] : face_of) edges.insert(std::minmax(e.first, e.second));
+    int flips = 0;
+    for (const auto& [a, b] : edges) {
+      const auto f1_it = face_of.find({a, b}), f2_it = face_of.find({b, a});
+      if (f1_it == face_of.end() || f2_it == face_of.end()) continue;
+      const int f1 = f1_it->second, f2 = f2_it->second;
+      const int c = third(f1, a, b), d = third(f2, b, a);
+      if (c < 0 || d < 0 || c == d || face_of.count({c, d}) != 0 || face_of.count({d, c}) != 0) continue;
+      // Faces (a, b, c), (b, a, d) -> (a, d, c), (d, b, c).
+      const Eigen::Vector3d n1 = normal(a, b, c), n2 = normal(b, a, d);
+      if (n1.dot(n2) <= cos_flip_ * n1.norm() * n2.norm()) continue;
+      const double before = std::min(quality(a, b, c), quality(b, a, d));
+      const double after = std::min(quality(a, d, c), quality(d, b, c));
+      if (after <= before + 1e-3) continue;
+      const Eigen::Vector3d m1 = normal(a, d, c), m2 = normal(d, b, c);
+      const Eigen::Vector3d n = n1 + n2;
+      if (turned(n, m1) || turned(n, m2) || !within(0.5 * (p(c) + p(d)))) continue;
+      mesh_.tris.row(f1) << a, d, c;
+      mesh_.tris.row(f2) << d, b, c;
+      face_of.erase({a, b});
+      face_of.erase({b, a});
+      face_of[{a, d}] = f1;
+      face_of[{d, c}] = f1;
+      face_of[{c, a}] = f1;
+      face_of[{d, b}] = f2;
+      face_of[{b, c}] = f2;
+      face_of[{c, d}] = f2;
+      ++flips;
+    }
+    return flips;
+  }
+
+  int third(int f, int a, int b) const {
+    for (int k = 0; k < 3; ++k)
+      if (mesh_.tris(f, k) == a && mesh_.tris(f, (k + 1) % 3) == b) return mesh_.tris(f, (k + 2) % 3);
+    return -1;
+  }
+
+  // One Gauss-Seidel sweep of tangential relaxation; returns the number of vertices moved.
+  int relax_pass() {
+    const int nv = static_cast<int>(mesh_.vertices.rows());
+    std::vector<std::vector<int>> faces(static_cast<std::size_t>(nv));
+    for (int f = 0; f < mesh_.tris.rows(); ++f)
+      for (int k = 0; k < 3; ++k) faces[static_cast<std::size_t>(mesh_.tris(f, k))].push_back(f);
+    int moves = 0;
+    for (int v = 0; v < nv; ++v) {
+      const auto& around = faces[static_cast<std::size_t>(v)];
+      if (around.empty()) continue;
+      Eigen::Vector3d centroid = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();
+      double area = 0.0, worst = 1.0;
+      for (int f : around) {
+        const Eigen::Vector3d nf = normal(mesh_.tris(f, 0), mesh_.tris(f, 1), mesh_.tris(f, 2));
+        const double a = 0.5 * nf.norm();
+        centroid += a * (p(mesh_.tris(f, 0)) + p(mesh_.tris(f, 1)) + p(mesh_.tris(f, 2))) / 3.0;
+        area += a;
+        n += nf;
+        worst = std::min(worst, quality(mesh_.tris(f, 0), mesh_.tris(f, 1), mesh_.tris(f, 2)));
+      }
+      if (!(area > 0.0) || !(n.norm() > 0.0)) continue;
+      centroid /= area;
+      n.normalize();
+      Eigen::Vector3d step = 0.5 * (centroid - p(v));
+      step -= step.dot(n) * n;
+      const Eigen::Vector3d to = p(v) + step;
+      if (!within(to)) continue;
+      // Accept when the worst triangle around v gets better and none turns or leaves the bound.
+      const Eigen::Vector3d from = p(v);
+      mesh_.vertices.row(v) = to.transpose();
+      bool ok = true;
+      double worst_after = 1.0;
+      for (int f : around) {
+        const int a = mesh_.tris(f, 0), b = mesh_.tris(f, 1), c = mesh_.tris(f, 2);
+        worst_after = std::min(worst_after, quality(a, b, c));
+        Eigen::Vector3d old_corner[3] = {p(a), p(b), p(c)};
+        for (auto& x : old_corner)
+          if (x == to) x = from;
+        const Eigen::Vector3d n_old = (old_corner[1] - old_corner[0]).cross(old_corner[2] - old_corner[0]);
+        if (turned(n_old, normal(a, b, c)) || !within((p(a) + p(b) + p(c)) / 3.0)) {
+          ok = false;
+          break;
+        }
+      }
+      if (!ok || worst_after <= worst + 1e-4) {
+        mesh_.vertices.row(v) = from.transpose();
+        continue;
+      }
+      ++moves;
+    }
+    return moves;
+  }
+
+  TriMesh& mesh_;
+  const VoxelBoundaryDistance* boundary_;
+  ImprovementOptions options_;
+  double cos_flip_ = 0.0, cos_turn_ = 0.0;
+};
+
 }  // namespace
+
+ImprovementReport improve_surface(TriMesh& mesh, const VoxelBoundaryDistance* boundary,
+                                  const ImprovementOptions& options) {
+  if (options.rounds < 0) throw_error("surface improvement: rounds must be >= 0");
+  if (options.max_distance > 0.0 && boundary == nullptr)
+    throw_error("surface improvement: a distance bound needs the voxel boundary");
+  Improver improver(mesh, boundary, options);
+  return improver.run();
+}
 
 DecimationReport decimate_surface(TriMesh& mesh, const VoxelBoundaryDistance* boundary,
                                   const DecimationOptions& options) {

@@ -164,6 +164,41 @@ MaskCleanup clean_mask(VoxelMask& mask) {
   return report;
 }
 
+std::int64_t majority_filter(VoxelMask& mask, int passes) {
+  const VoxelGrid& g = mask.grid;
+  const int nx = g.size.x(), ny = g.size.y(), nz = g.size.z();
+  const std::size_t n = mask.inside.size();
+  std::vector<std::uint8_t> a(n), b(n);
+  std::int64_t changed = 0;
+  // Box sums by three 1D passes (values stay <= 27).
+  auto pass = [&](const std::vector<std::uint8_t>& in, std::vector<std::uint8_t>& out, int axis) {
+    const std::int64_t stride = axis == 0 ? 1 : (axis == 1 ? nx : std::int64_t{nx} * ny);
+    const int len = g.size[axis];
+    for (int k = 0; k < nz; ++k)
+      for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+          const std::int64_t v = g.index(i, j, k);
+          const int pos = axis == 0 ? i : (axis == 1 ? j : k);
+          int sum = in[static_cast<std::size_t>(v)];
+          if (pos > 0) sum += in[static_cast<std::size_t>(v - stride)];
+          if (pos + 1 < len) sum += in[static_cast<std::size_t>(v + stride)];
+          out[static_cast<std::size_t>(v)] = static_cast<std::uint8_t>(sum);
+        }
+  };
+  for (int p = 0; p < passes; ++p) {
+    for (std::size_t v = 0; v < n; ++v) a[v] = mask.inside[v] ? 1 : 0;
+    pass(a, b, 0);
+    pass(b, a, 1);
+    pass(a, b, 2);
+    for (std::size_t v = 0; v < n; ++v) {
+      const std::uint8_t now = b[v] >= 14 ? 1 : 0;
+      if (now != (mask.inside[v] ? 1 : 0)) ++changed;
+      mask.inside[v] = now;
+    }
+  }
+  return changed;
+}
+
 LabelVolume voxelize(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tris, double spacing,
                      int margin_voxels, std::int32_t label) {
   if (!(spacing > 0.0)) throw_error("voxelize: spacing must be positive, got ", spacing);

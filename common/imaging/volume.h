@@ -69,6 +69,12 @@ struct MaskCleanup {
 /// an edge only are separated), so the surface it then extracts is one closed, connected surface. Deterministic.
 MaskCleanup clean_mask(VoxelMask& mask);
 
+/// Majority vote over each voxel's 3 x 3 x 3 neighbourhood (inside when at least 14 of the 27 are), `passes`
+/// times: removes isolated flipped voxels and one-voxel tunnels and bumps of a noisy segmentation, at the price of
+/// rounding edges and corners by a fraction of a voxel. Outside the volume counts as outside. Returns the number of
+/// voxels changed (over all passes).
+std::int64_t majority_filter(VoxelMask& mask, int passes = 1);
+
 /// A test volume from a closed, outward-oriented triangle surface (vertices in m, world frame): voxels of edge
 /// `spacing` (m) on an axis-aligned grid covering the surface's bounding box plus `margin_voxels` on every side,
 /// label `label` where the voxel centre is inside (parity of crossings along a z-line), 0 elsewhere.

@@ -436,6 +436,11 @@ LabelVolume read_nrrd(const std::string& path) {
   if (!has_spacings && !has_directions)
     throw_error(path, ": header has neither 'spacings' nor 'space directions': the voxel size is unknown");
 
+  constexpr long kMaxVoxels = 1L << 31;
+  if (sizes[0] * sizes[1] * sizes[2] > kMaxVoxels)
+    throw_error(path, ": ", sizes[0], " x ", sizes[1], " x ", sizes[2], " voxels is more than this reader takes (",
+                kMaxVoxels, "); crop the volume around the organ");
+
   LabelVolume volume;
   volume.source = path;
   VoxelGrid& g = volume.grid;

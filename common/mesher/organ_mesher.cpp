@@ -88,8 +88,10 @@ double liver_field(double x, double y, double z) {
   return f - kLiverIso;
 }
 
-// A closed triangle surface split into an upper and a lower disk along a closed loop of edges.
-struct TriSurface {
+// A closed triangle surface handed to Gmsh as discrete entities; the liver's is split into an upper and a lower
+// disk along a closed loop of edges (side and loop stay empty for a surface kept whole).
+// (Not TriSurface: mesh.h has a public type of that name.)
+struct DiscreteSurface {
   std::vector<double> xyz;  // #V x 3 row-major, m
   std::vector<int> tris;    // #F x 3, 0-based, counter-clockwise seen from outside
   std::vector<int> side;    // #V: +1 upper disk, -1 lower disk, 0 on the loop between them
@@ -102,8 +104,8 @@ struct TriSurface {
 // and lower), each nearly a graph over the xy-plane, which Gmsh reparametrizes robustly. (Letting Gmsh split the
 // closed surface itself, classifySurfaces(forReparametrization), gave patches on which Frontal-Delaunay failed at
 // some sizes and fell back to MeshAdapt, taking a minute.)
-TriSurface liver_surface(int n) {
-  TriSurface s;
+DiscreteSurface liver_surface(int n) {
+  DiscreteSurface s;
   std::map<std::array<int, 3>, int> index;  // integer cube coordinates in [-n/2, n/2]^3 -> vertex
   const int half = n / 2;
   auto vertex = [&](int i, int j, int k) {
@@ -186,7 +188,7 @@ int liver_cells(double h) {
 }
 
 // Volume (divergence theorem) and area of a closed outward triangle surface.
-std::pair<double, double> volume_and_area(const TriSurface& s) {
+std::pair<double, double> volume_and_area(const DiscreteSurface& s) {
   double volume = 0.0, area = 0.0;
   for (std::size_t f = 0; f < s.tris.size(); f += 3) {
     const double* a = &s.xyz[3 * s.tris[f]];
@@ -278,10 +280,10 @@ void mesh_bottom_differently(double z) {
   for (const auto& face : faces) gmsh::model::mesh::setAlgorithm(2, face.second, 5);  // Delaunay
 }
 
-// Gmsh node tag of a TriSurface vertex (0-based), and the coordinates of a list of node tags.
+// Gmsh node tag of a DiscreteSurface vertex (0-based), and the coordinates of a list of node tags.
 std::size_t tag_of(int vertex) { return static_cast<std::size_t>(vertex) + 1; }
 
-std::vector<double> node_coords(const TriSurface& s, const std::vector<std::size_t>& tags) {
+std::vector<double> node_coords(const DiscreteSurface& s, const std::vector<std::size_t>& tags) {
   std::vector<double> xyz;
   xyz.reserve(3 * tags.size());
   for (std::size_t t : tags)
@@ -291,7 +293,7 @@ std::vector<double> node_coords(const TriSurface& s, const std::vector<std::size
 
 // Puts on discrete surface `surface` the vertices of `s` for which has_node(vertex) holds (the nodes classified on
 // it) and the triangles for which has_triangle(triangle) holds, numbering elements from element_tag on.
-void add_discrete_triangles(int surface, const TriSurface& s, const std::function<bool(std::size_t)>& has_node,
+void add_discrete_triangles(int surface, const DiscreteSurface& s, const std::function<bool(std::size_t)>& has_node,
                             const std::function<bool(std::size_t)>& has_triangle, std::size_t& element_tag) {
   std::vector<std::size_t> nodes, tri_tags, tri_nodes;
   const std::size_t vertex_count = s.xyz.size() / 3;
@@ -307,7 +309,7 @@ void add_discrete_triangles(int surface, const TriSurface& s, const std::functio
 }
 
 // Builds the shape's geometry in a fresh Gmsh model (`liver` is used for "liver" only).
-void build_geometry(const std::string& shape, const TriSurface& liver) {
+void build_geometry(const std::string& shape, const DiscreteSurface& liver) {
   gmsh::model::add(shape);
   if (shape == "plate") {
     gmsh::model::occ::addBox(-kPlateSide / 2, -kPlateSide / 2, -kPlateThickness / 2, kPlateSide, kPlateSide,
@@ -527,7 +529,7 @@ TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress, OrganMeshR
 
   // Volume and area give the first characteristic length. The liver's are those of its sampled surface, first
   // sampled coarsely to estimate h, then at the resolution that h asks for (fixed across re-meshes).
-  TriSurface liver;
+  DiscreteSurface liver;
   NodeModel model;
   if (spec.shape == "plate") {
     model.volume = kPlateSide * kPlateSide * kPlateThickness;
@@ -577,7 +579,7 @@ TetMesh mesh_closed_surface(const Eigen::MatrixX3d& vertices, const Eigen::Matri
   if (!vertices.allFinite()) throw_error(context, ": non-finite vertex coordinates");
   if (tris.minCoeff() < 0 || tris.maxCoeff() >= vertices.rows()) throw_error(context, ": triangle index out of range");
   // The surface's own numbers: volume and area by the divergence theorem, vertices used.
-  TriSurface surface;
+  DiscreteSurface surface;
   surface.xyz.resize(static_cast<std::size_t>(3 * vertices.rows()));
   for (Eigen::Index v = 0; v < vertices.rows(); ++v)
     for (int c = 0; c < 3; ++c) surface.xyz[static_cast<std::size_t>(3 * v + c)] = vertices(v, c);

@@ -83,11 +83,11 @@ int main(int argc, char** argv) {
                     100 * r.mesh_volume_error);
         for (const StageTime& st : s.report.stages) std::printf(" %6.2f", st.seconds);
         std::printf(" %6.2f\n", total);
-        std::printf("%-16s mesh %d nodes (wanted %d), %d tets, worst tet quality %.2f; %ld stray voxels dropped, "
-                    "%ld cavity voxels filled; smoothing clamped %ld moves\n",
+        std::printf("%-16s mesh %d nodes (wanted %d), %d tets, worst tet quality %.2f; majority filter changed %ld "
+                    "voxels, %ld stray voxels dropped, %ld cavity voxels filled; smoothing clamped %ld moves\n",
                     "", s.report.mesh.nodes, options.target_nodes, s.report.mesh.tets, s.report.mesh.min_quality,
-                    static_cast<long>(s.report.cleanup.removed_voxels), static_cast<long>(s.report.cleanup.filled_voxels),
-                    s.report.smoothing.clamped);
+                    static_cast<long>(s.report.denoised_voxels), static_cast<long>(s.report.cleanup.removed_voxels),
+                    static_cast<long>(s.report.cleanup.filled_voxels), s.report.smoothing.clamped);
       }
     }
     std::printf("\nH: symmetric Hausdorff distance, m: mean distance, both to the original surface in voxels of the "
