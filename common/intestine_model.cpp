@@ -65,10 +65,10 @@ MassSpring IntestineModel::build(const IntestineParams& p, double& amplitude, do
   }
   auto positive = [](double v) { return std::isfinite(v) && v > 0; };
   if (!positive(p.length) || !positive(p.cylinder_radius) || p.folds < 1 || !positive(p.angular_span) ||
-      p.angular_span > 2 * kPi || !(p.fold_shape >= 0 && p.fold_shape <= 1) || !positive(p.intestine_radius) ||
+      p.angular_span > 2 * kPi || !(p.fold_shape >= 0 && p.fold_shape <= 2) || !positive(p.intestine_radius) ||
       !(p.mesentery_thickness >= 0)) {
     throw_error("intestine: length, cylinder_radius, angular_span (<= 2 pi), intestine_radius must be > 0, folds >= 1, "
-                "fold_shape in [0, 1], mesentery_thickness >= 0");
+                "fold_shape in [0, 2], mesentery_thickness >= 0");
   }
   if (!positive(p.intestine_node_mass) || !positive(p.mesentery_node_mass) || !(p.structural_stiffness >= 0) ||
       !(p.shear_stiffness >= 0) || !(p.bending_stiffness >= 0) || !(p.spring_damping >= 0) || !(p.drag >= 0) ||

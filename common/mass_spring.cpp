@@ -156,10 +156,25 @@ struct Band {
     for (int j = 0; j < n; ++j) {
       double* cj = col(j);
       const int rows = std::min(p, n - 1 - j) + 1;  // rows j .. j + rows - 1
-      for (int k = std::max(0, j - p); k < j; ++k) {
+      // cj -= sum_k L(j, k) L(j.., k), four columns k at a time (column k reaches row k + p, so each later column
+      // is one entry longer: the common part first, then the tails).
+      int k = std::max(0, j - p);
+      for (; k + 3 < j; k += 4) {
+        const double* c0 = col(k) + (j - k);
+        const double* c1 = col(k + 1) + (j - k - 1);
+        const double* c2 = col(k + 2) + (j - k - 2);
+        const double* c3 = col(k + 3) + (j - k - 3);
+        const double f0 = c0[0], f1 = c1[0], f2 = c2[0], f3 = c3[0];
+        const int l0 = std::min(rows, k + p - j + 1), l1 = std::min(rows, l0 + 1), l2 = std::min(rows, l0 + 2),
+                  l3 = std::min(rows, l0 + 3);
+        for (int t = 0; t < l0; ++t) cj[t] -= (f0 * c0[t] + f1 * c1[t]) + (f2 * c2[t] + f3 * c3[t]);
+        for (int t = l0; t < l1; ++t) cj[t] -= f1 * c1[t] + (f2 * c2[t] + f3 * c3[t]);
+        for (int t = l1; t < l2; ++t) cj[t] -= f2 * c2[t] + f3 * c3[t];
+        for (int t = l2; t < l3; ++t) cj[t] -= f3 * c3[t];
+      }
+      for (; k < j; ++k) {
         const double* ck = col(k) + (j - k);  // L(j.., k)
         const double f = ck[0];
-        if (f == 0) continue;
         const int len = std::min(rows, k + p - j + 1);
         for (int t = 0; t < len; ++t) cj[t] -= f * ck[t];
       }

@@ -31,11 +31,6 @@ Eigen::Vector3d rotate_towards(const Eigen::Vector3d& u, const Eigen::Vector3d& 
   return std::cos(a) * u + std::sin(a) * w;
 }
 
-// Projection of unit t into the cone of axis d (unit) and half-angle phi.
-Eigen::Vector3d into_cone(const Eigen::Vector3d& t, const Eigen::Vector3d& d, double phi) {
-  return angle(t, d) <= phi ? t : rotate_towards(d, t, phi);
-}
-
 void put(std::vector<float>& v, int i, const Eigen::Vector3d& p) {
   const auto k = static_cast<std::size_t>(3 * i);
   v[k] = static_cast<float>(p.x());
@@ -82,28 +77,38 @@ Eigen::Vector3d hermite_d2(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
   return (12 * t - 6) * p0 + (6 * t - 4) * m0 + (-12 * t + 6) * p1 + (6 * t - 2) * m1;
 }
 
+namespace {
+
+// One double-reflection step: the normal at (x1, t1) transported from (x0, t0, r0). Reflection in the bisecting
+// plane of x0, x1, then in the plane that maps the reflected tangent onto t1: the composition rotates the frame with
+// (to fourth order) no twist about the tangent.
+Eigen::Vector3d rmf_step(const Eigen::Vector3d& x0, const Eigen::Vector3d& t0, const Eigen::Vector3d& r0,
+                         const Eigen::Vector3d& x1, const Eigen::Vector3d& t1) {
+  const Eigen::Vector3d v1 = x1 - x0;
+  const double c1 = v1.squaredNorm();
+  Eigen::Vector3d rl = r0, tl = t0;
+  if (c1 > kTiny * kTiny) {
+    rl = r0 - (2.0 / c1) * v1.dot(r0) * v1;
+    tl = t0 - (2.0 / c1) * v1.dot(t0) * v1;
+  }
+  const Eigen::Vector3d v2 = t1 - tl;
+  const double c2 = v2.squaredNorm();
+  Eigen::Vector3d rn = c2 > kTiny * kTiny ? Eigen::Vector3d(rl - (2.0 / c2) * v2.dot(rl) * v2) : rl;
+  // Re-orthonormalize against round-off (and tangents the guard turned).
+  rn -= rn.dot(t1) * t1;
+  const double len = rn.norm();
+  return len > kTiny ? Eigen::Vector3d(rn / len) : orthogonal(t1);
+}
+
+}  // namespace
+
 void rotation_minimizing_frames(const Eigen::Vector3d* x, const Eigen::Vector3d* t, int n, const Eigen::Vector3d& r0,
                                 Eigen::Vector3d* r, Eigen::Vector3d* s) {
   if (n <= 0) return;
   r[0] = r0;
   s[0] = t[0].cross(r[0]);
   for (int i = 0; i + 1 < n; ++i) {
-    // Reflection in the bisecting plane of x_i, x_{i+1}, then in the plane that maps the reflected tangent onto
-    // t_{i+1}: the composition rotates the frame with (to fourth order) no twist about the tangent.
-    const Eigen::Vector3d v1 = x[i + 1] - x[i];
-    const double c1 = v1.squaredNorm();
-    Eigen::Vector3d rl = r[i], tl = t[i];
-    if (c1 > kTiny * kTiny) {
-      rl = r[i] - (2.0 / c1) * v1.dot(r[i]) * v1;
-      tl = t[i] - (2.0 / c1) * v1.dot(t[i]) * v1;
-    }
-    const Eigen::Vector3d v2 = t[i + 1] - tl;
-    const double c2 = v2.squaredNorm();
-    Eigen::Vector3d rn = c2 > kTiny * kTiny ? Eigen::Vector3d(rl - (2.0 / c2) * v2.dot(rl) * v2) : rl;
-    // Re-orthonormalize against round-off (and tangents the guard turned).
-    rn -= rn.dot(t[i + 1]) * t[i + 1];
-    const double len = rn.norm();
-    r[i + 1] = len > kTiny ? Eigen::Vector3d(rn / len) : orthogonal(t[i + 1]);
+    r[i + 1] = rmf_step(x[i], t[i], r[i], x[i + 1], t[i + 1]);
     s[i + 1] = t[i + 1].cross(r[i + 1]);
   }
 }
@@ -111,8 +116,10 @@ void rotation_minimizing_frames(const Eigen::Vector3d* x, const Eigen::Vector3d*
 TubeBuilder::TubeBuilder(const TubeParams& params, int max_points) : params_(params), max_points_(max_points) {
   if (max_points < 2) throw_error("tube: max_points must be >= 2 (got ", max_points, ")");
   if (!(params.radius > 0) || !(params.tension >= 0 && params.tension < 1) || !(params.flag_turn > 0) ||
-      params.max_extra_samples < 0 || params.max_extra_samples > 8 || !(params.fold_safety >= 1.5)) {
-    throw_error("tube: radius > 0, tension in [0, 1), flag_turn > 0, max_extra_samples in 0..8, fold_safety >= 1.5");
+      params.max_extra_samples < 0 || params.max_extra_samples > 8 || !(params.ring_clearance >= 0) ||
+      !(params.min_radius_fraction > 0 && params.min_radius_fraction <= 1)) {
+    throw_error("tube: radius > 0, tension in [0, 1), flag_turn > 0, max_extra_samples in 0..8, ring_clearance >= 0, "
+                "min_radius_fraction in (0, 1]");
   }
   const auto np = static_cast<std::size_t>(max_points);
   points_.resize(np);
@@ -120,10 +127,6 @@ TubeBuilder::TubeBuilder(const TubeParams& params, int max_points) : params_(par
   curvature_.assign(np, 0.0);
   const auto ns = static_cast<std::size_t>(max_intervals() + 1);
   samples_.resize(ns);
-  centers_.resize(ns);
-  ring_tangents_.resize(ns);
-  normals_.resize(ns);
-  binormals_.resize(ns);
   // Primitives: (rings + 1) x sides vertices (cos a, sin a, t, w(t)).
   for (int lod = 0; lod <= kTubeMaxLod; ++lod) {
     TubePrimitive prim;
@@ -179,13 +182,15 @@ bool TubeBuilder::sample_spline(int count) noexcept {
     if (d.norm() < kTiny) d = p1 - p0;
     if (d.norm() < kTiny && k > 0) d = samples_[static_cast<std::size_t>(k - 1)].tangent;
     if (d.norm() < kTiny) d = Eigen::Vector3d::UnitX();
-    s.tangent = d.normalized();
+    s.tangent = s.spline_tangent = d.normalized();
     s.segment = seg;
     s.t = t;
     s.extra = extra;
-    s.tilted = false;
+    s.tilt = 0;
+    s.radius = params_.radius;
     ++k;
   };
+  constexpr int kProbe = 16;
   for (int i = 0; i + 1 < count; ++i) {
     const Eigen::Vector3d &p0 = points_[static_cast<std::size_t>(i)], &p1 = points_[static_cast<std::size_t>(i + 1)];
     const Eigen::Vector3d &m0 = tangents_[static_cast<std::size_t>(i)], &m1 = tangents_[static_cast<std::size_t>(i + 1)];
@@ -198,7 +203,6 @@ bool TubeBuilder::sample_spline(int count) noexcept {
     if (!(ci > params_.flag_turn) || params_.max_extra_samples == 0) continue;
     ++stats_.flagged_segments;
     // Parameter of maximal curvature on 16 samples, refined by a parabola through the best and its neighbours.
-    constexpr int kProbe = 16;
     double kap[kProbe];
     int best = 0;
     for (int j = 0; j < kProbe; ++j) {
@@ -213,15 +217,46 @@ bool TubeBuilder::sample_spline(int count) noexcept {
       const double den = kap[best - 1] - 2 * kap[best] + kap[best + 1];
       if (den < 0) tstar += std::clamp(0.5 * (kap[best - 1] - kap[best + 1]) / den, -0.5, 0.5) / kProbe;
     }
-    // Extra samples clustered around t*: more for a larger turn.
+    tstar = std::clamp(tstar, 0.05, 0.95);
+    // Turning accumulated along the segment (on the probes) and at t*.
+    double cum[kProbe + 1];
+    cum[0] = 0;
+    Eigen::Vector3d prev = hermite_d1(p0, p1, m0, m1, 0);
+    for (int j = 1; j <= kProbe; ++j) {
+      const Eigen::Vector3d cur = hermite_d1(p0, p1, m0, m1, static_cast<double>(j) / kProbe);
+      cum[j] = cum[j - 1] + angle(prev, cur);
+      prev = cur;
+    }
+    auto turning_at = [&](double t) {
+      const double f = t * kProbe;
+      const int j = std::min(kProbe - 1, static_cast<int>(f));
+      return cum[j] + (f - j) * (cum[j + 1] - cum[j]);
+    };
+    auto param_of = [&](double a) {  // inverse of turning_at
+      int j = 0;
+      while (j < kProbe - 1 && cum[j + 1] < a) ++j;
+      const double span = cum[j + 1] - cum[j];
+      return (j + (span > kTiny ? std::clamp((a - cum[j]) / span, 0.0, 1.0) : 0.5)) / kProbe;
+    };
+    const double total = cum[kProbe], at_star = turning_at(tstar);
+    // One extra sample at t*, the others on either side in proportion to the turning there, at equal steps of it.
     const int extra = std::min(params_.max_extra_samples,
                                std::max(1, static_cast<int>(std::ceil(ci / params_.flag_turn)) - 1));
-    const double tc = std::clamp(tstar, 0.1, 0.9);
-    const double span = std::min(0.7, 1.8 * std::min(tc, 1 - tc));
-    for (int j = 0; j < extra; ++j) {
-      const double t = extra == 1 ? tc : tc + span * (static_cast<double>(j) / (extra - 1) - 0.5);
-      push(i, std::clamp(t, 0.02, 0.98), true);
+    const int rest = extra - 1;
+    const int left = total > kTiny ? static_cast<int>(std::lround(rest * at_star / total)) : rest / 2;
+    const int right = rest - left;
+    double ts[9];
+    int nt = 0;
+    for (int m = 1; m <= left; ++m) ts[nt++] = param_of(at_star * m / (left + 1));
+    ts[nt++] = tstar;
+    for (int m = 1; m <= right; ++m) ts[nt++] = param_of(at_star + (total - at_star) * m / (right + 1));
+    // Keep them ordered and at least 0.04 apart (and from the segment's ends).
+    double last = 0;
+    for (int m = 0; m < nt; ++m) {
+      if (ts[m] < last + 0.04 || ts[m] > 0.96) continue;
+      push(i, ts[m], true);
       ++stats_.extra_samples;
+      last = ts[m];
     }
   }
   push(count - 2, 1.0, false);
@@ -229,89 +264,179 @@ bool TubeBuilder::sample_spline(int count) noexcept {
   return true;
 }
 
-void TubeBuilder::guard() noexcept {
-  const double r = params_.radius, kappa = params_.fold_safety;
-  auto phi = [&](double l) { return std::min(0.25 * kPi, std::asin(std::min(1.0, l / (2 * kappa * r)))); };
-  auto erase = [&](int k) {
-    for (int i = k; i + 1 < sample_count_; ++i) {
-      samples_[static_cast<std::size_t>(i)] = samples_[static_cast<std::size_t>(i + 1)];
-    }
-    --sample_count_;
-    ++stats_.removed_samples;
-  };
-  bool changed = true;
-  for (int pass = 0; changed && pass < 4 * max_intervals() + 4; ++pass) {
-    changed = false;
-    for (int k = 0; k < sample_count_ && sample_count_ >= 2; ++k) {
-      TubeSample& s = samples_[static_cast<std::size_t>(k)];
-      const bool first = k == 0, last = k == sample_count_ - 1;
-      Eigen::Vector3d dp = Eigen::Vector3d::Zero(), dn = Eigen::Vector3d::Zero();
-      double lp = 0, ln = 0;
-      if (!first) {
-        dp = s.center - samples_[static_cast<std::size_t>(k - 1)].center;
-        lp = dp.norm();
-      }
-      if (!last) {
-        dn = samples_[static_cast<std::size_t>(k + 1)].center - s.center;
-        ln = dn.norm();
-      }
-      // Coincident rings: remove the interior one of the pair.
-      if ((!first && lp < 1e-9) || (!last && ln < 1e-9)) {
-        if (sample_count_ <= 2) return;
-        erase(!last ? (first ? k + 1 : k) : k - 1);
-        changed = true;
-        break;
-      }
-      Eigen::Vector3d t = s.tangent;
-      if (first) {
-        t = into_cone(t, dn / ln, phi(ln));
-      } else if (last) {
-        t = into_cone(t, dp / lp, phi(lp));
-      } else {
-        const Eigen::Vector3d up = dp / lp, un = dn / ln;
-        const double fp = phi(lp), fn = phi(ln), beta = angle(up, un);
-        if (beta > fp + fn) {  // the two cones are disjoint: a kink the tube cannot follow
-          erase(k);
-          changed = true;
-          break;
-        }
-        // Alternating projections onto the two (convex) caps, then a point of the arc between the axes that lies in
-        // both if they have not converged.
-        for (int it = 0; it < 8 && (angle(t, up) > fp + 1e-12 || angle(t, un) > fn + 1e-12); ++it) {
-          t = into_cone(into_cone(t, up, fp), un, fn);
-        }
-        if (angle(t, up) > fp + 1e-9 || angle(t, un) > fn + 1e-9) {
-          const double lo = std::max(0.0, beta - fn), hi = std::min(beta, fp);
-          t = rotate_towards(up, un, 0.5 * (lo + hi));
-        }
-      }
-      if (angle(t, s.tangent) > 1e-12) {
-        s.tangent = t.normalized();
-        s.tilted = true;
-      }
+void TubeBuilder::erase(int k) noexcept {
+  for (int i = k; i + 1 < sample_count_; ++i) {
+    samples_[static_cast<std::size_t>(i)] = samples_[static_cast<std::size_t>(i + 1)];
+  }
+  --sample_count_;
+  ++stats_.removed_samples;
+}
+
+void TubeBuilder::first_frame(const Eigen::Vector3d& r0) noexcept {
+  TubeSample& s = samples_[0];
+  Eigen::Vector3d r = r0 - r0.dot(s.tangent) * s.tangent;
+  r = r.norm() > 1e-6 ? Eigen::Vector3d(r.normalized()) : orthogonal(s.tangent);
+  s.normal = r;
+  s.binormal = s.tangent.cross(r);
+}
+
+void TubeBuilder::frame_step(int k) noexcept {
+  const TubeSample& a = samples_[static_cast<std::size_t>(k)];
+  TubeSample& b = samples_[static_cast<std::size_t>(k + 1)];
+  b.normal = rmf_step(a.center, a.tangent, a.normal, b.center, b.tangent);
+  b.binormal = b.tangent.cross(b.normal);
+}
+
+double TubeBuilder::interval_fit(int k) const noexcept {
+  // The rings the skinning makes at t = j / 8 (every LOD's rings are among them): centre, plane normal, radius.
+  constexpr int kFine = 8;
+  const TubeSample &a = samples_[static_cast<std::size_t>(k)], &b = samples_[static_cast<std::size_t>(k + 1)];
+  const double len = (b.center - a.center).norm();
+  if (!(len > 1e-9)) return 0;
+  Eigen::Vector3d c[kFine + 1], n[kFine + 1];
+  double rho[kFine + 1];
+  for (int j = 0; j <= kFine; ++j) {
+    const double t = static_cast<double>(j) / kFine, w = skin_weight(t);
+    c[j] = (1 - w) * (a.center + (t * len) * a.tangent) + w * (b.center + ((t - 1) * len) * b.tangent);
+    const Eigen::Vector3d u = (1 - w) * a.radius * a.normal + w * b.radius * b.normal;
+    const Eigen::Vector3d v = (1 - w) * a.radius * a.binormal + w * b.radius * b.binormal;
+    const Eigen::Vector3d nn = u.cross(v);
+    const double l = nn.norm();
+    if (!(l > 1e-12)) return 0;
+    n[j] = nn / l;
+    // The ellipse's largest radius: sqrt of the larger eigenvalue of the Gram matrix of (u, v).
+    const double guu = u.squaredNorm(), gvv = v.squaredNorm(), guv = u.dot(v);
+    const double half = 0.5 * (guu - gvv);
+    rho[j] = std::sqrt(0.5 * (guu + gvv) + std::sqrt(half * half + guv * guv));
+  }
+  // Ring j passes when the other ring's plane meets its own farther than rho_j + e from its centre:
+  // d.n_other / sin(theta) >= rho_j + e. The fit is the largest factor on every rho that keeps all pairs passing.
+  const double e = params_.ring_clearance;
+  double fit = 1e300;
+  for (int stride = 1; stride <= kFine; stride *= 2) {
+    for (int j = 0; j + stride <= kFine; j += stride) {
+      const int i = j + stride;
+      const Eigen::Vector3d d = c[i] - c[j];
+      const double st = n[j].cross(n[i]).norm();
+      const double dj = d.dot(n[i]), di = d.dot(n[j]);
+      if (dj <= e * st || di <= e * st) return 0;  // behind, or closer than the clearance alone allows
+      if (st < 1e-12) continue;                    // parallel rings ahead of each other
+      fit = std::min({fit, (dj / st - e) / rho[j], (di / st - e) / rho[i]});
     }
   }
-  for (int k = 0; k < sample_count_; ++k) stats_.tilted_rings += samples_[static_cast<std::size_t>(k)].tilted ? 1 : 0;
+  return fit;
+}
+
+int TubeBuilder::repair(int k, double fit) noexcept {
+  const int a = k, b = k + 1, last = sample_count_ - 1;
+  // 1. Turn the end rings towards their miters, half way then all the way.
+  auto target = [&](int i) {
+    const Eigen::Vector3d& ci = samples_[static_cast<std::size_t>(i)].center;
+    Eigen::Vector3d m = Eigen::Vector3d::Zero();
+    if (i > 0) m += (ci - samples_[static_cast<std::size_t>(i - 1)].center).normalized();
+    if (i < last) m += (samples_[static_cast<std::size_t>(i + 1)].center - ci).normalized();
+    return m.norm() > kTiny ? Eigen::Vector3d(m.normalized()) : samples_[static_cast<std::size_t>(i)].spline_tangent;
+  };
+  bool changed_a = false, changed = false;
+  for (int i : {a, b}) {
+    TubeSample& s = samples_[static_cast<std::size_t>(i)];
+    if (s.tilt >= 4) continue;
+    const Eigen::Vector3d m = target(i);
+    const double off = angle(s.spline_tangent, m);
+    if (off < 0.02) {  // the spline already runs along the miter: turning cannot help
+      s.tilt = 4;
+      continue;
+    }
+    s.tilt = std::min(4, s.tilt + 2);  // half way, then all the way
+    s.tangent = rotate_towards(s.spline_tangent, m, 0.25 * s.tilt * off);
+    changed = true;
+    changed_a = changed_a || i == a;
+  }
+  // 2. Narrow both end rings by the fit the check found (a fold tighter than the tube drawn pinched).
+  if (!changed) {
+    const double floor = params_.min_radius_fraction * params_.radius;
+    const double factor = std::clamp(0.995 * fit, 0.0, 0.95);
+    for (int i : {a, b}) {
+      TubeSample& s = samples_[static_cast<std::size_t>(i)];
+      if (s.radius <= floor * (1 + 1e-9)) continue;
+      s.radius = std::max(floor, factor * s.radius);
+      changed = true;
+      changed_a = changed_a || i == a;
+    }
+  }
+  if (changed) return changed_a ? std::max(0, k - 1) : k;
+  // 3. Cut the kink: remove an extra sample at the interval's ends, else the end where the chords turn most (the
+  // tube's ends stay).
+  if (samples_[static_cast<std::size_t>(b)].extra && b != last) {
+    erase(b);
+    return k;
+  }
+  if (samples_[static_cast<std::size_t>(a)].extra && a != 0) {
+    erase(a);
+    return k - 1;
+  }
+  auto turn = [&](int i) {
+    if (i <= 0 || i >= last) return -1.0;
+    const Eigen::Vector3d& ci = samples_[static_cast<std::size_t>(i)].center;
+    return angle(ci - samples_[static_cast<std::size_t>(i - 1)].center,
+                 samples_[static_cast<std::size_t>(i + 1)].center - ci);
+  };
+  const double ta = turn(a), tb = turn(b);
+  if (tb >= 0 && tb >= ta) {
+    erase(b);
+    return k;
+  }
+  if (ta >= 0) {
+    erase(a);
+    return k - 1;
+  }
+  return k + 1;  // two samples left: nothing more to do
+}
+
+void TubeBuilder::guard(const Eigen::Vector3d& r0) noexcept {
+  first_frame(r0);
+  int budget = 64 * (max_intervals() + 1);
+  int k = 0;
+  while (k + 1 < sample_count_ && budget-- > 0) {
+    frame_step(k);
+    const double fit = interval_fit(k);
+    if (fit >= 1) {
+      ++k;
+      continue;
+    }
+    const int restart = repair(k, fit);
+    if (restart == 0 && k == 0) first_frame(r0);  // sample 0 turned: its frame again
+    k = restart;
+  }
+  // Frames after the last check (budget exhausted or the final interval accepted): complete them.
+  for (int i = std::max(0, k); i + 1 < sample_count_; ++i) frame_step(i);
+  stats_.min_radius = params_.radius;
+  for (int i = 0; i < sample_count_; ++i) {
+    const TubeSample& s = samples_[static_cast<std::size_t>(i)];
+    stats_.tilted_rings += angle(s.tangent, s.spline_tangent) > 1e-9;
+    stats_.narrowed_rings += s.radius < params_.radius;
+    stats_.min_radius = std::min(stats_.min_radius, s.radius);
+  }
 }
 
 void TubeBuilder::skin(int lod, TubeMesh& mesh) const noexcept {
   const TubeLod l = tube_lod(lod);
   const TubePrimitive& prim = primitives_[static_cast<std::size_t>(lod)];
   const int sides = l.sides, q = l.rings, intervals = sample_count_ - 1;
-  const double r = params_.radius;
   int ring = 0;
   for (int k = 0; k < intervals; ++k) {
     const TubeSample &a = samples_[static_cast<std::size_t>(k)], &b = samples_[static_cast<std::size_t>(k + 1)];
     const double len = (b.center - a.center).norm();
-    // Skinning matrices for a vertex shader: A = [r N_a, r B_a, l T_a, c_a], B = [r N_b, r B_b, l T_b, c_b - l T_b].
+    // Skinning matrices for a vertex shader: A = [r_a N_a, r_a B_a, l T_a, c_a], B = [r_b N_b, r_b B_b, l T_b,
+    // c_b - l T_b].
     float* m = &mesh.skin[static_cast<std::size_t>(24 * k)];
     for (int row = 0; row < 3; ++row) {
-      m[4 * row + 0] = static_cast<float>(r * a.normal[row]);
-      m[4 * row + 1] = static_cast<float>(r * a.binormal[row]);
+      m[4 * row + 0] = static_cast<float>(a.radius * a.normal[row]);
+      m[4 * row + 1] = static_cast<float>(a.radius * a.binormal[row]);
       m[4 * row + 2] = static_cast<float>(len * a.tangent[row]);
       m[4 * row + 3] = static_cast<float>(a.center[row]);
-      m[12 + 4 * row + 0] = static_cast<float>(r * b.normal[row]);
-      m[12 + 4 * row + 1] = static_cast<float>(r * b.binormal[row]);
+      m[12 + 4 * row + 0] = static_cast<float>(b.radius * b.normal[row]);
+      m[12 + 4 * row + 1] = static_cast<float>(b.radius * b.binormal[row]);
       m[12 + 4 * row + 2] = static_cast<float>(len * b.tangent[row]);
       m[12 + 4 * row + 3] = static_cast<float>(b.center[row] - len * b.tangent[row]);
     }
@@ -320,13 +445,15 @@ void TubeBuilder::skin(int lod, TubeMesh& mesh) const noexcept {
       const double t = static_cast<double>(j) / q, w = skin_weight(t);
       const Eigen::Vector3d center =
           (1 - w) * (a.center + (t * len) * a.tangent) + w * (b.center + ((t - 1) * len) * b.tangent);
-      const Eigen::Vector3d u = (1 - w) * a.normal + w * b.normal, v = (1 - w) * a.binormal + w * b.binormal;
+      const double ra = (1 - w) * a.radius, rb = w * b.radius;
+      const Eigen::Vector3d u = ra * a.normal + rb * b.normal, v = ra * a.binormal + rb * b.binormal;
+      const Eigen::Vector3d un = (1 - w) * a.normal + w * b.normal, vn = (1 - w) * a.binormal + w * b.binormal;
       for (int i = 0; i < sides; ++i) {
         const auto pi = static_cast<std::size_t>(4 * i);
         const double ca = prim.vertices[pi], sa = prim.vertices[pi + 1];
-        Eigen::Vector3d radial = ca * u + sa * v;
         const int vi = ring * sides + i;
-        put(mesh.positions, vi, center + r * radial);
+        put(mesh.positions, vi, center + ca * u + sa * v);
+        const Eigen::Vector3d radial = ca * un + sa * vn;
         const double rn = radial.norm();
         put(mesh.normals, vi, rn > kTiny ? Eigen::Vector3d(radial / rn) : a.tangent);
       }
@@ -358,12 +485,18 @@ bool TubeBuilder::build(const double* points, int count, int lod, TubeMesh& mesh
   mesh.sides = l.sides;
   sample_count_ = 0;
   if (!points || count < 2 || count > max_points_) return false;
+  double spread = 0;
   for (int i = 0; i < count; ++i) {
     points_[static_cast<std::size_t>(i)] = Eigen::Vector3d(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
     if (!points_[static_cast<std::size_t>(i)].allFinite()) return false;
+    spread = std::max(spread, (points_[static_cast<std::size_t>(i)] - points_[0]).norm());
   }
+  if (!(spread > 1e-9)) return false;  // all points in one place: no axis
   sample_spline(count);
-  guard();
+  // Frames and ring guard: the first normal continues the previous build's, so the tube does not spin from frame to
+  // frame.
+  const Eigen::Vector3d r0 = has_previous_normal_ ? previous_normal_ : orthogonal(samples_[0].tangent);
+  guard(r0);
   if (sample_count_ < 2) {
     sample_count_ = 0;
     return false;
@@ -376,22 +509,7 @@ bool TubeBuilder::build(const double* points, int count, int lod, TubeMesh& mesh
       mesh.skin.size() < static_cast<std::size_t>(24 * intervals)) {
     return false;
   }
-  // Frames: the first normal continues the previous build's, so the tube does not spin from frame to frame.
-  for (int k = 0; k < sample_count_; ++k) {
-    centers_[static_cast<std::size_t>(k)] = samples_[static_cast<std::size_t>(k)].center;
-    ring_tangents_[static_cast<std::size_t>(k)] = samples_[static_cast<std::size_t>(k)].tangent;
-  }
-  const Eigen::Vector3d& t0 = ring_tangents_[0];
-  Eigen::Vector3d r0 = has_previous_normal_ ? Eigen::Vector3d(previous_normal_ - previous_normal_.dot(t0) * t0)
-                                            : Eigen::Vector3d::Zero();
-  r0 = r0.norm() > 1e-6 ? Eigen::Vector3d(r0.normalized()) : orthogonal(t0);
-  rotation_minimizing_frames(centers_.data(), ring_tangents_.data(), sample_count_, r0, normals_.data(),
-                             binormals_.data());
-  for (int k = 0; k < sample_count_; ++k) {
-    samples_[static_cast<std::size_t>(k)].normal = normals_[static_cast<std::size_t>(k)];
-    samples_[static_cast<std::size_t>(k)].binormal = binormals_[static_cast<std::size_t>(k)];
-  }
-  previous_normal_ = normals_[0];
+  previous_normal_ = samples_[0].normal;
   has_previous_normal_ = true;
   stats_.samples = sample_count_;
   mesh.intervals = intervals;

@@ -5,14 +5,15 @@
 //   1. a cardinal spline through the points (Hermite pieces, tangents (1 - c) (P_{i+1} - P_{i-1}) / 2);
 //   2. the curvature indicator c_i of each segment: the turning of the spline's tangent over the segment (angle from
 //      t = 0 to 1/2 plus angle from 1/2 to 1, rad), two derivative evaluations;
-//   3. segments with c_i > flag_turn get 1..max_extra_samples extra samples clustered around the parameter of
-//      maximal curvature t* (found on 16 samples of |H' x H''| / |H'|^3, refined by a parabola);
-//   4. a ring guard that keeps adjacent cross-sections from intersecting inside the tube (see below);
-//   5. rotation-minimizing frames along the samples by the double reflection method (Wang, Juttler, Zheng, Liu,
+//   3. segments with c_i > flag_turn get 1..max_extra_samples extra samples (more for a larger turn): one at the
+//      parameter of maximal curvature t* (found on 16 samples of |H' x H''| / |H'|^3, refined by a parabola), the
+//      others on either side of it at equal steps of turning, so that they crowd where the curve bends most;
+//   4. rotation-minimizing frames along the samples by the double reflection method (Wang, Juttler, Zheng, Liu,
 //      ACM TOG 2008), the first normal carried over from the previous build so the tube does not spin;
+//   5. a ring guard that keeps adjacent cross-sections from intersecting inside the tube (see below);
 //   6. two-matrix skinning of a precomputed cylinder primitive: a primitive vertex (cos a, sin a, t) of interval k
-//      becomes (1 - w(t)) A_k v + w(t) B_k v, with A_k = [r N_a, r B_a, l T_a, c_a] and
-//      B_k = [r N_b, r B_b, l T_b, c_b - l T_b] the frames at the interval's ends (l: chord length) and the weight
+//      becomes (1 - w(t)) A_k v + w(t) B_k v, with A_k = [r_a N_a, r_a B_a, l T_a, c_a] and
+//      B_k = [r_b N_b, r_b B_b, l T_b, c_b - l T_b] the frames at the interval's ends (l: chord length) and the weight
 //      w(t) = 3 t^2 - 2 t^3. Because w'(0) = w'(1) = 0 the axis leaves each ring along that ring's tangent, so
 //      the skinned tube is C1 across rings and the axis is a Hermite-like cubic between them.
 //   7. levels of detail: LOD i (0..kTubeMaxLod) has sides x rings = 4 2^i quads per interval (8 2^i triangles),
@@ -20,14 +21,18 @@
 // The CPU skinning writes positions, normals and triangle indices (any backend can draw them, tests can check them);
 // the same A_k, B_k per interval (TubeMesh::skin) and TubePrimitive let a vertex shader do step 6 instead.
 //
-// Ring guard: two cross-sections (centres c1, c2, unit normals n1, n2 at angle theta, radius r) do not intersect
-// inside the tube when d.n1 >= r sin(theta) and d.n2 >= r sin(theta), d = c2 - c1 (the planes' common line is then at
-// least r from both centres). If every ring's tangent stays within phi(l) of each adjacent chord, with
-// sin(phi) = l / (2 kappa r) and phi <= 45 deg, the condition holds with margin kappa for the rings and, with
-// kappa >= the weight's largest slope (1.5), for the skinned rings between them. The guard projects each ring's
-// tangent into the cones of its two chords; a sample where the cones are disjoint (a kink sharper than the tube can
-// follow) is removed, which lengthens its neighbours' chords. Folds the collision response allows (legs at least
-// 2 r apart) keep every point; only kinks sharper than the tube radius are cut.
+// Ring guard: two cross-sections (centres c1, c2, radii r1, r2, unit normals n1, n2 at angle theta) do not intersect
+// inside the tube when d.n2 >= (r1 + e) sin(theta) and d.n1 >= (r2 + e) sin(theta), d = c2 - c1, e = ring_clearance:
+// the planes' common line then passes farther than its radius from each ring's centre. The guard checks this for
+// every pair of adjacent rings the skinning will produce in an interval, at every LOD (the rings of the coarser LODs
+// are a subset of the finest one's), and repairs an interval that fails, least visible first: it turns the end
+// rings' tangents step by step from the spline's towards the miter of the adjacent chords (their bisector; the
+// chord at the tube's ends); then narrows the two end rings step by step down to min_radius_fraction of the radius
+// (a fold tighter than the tube is drawn pinched, as a real bowel folds); and only then removes a sample, an extra
+// one first, else the one where the chords turn most, so that a kink sharper than even the narrowed tube can follow
+// is cut. The tube's first and last rings always stay. A curve whose radius of curvature stays above about 1.5
+// (radius + clearance) passes unchanged: the weight's largest slope, 1.5 at t = 1/2, is where the skinned rings
+// turn fastest.
 //
 // Phases: TubeBuilder and the meshes allocate at construction (make_mesh: for the largest input and a LOD);
 // build() and mesentery_strip() allocate nothing.
@@ -52,7 +57,8 @@ struct TubeParams {
   double tension = 0.0;          // cardinal spline tension c in [0, 1) (0: Catmull-Rom)
   double flag_turn = 0.35;       // rad, c_i above this flags the segment for extra samples
   int max_extra_samples = 3;     // per flagged segment, 0..8
-  double fold_safety = 1.6;      // kappa of the ring guard, >= 1.5 (the weight function's largest slope)
+  double ring_clearance = 0.0005;  // m, adjacent rings' planes must meet at least radius + this from both centres
+  double min_radius_fraction = 0.5;  // the ring guard narrows rings down to this fraction of the radius, (0, 1]
 };
 
 /// Skinning weight of the far frame at parameter t of an interval: 3 t^2 - 2 t^3.
@@ -67,7 +73,9 @@ struct TubeSample {
   int segment = 0;      // spline segment
   double t = 0;         // parameter in the segment
   bool extra = false;   // added by the curvature refinement
-  bool tilted = false;  // the ring guard turned the tangent towards a chord
+  int tilt = 0;         // 0, 2, 4: how far (in quarters) the ring guard turned the tangent towards the miter
+  double radius = 0;    // m, the ring's radius (below TubeParams::radius where the guard narrowed it)
+  Eigen::Vector3d spline_tangent = Eigen::Vector3d::UnitX();  // unit, before the guard
 };
 
 /// The skinned tube. Sized by TubeBuilder::make_mesh; build() fills the first *_count entries.
@@ -96,7 +104,9 @@ struct TubeStats {
   int flagged_segments = 0;   // c_i > flag_turn
   int extra_samples = 0;      // added by the refinement (before the guard)
   int removed_samples = 0;    // removed by the guard
-  int tilted_rings = 0;       // rings whose tangent the guard turned towards a chord
+  int tilted_rings = 0;       // rings whose tangent the guard turned towards the miter
+  int narrowed_rings = 0;     // rings the guard narrowed
+  double min_radius = 0;      // m, the narrowest ring
 };
 
 /// Cardinal spline tangents m_i = (1 - c)(P_{i+1} - P_{i-1}) / 2 (one-sided at the ends), n >= 2 points.
@@ -144,7 +154,12 @@ class TubeBuilder {
 
  private:
   bool sample_spline(int count) noexcept;
-  void guard() noexcept;
+  void first_frame(const Eigen::Vector3d& r0) noexcept;
+  void frame_step(int k) noexcept;
+  double interval_fit(int k) const noexcept;  // >= 1: the interval's rings pass the guard
+  int repair(int k, double fit) noexcept;
+  void erase(int k) noexcept;
+  void guard(const Eigen::Vector3d& r0) noexcept;
   void skin(int lod, TubeMesh& mesh) const noexcept;
 
   TubeParams params_;
@@ -152,7 +167,6 @@ class TubeBuilder {
   std::vector<Eigen::Vector3d> points_, tangents_;
   std::vector<double> curvature_;
   std::vector<TubeSample> samples_;
-  std::vector<Eigen::Vector3d> centers_, ring_tangents_, normals_, binormals_;
   int sample_count_ = 0;
   TubeStats stats_;
   Eigen::Vector3d previous_normal_ = Eigen::Vector3d::UnitY();
@@ -174,7 +188,7 @@ struct MesenteryMesh {
 /// Allocates the mesh and writes the (fixed) strip indices.
 MesenteryMesh make_mesentery_mesh(int rows, int cols);
 /// Run phase, no allocation: positions and normals from `points` (3 rows cols doubles, node (r, c) at r cols + c,
-/// the layout of IntestineState::positions()). False if the mesh was made for another grid or a point is not finite.
+/// the layout of IntestineState::positions()). False if the mesh is too small for its grid or a point is not finite.
 bool mesentery_strip(const double* points, MesenteryMesh& mesh) noexcept;
 
 }  // namespace surgsim::intestine

@@ -186,7 +186,7 @@ TEST(CollisionResponseTest, RespondAllocatesNothing) {
   for (int i = 0; i < 8; ++i) list.push(contact_of(x, 0.04));
   const std::vector<double> inv_mass(4, 1.0);
   ResponseReport rep;
-  test::AllocationCounter counter;
+  surgsim::test::AllocationCounter counter;
   respond(list, inv_mass.data(), ResponseParams{}, x, v, rep);
   list.clear();
   EXPECT_EQ(counter.count(), 0);

@@ -252,7 +252,7 @@ TEST(MassSpringTest, IntegrateAllocatesNothing) {
   c.weights = {0.5, 0.5, 0};
   c.depth = 0.003;
   c.stiffness = 300;
-  test::AllocationCounter counter;
+  surgsim::test::AllocationCounter counter;
   for (int s = 0; s < 20; ++s) {
     integrate(sys, Integrator::kImplicitEuler, &c, 1, 1e-3, x, v, work);
     integrate(sys, Integrator::kSymplecticEuler, &c, 1, 1e-4, x, v, work);

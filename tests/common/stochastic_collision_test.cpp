@@ -99,7 +99,7 @@ CollisionTopology grid_topology(int rows, int cols) {
 Eigen::Matrix3Xd crossing_runs(int cols) {
   Eigen::Matrix3Xd x(3, 2 * cols);
   for (int c = 0; c < cols; ++c) {
-    const Eigen::Vector3d p = c < 20 ? Eigen::Vector3d(0.04 * c, 0, 0) : Eigen::Vector3d(0.22, 0.82 - 0.04 * c, 0.03);
+    const Eigen::Vector3d p = c < 20 ? Eigen::Vector3d(0.04 * c, 0, 0) : Eigen::Vector3d(0.22, 1.22 - 0.04 * c, 0.03);
     x.col(c) = p;
     x.col(cols + c) = p + Eigen::Vector3d(0, 0, -1);
   }
@@ -281,15 +281,69 @@ TEST(StochasticCollisionTest, RecallAgainstBruteForceOverAScriptedRun) {
       for (const auto& c : truth) residual = std::max(residual, c.radius_sum - c.distance);
     }
   }
-  std::printf("recall over the scripted run (n = %d): pairs %.3f (%ld / %ld), deeper than 1 mm %.3f (%ld / %ld), "
-              "contact zones %.3f (%ld / %ld); largest penetration left after the response %.4f m\n",
-              p.detection.random_pairs, total.pair_recall(), total.found, total.truth, total.deep_recall(),
-              total.found_deep, total.truth_deep, total.region_recall(), total.regions_found, total.regions, residual);
+  std::printf("recall over the scripted run (n = %d): pairs %.3f (%ld / %ld), penetration-weighted %.3f, contact zones "
+              "%.3f (%ld / %ld); deepest missed %.4f m; largest penetration left after the response %.4f m\n",
+              p.detection.random_pairs, total.pair_recall(), total.found, total.truth, total.depth_recall(),
+              total.region_recall(), total.regions_found, total.regions, total.max_missed, residual);
   EXPECT_GT(total.truth, 1000);
-  EXPECT_GT(total.pair_recall(), 0.45);
-  EXPECT_GT(total.deep_recall(), 0.6);
-  EXPECT_GT(total.region_recall(), 0.6);
-  EXPECT_LT(residual, p.intestine_radius);  // never more than a radius: the tube is never crossed
+  EXPECT_GT(total.pair_recall(), 0.85);
+  EXPECT_GT(total.depth_recall(), 0.5);  // the found contacts are resolved at once and stay shallow
+  EXPECT_GT(total.region_recall(), 0.85);
+  EXPECT_LT(residual, 0.5 * p.intestine_radius);  // never near crossing the tube
+}
+
+// The loop's own detection and response on crafted crossings in the real model, no dynamics: one leg of a fold
+// pushed three quarters of the way onto the other leg (the tubes overlap by centimetres along several segments), and
+// a segment of another fold pushed to 5 mm from the nearest mesentery it does not belong to. Both are undone within
+// 40 steps (the random pairs have to find every part of the crafted zones first).
+TEST(StochasticCollisionTest, StochasticDetectionAndResponseUntangleCraftedCrossings) {
+  const IntestineModel model(IntestineParams{});
+  const CollisionTopology& topo = model.topology();
+  IntestineState state(model, 4);
+  // The fold whose crest is node 10: nodes 10 - k and 10 + k face each other.
+  for (int c = 4; c <= 8; ++c) state.x.col(c) += 0.75 * (state.x.col(20 - c) - state.x.col(c));
+  // Segment 45 and its closest tested mesentery triangle at rest.
+  double best = 1e9, sp = 0;
+  Eigen::Vector3d pb = Eigen::Vector3d::Zero();
+  for (int tri = 0; tri < 2 * topo.cells(); ++tri) {
+    if (!topo.cell_tested(45, tri / 2)) continue;
+    int n[3];
+    topo.triangle(tri, n);
+    double s = 0;
+    Eigen::Vector3d bary;
+    const double d = segment_triangle(state.x.col(45), state.x.col(46), state.x.col(n[0]), state.x.col(n[1]),
+                                      state.x.col(n[2]), s, bary);
+    if (d < best) {
+      best = d;
+      sp = s;
+      pb = bary[0] * state.x.col(n[0]) + bary[1] * state.x.col(n[1]) + bary[2] * state.x.col(n[2]);
+    }
+  }
+  const Eigen::Vector3d pa = state.x.col(45) + sp * (state.x.col(46) - state.x.col(45));
+  const Eigen::Vector3d shift = (pb - pa) * (1 - 0.005 / best);
+  state.x.col(45) += shift;
+  state.x.col(46) += shift;
+
+  ContactList truth(100000);
+  detect_brute_force(topo, state.x, truth);
+  double before = 0;
+  bool membrane = false;
+  for (const auto& c : truth) {
+    before = std::max(before, c.radius_sum - c.distance);
+    membrane = membrane || (c.kind == ContactKind::kSegmentTriangle && c.element_a == 45);
+  }
+  ASSERT_GT(before, 0.02);
+  ASSERT_TRUE(membrane);
+  StepReport report;
+  for (int s = 0; s < 40; ++s) {  // 40 ms at the haptic rate
+    step_detection(model, state, report);
+    step_response(model, state, report);
+  }
+  truth.clear();
+  detect_brute_force(topo, state.x, truth);
+  double left = 0;
+  for (const auto& c : truth) left = std::max(left, c.radius_sum - c.distance);
+  EXPECT_LT(left, 1e-3) << truth.size() << " contacts left, deepest " << left << " m";
 }
 
 TEST(StochasticCollisionTest, SameSeedSameResultOtherSeedOtherPairs) {
@@ -320,7 +374,7 @@ TEST(StochasticCollisionTest, DetectAllocatesNothing) {
   ContactList out(2048);
   StochasticDetector& det = state.detector();
   det.set_random_pairs(100, 100);
-  test::AllocationCounter counter;
+  surgsim::test::AllocationCounter counter;
   for (int s = 0; s < 20; ++s) {
     out.clear();
     det.detect(state.x, out);

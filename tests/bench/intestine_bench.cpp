@@ -1,0 +1,283 @@
+// intestine_bench: the intestine scene's core at the haptic step (DESIGN.md 8: 400 masses + collisions >= 1 kHz).
+// Prints tables; run by hand (not a ctest): build/bench/intestine_bench [--quick].
+//   1. step time p50 / p99 (model + detection + response) at dt = 1 ms over the scripted run;
+//   2. integrator stability against spring stiffness at dt = 1 ms (implicit vs explicit);
+//   3. detection recall against the brute-force reference and time per step against the random pairs n
+//      (the paper's fig. 14 as numbers);
+//   4. tube build time and size per LOD; mesentery strip;
+//   5. the frame-rate controller (paper eq. 15) under a synthetic load: LOD chosen and mean rate against the target.
+#include <CLI/CLI.hpp>
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "frame_rate_controller.h"
+#include "intestine_model.h"
+#include "intestine_test_util.h"
+#include "tube_geometry.h"
+
+namespace {
+
+using namespace surgsim::intestine;
+using Clock = std::chrono::steady_clock;
+
+double us_since(Clock::time_point t0) { return std::chrono::duration<double, std::micro>(Clock::now() - t0).count(); }
+
+// CPU time of this thread (us): unlike the wall clock it does not count the time the scheduler gave to other
+// processes (the build machine is shared), so its percentiles show the step's own cost.
+double thread_cpu_us() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return 1e6 * static_cast<double>(ts.tv_sec) + 1e-3 * static_cast<double>(ts.tv_nsec);
+}
+
+double pct(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))];
+}
+
+struct RunResult {
+  std::vector<double> total, dynamics, detection, response, cpu;
+  RecallStats recall;
+  double residual = 0;  // m, largest brute-force penetration after the response
+  double contacts_mean = 0;
+  int contacts_max = 0;
+  int faults = 0;
+};
+
+// The scripted run (gravity folds the intestine onto itself, the probe pushes and lifts the folds): times each phase
+// and, every `every` steps, compares the stochastic contacts with the brute force on the same positions.
+RunResult scripted_run(const IntestineParams& params, int steps, int every) {
+  const IntestineModel model(params);
+  IntestineState state(model, 1);
+  StepReport report;
+  ContactList truth(100000);
+  RunResult r;
+  long contacts = 0;
+  for (int s = 0; s < steps; ++s) {
+    const Probe probe = test::scripted_probe(s * 1e-3);
+    const double c0 = thread_cpu_us();
+    const auto t0 = Clock::now();
+    step_dynamics(model, state, probe, 1e-3, report);
+    const double d0 = us_since(t0);
+    const auto t1 = Clock::now();
+    step_detection(model, state, report);
+    const double d1 = us_since(t1);
+    const double c1 = thread_cpu_us();
+    if (every > 0 && s % every == 0) {
+      truth.clear();
+      detect_brute_force(model.topology(), state.x, truth);
+      r.recall += compare_with_reference(model.topology(), state.contacts(), truth);
+    }
+    const auto t2 = Clock::now();
+    const double c2 = thread_cpu_us();
+    step_response(model, state, report);
+    const double d2 = us_since(t2);
+    r.cpu.push_back((c1 - c0) + (thread_cpu_us() - c2));
+    r.faults += report.status != StepStatus::kOk;
+    if (every > 0 && s % every == 0) {
+      truth.clear();
+      detect_brute_force(model.topology(), state.x, truth);
+      for (const auto& c : truth) r.residual = std::max(r.residual, c.radius_sum - c.distance);
+    }
+    r.dynamics.push_back(d0);
+    r.detection.push_back(d1);
+    r.response.push_back(d2);
+    r.total.push_back(d0 + d1 + d2);
+    contacts += report.contacts;
+    r.contacts_max = std::max(r.contacts_max, report.contacts);
+  }
+  r.contacts_mean = static_cast<double>(contacts) / steps;
+  return r;
+}
+
+void step_table(int steps) {
+  std::printf("\n1. Step time at dt = 1 ms, default model (4 x 100 masses, implicit Euler, n = 10), scripted run of "
+              "%.1f s\n", steps * 1e-3);
+  const RunResult r = scripted_run(IntestineParams{}, steps, 0);
+  std::printf("%-34s %9s %9s %9s\n", "phase", "p50 us", "p99 us", "max us");
+  auto row = [](const char* name, const std::vector<double>& v) {
+    std::printf("%-34s %9.1f %9.1f %9.1f\n", name, pct(v, 0.5), pct(v, 0.99), pct(v, 1.0));
+  };
+  row("mass-spring (probe, implicit)", r.dynamics);
+  row("stochastic detection", r.detection);
+  row("response", r.response);
+  row("step (model + detection + resp.)", r.total);
+  row("step, thread CPU time", r.cpu);
+  std::printf("contacts per step: mean %.1f, max %d; faults %d; capable of %.0f Hz at the CPU-time p99 (%.0f Hz at the "
+              "wall-clock p99, which includes preemption on this shared machine)\n", r.contacts_mean, r.contacts_max,
+              r.faults, 1e6 / pct(r.cpu, 0.99), 1e6 / pct(r.total, 0.99));
+}
+
+void stability_table() {
+  std::printf("\n2. Integrator stability at dt = 1 ms: 1 s from the rest shape perturbed by 2 mm, all springs at k\n");
+  std::printf("%-10s %-30s %-30s\n", "k (N/m)", "implicit Euler: max dE / E0", "symplectic Euler: max dE / E0");
+  for (double k : {1e2, 1e3, 1e4, 1e5, 1e6}) {
+    std::string cells[2];
+    for (int i = 0; i < 2; ++i) {
+      IntestineParams p;
+      p.structural_stiffness = p.shear_stiffness = p.bending_stiffness = k;
+      const IntestineModel model(p);
+      const MassSpring& sys = model.mass_spring();
+      std::mt19937 rng(3);
+      std::uniform_real_distribution<double> u(-0.002, 0.002);
+      Eigen::Matrix3Xd x = sys.rest(), v = Eigen::Matrix3Xd::Zero(3, sys.node_count());
+      for (int n = 0; n < sys.node_count(); ++n) {
+        if (!sys.fixed(n)) x.col(n) += Eigen::Vector3d(u(rng), u(rng), u(rng));
+      }
+      MassSpringWorkspace work(sys);
+      const double e0 = sys.kinetic_energy(v) + sys.potential_energy(x);
+      const double scale = std::abs(e0 - sys.potential_energy(sys.rest()));
+      double worst = 0;
+      int blew = -1;
+      for (int s = 0; s < 1000 && blew < 0; ++s) {
+        const IntegrateStatus st =
+            integrate(sys, i == 0 ? Integrator::kImplicitEuler : Integrator::kSymplecticEuler, nullptr, 0, 1e-3, x, v,
+                      work);
+        const double e = sys.kinetic_energy(v) + sys.potential_energy(x);
+        if (st != IntegrateStatus::kOk || !std::isfinite(e) || e - e0 > 1e6 * scale) blew = s;
+        worst = std::max(worst, (e - e0) / scale);
+      }
+      char buf[64];
+      if (blew >= 0) {
+        std::snprintf(buf, sizeof buf, "blew up at step %d", blew);
+      } else {
+        std::snprintf(buf, sizeof buf, "%+.3g", worst);
+      }
+      cells[i] = buf;
+    }
+    std::printf("%-10.0e %-30s %-30s\n", k, cells[0].c_str(), cells[1].c_str());
+  }
+}
+
+void recall_table(int steps) {
+  std::printf("\n3. Detection against the brute-force reference over the scripted run (%.1f s, compared every 10 steps "
+              "on the same positions)\n", steps * 1e-3);
+  std::printf("%-22s %8s %8s %8s %10s %10s %9s %9s %9s %9s\n", "random pairs n", "pairs", "zones", "depth",
+              "missed mm", "left mm", "det p50", "det p99", "step p50", "cpu p99");
+  auto row = [&](const char* label, const IntestineParams& p) {
+    const RunResult r = scripted_run(p, steps, 10);
+    std::printf("%-22s %8.3f %8.3f %8.3f %10.2f %10.2f %9.1f %9.1f %9.1f %9.1f\n", label, r.recall.pair_recall(),
+                r.recall.region_recall(), r.recall.depth_recall(), 1e3 * r.recall.max_missed, 1e3 * r.residual,
+                pct(r.detection, 0.5), pct(r.detection, 0.99), pct(r.total, 0.5), pct(r.cpu, 0.99));
+  };
+  for (int n : {0, 5, 10, 20, 50, 100}) {
+    IntestineParams p;
+    p.detection.random_pairs = p.detection.random_mesentery_pairs = n;
+    row(std::to_string(n).c_str(), p);
+  }
+  IntestineParams paper;
+  paper.detection.zone_budget = 0;
+  row("10, minima only", paper);
+  std::printf("pairs: reference contacts reported; zones: contact zones with at least one reported; depth: weighted by "
+              "penetration;\nmissed: deepest reference contact not reported; left: deepest penetration after the "
+              "response; times in us (det: wall clock; cpu: the step's thread CPU time).\n");
+}
+
+void tube_table() {
+  std::printf("\n4. Tube build (spline, curvature samples, ring guard, RMF, CPU skinning) on the intestine after 1 s "
+              "of the scripted run\n");
+  const IntestineModel model(IntestineParams{});
+  IntestineState state(model, 1);
+  StepReport report;
+  for (int s = 0; s < 1000; ++s) step(model, state, test::scripted_probe(s * 1e-3), 1e-3, report);
+  TubeBuilder builder(TubeParams{}, model.columns());
+  TubeMesh mesh = builder.make_mesh(kTubeMaxLod);
+  std::printf("%-4s %-14s %9s %9s %9s %11s %11s\n", "LOD", "sides x rings", "intervals", "vertices", "triangles",
+              "build p50us", "cpu p99us");
+  for (int lod = 0; lod <= kTubeMaxLod; ++lod) {
+    std::vector<double> t, c;
+    for (int i = 0; i < 200; ++i) {
+      const double c0 = thread_cpu_us();
+      const auto t0 = Clock::now();
+      builder.build(state.positions(), model.columns(), lod, mesh);
+      t.push_back(us_since(t0));
+      c.push_back(thread_cpu_us() - c0);
+    }
+    const TubeLod l = tube_lod(lod);
+    std::printf("%-4d %2d x %-9d %9d %9d %9d %11.1f %11.1f\n", lod, l.sides, l.rings, mesh.intervals,
+                mesh.vertex_count, mesh.index_count / 3, pct(t, 0.5), pct(c, 0.99));
+  }
+  const TubeStats& st = builder.stats();
+  std::printf("samples %d (flagged segments %d, extra %d, removed %d), rings turned %d, narrowed %d (narrowest %.1f "
+              "mm)\n", st.samples, st.flagged_segments, st.extra_samples, st.removed_samples, st.tilted_rings,
+              st.narrowed_rings, 1e3 * st.min_radius);
+  MesenteryMesh strip = make_mesentery_mesh(model.rows(), model.columns());
+  std::vector<double> t;
+  for (int i = 0; i < 200; ++i) {
+    const auto t0 = Clock::now();
+    mesentery_strip(state.positions(), strip);
+    t.push_back(us_since(t0));
+  }
+  std::printf("mesentery strip: %d vertices, %d strip indices, %.1f us\n", strip.vertex_count, strip.index_count,
+              pct(t, 0.5));
+}
+
+void controller_table() {
+  std::printf("\n5. Frame-rate controller (eq. 15, alpha = 1e-4, beta = 5) under a synthetic load: frame time = 4 ms + "
+              "0.25 us x triangles,\n   800 2^LOD triangles; 20000 frames, statistics over the last 10000\n");
+  auto fps = [](int lod) { return 1.0 / (0.004 + 2.5e-7 * 800.0 * std::pow(2.0, lod)); };
+  std::printf("LOD rates:");
+  for (int l = 0; l <= kTubeMaxLod; ++l) std::printf(" %d: %.0f Hz", l, fps(l));
+  std::printf("\n%-10s %-12s %-14s %-10s %-16s\n", "target Hz", "LOD used", "time at each", "mean Hz", "frames to settle");
+  for (double target : {30.0, 60.0, 100.0, 150.0, 200.0, 300.0}) {
+    FrameRateParams p;
+    p.target_hz = target;
+    p.initial_lod = 0;
+    FrameRateController ctl(p);
+    int hist[kTubeMaxLod + 1] = {};
+    double sum = 0;
+    for (int k = 0; k < 20000; ++k) {
+      const double f = fps(ctl.lod());
+      if (k >= 10000) {
+        sum += f;
+        ++hist[ctl.lod()];
+      }
+      ctl.update(f);
+    }
+    int lo = kTubeMaxLod, hi = 0;
+    for (int l = 0; l <= kTubeMaxLod; ++l) {
+      if (hist[l] > 0) {
+        lo = std::min(lo, l);
+        hi = std::max(hi, l);
+      }
+    }
+    // Frames until the LOD enters [lo, hi] for good.
+    FrameRateController again(p);
+    int settle = 0;
+    for (int k = 0; k < 10000; ++k) {
+      if (again.lod() < lo || again.lod() > hi) settle = k + 1;
+      again.update(fps(again.lod()));
+    }
+    char used[32], share[32];
+    std::snprintf(used, sizeof used, lo == hi ? "%d" : "%d-%d", lo, hi);
+    std::snprintf(share, sizeof share, lo == hi ? "100%%" : "%.0f%% / %.0f%%", 100.0 * hist[lo] / 10000,
+                  100.0 * hist[hi] / 10000);
+    std::printf("%-10.0f %-12s %-14s %-10.1f %-16d\n", target, used, share, sum / 10000, settle);
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"intestine_bench: step time, integrator stability, detection recall, tube LODs, frame-rate control"};
+  bool quick = false;
+  app.add_flag("--quick", quick, "shorter runs (1.7 s scripted run instead of 3.4 s)");
+  CLI11_PARSE(app, argc, argv);
+  const int steps = quick ? 1700 : 3400;
+  std::printf("intestine_bench (times are wall-clock on this machine, single thread)\n");
+  step_table(steps);
+  stability_table();
+  recall_table(steps);
+  tube_table();
+  controller_table();
+  return 0;
+}
