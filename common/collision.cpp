@@ -226,39 +226,42 @@ int BucketGrid::triangles_of(const int* nodes, int count, int* tris, int capacit
   return n_tris;
 }
 
+// Tests surface triangle f against [p0, p1] and keeps the earliest crossing from outside in `best`.
+void BucketGrid::test_triangle(int f, const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, PositionFn positions,
+                               const void* context, SurfaceHit& best) const {
+  Eigen::Vector3d v[3];
+  for (int e = 0; e < 3; ++e) {
+    const int n = surface_->tris(f, e);
+    if (positions != nullptr) {
+      positions(context, n, v[e]);
+    } else {
+      v[e] = rest_->row(n).transpose();
+    }
+  }
+  // Only crossings from outside to inside count (the outward normal faces the segment's start).
+  const Eigen::Vector3d normal = (v[1] - v[0]).cross(v[2] - v[0]);
+  if (normal.dot(p1 - p0) >= 0) return;
+  double s;
+  Eigen::Vector3d bary;
+  if (segment_triangle(p0, p1, v[0], v[1], v[2], s, bary) && s < best.s) {
+    best.hit = true;
+    best.s = s;
+    best.triangle = f;
+    best.nodes = {surface_->tris(f, 0), surface_->tris(f, 1), surface_->tris(f, 2)};
+    best.bary = bary;
+    best.point = p0 + s * (p1 - p0);
+  }
+}
+
 SurfaceHit BucketGrid::segment_query(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, PositionFn positions,
                                      const void* context) const {
   SurfaceHit best;
+  best.s = 2.0;
   int nodes[kMaxCandidates];
   int tris[kMaxTriangles];
   const int n_nodes = gather_cells(p0, p1, nodes, kMaxCandidates);
   const int n_tris = triangles_of(nodes, n_nodes, tris, kMaxTriangles);
-  best.s = 2.0;
-  for (int a = 0; a < n_tris; ++a) {
-    const int f = tris[a];
-    Eigen::Vector3d v[3];
-    for (int e = 0; e < 3; ++e) {
-      const int n = surface_->tris(f, e);
-      if (positions != nullptr) {
-        positions(context, n, v[e]);
-      } else {
-        v[e] = rest_->row(n).transpose();
-      }
-    }
-    // Only crossings from outside to inside count (the outward normal faces the segment's start).
-    const Eigen::Vector3d normal = (v[1] - v[0]).cross(v[2] - v[0]);
-    if (normal.dot(p1 - p0) >= 0) continue;
-    double s;
-    Eigen::Vector3d bary;
-    if (segment_triangle(p0, p1, v[0], v[1], v[2], s, bary) && s < best.s) {
-      best.hit = true;
-      best.s = s;
-      best.triangle = f;
-      best.nodes = {surface_->tris(f, 0), surface_->tris(f, 1), surface_->tris(f, 2)};
-      best.bary = bary;
-      best.point = p0 + s * (p1 - p0);
-    }
-  }
+  for (int a = 0; a < n_tris; ++a) test_triangle(tris[a], p0, p1, positions, context, best);
   if (!best.hit) best.s = 0;
   return best;
 }
@@ -267,29 +270,7 @@ SurfaceHit BucketGrid::segment_query_brute(const Eigen::Vector3d& p0, const Eige
                                            const void* context) const {
   SurfaceHit best;
   best.s = 2.0;
-  for (int f = 0; f < surface_->tris.rows(); ++f) {
-    Eigen::Vector3d v[3];
-    for (int e = 0; e < 3; ++e) {
-      const int n = surface_->tris(f, e);
-      if (positions != nullptr) {
-        positions(context, n, v[e]);
-      } else {
-        v[e] = rest_->row(n).transpose();
-      }
-    }
-    const Eigen::Vector3d normal = (v[1] - v[0]).cross(v[2] - v[0]);
-    if (normal.dot(p1 - p0) >= 0) continue;
-    double s;
-    Eigen::Vector3d bary;
-    if (segment_triangle(p0, p1, v[0], v[1], v[2], s, bary) && s < best.s) {
-      best.hit = true;
-      best.s = s;
-      best.triangle = f;
-      best.nodes = {surface_->tris(f, 0), surface_->tris(f, 1), surface_->tris(f, 2)};
-      best.bary = bary;
-      best.point = p0 + s * (p1 - p0);
-    }
-  }
+  for (int f = 0; f < surface_->tris.rows(); ++f) test_triangle(f, p0, p1, positions, context, best);
   if (!best.hit) best.s = 0;
   return best;
 }

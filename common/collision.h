@@ -76,6 +76,8 @@ class BucketGrid {
   void cell_of(const Eigen::Vector3d& p, int& i, int& j, int& k) const;
   int gather_cells(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, int* nodes, int capacity) const;
   int triangles_of(const int* nodes, int count, int* tris, int capacity) const;
+  void test_triangle(int f, const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, PositionFn positions,
+                     const void* context, SurfaceHit& best) const;
 
   const Eigen::MatrixX3d* rest_;
   const SurfaceMesh* surface_;
