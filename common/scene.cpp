@@ -462,9 +462,13 @@ HapticSpec read_haptic(const Reader& r, const Field& f) {
 }
 
 VisualSpec read_visual(const Reader& r, const Field& f) {
-  const Map m(r, f, {"rate_hz", "width", "height", "camera", "png_every", "vtk", "video", "surface"});
+  const Map m(r, f, {"rate_hz", "width", "height", "camera", "png_every", "vtk", "video", "surface", "target_fps"});
   VisualSpec v;
   if (m.has("rate_hz")) v.rate_hz = r.number(m.at("rate_hz"), closed(1, 1000), "frame rate in Hz, e.g. 50");
+  if (m.has("target_fps")) {
+    v.target_fps = r.number(m.at("target_fps"), closed(1, 1000),
+                            "frame rate in Hz the intestine's level of detail is adapted to hold, e.g. 60");
+  }
   if (m.has("width")) v.width = r.integer(m.at("width"), 16, 8192, "image width in pixels");
   if (m.has("height")) v.height = r.integer(m.at("height"), 16, 8192, "image height in pixels");
   if (m.has("png_every")) {
@@ -493,6 +497,86 @@ VisualSpec read_visual(const Reader& r, const Field& f) {
     }
   }
   return v;
+}
+
+IntestineSpec read_intestine(const Reader& r, const Field& f) {
+  const Map m(r, f,
+              {"length", "cylinder_radius", "folds", "angular_span", "fold_shape", "axis_origin", "axis_direction",
+               "columns", "rows", "intestine_radius", "mesentery_thickness", "intestine_node_mass",
+               "mesentery_node_mass", "structural_stiffness", "shear_stiffness", "bending_stiffness", "spring_damping",
+               "drag", "gravity", "integrator", "probe_radius", "probe_stiffness", "self_collisions", "random_pairs",
+               "random_mesentery_pairs", "seed", "response_iterations", "contact_capacity"});
+  IntestineSpec spec;
+  intestine::IntestineParams& p = spec.params;
+  const Range non_negative{0, kInf, false, true};
+  const auto read_number = [&](const char* k, double& out, const Range& range, const char* fix) {
+    if (m.has(k)) out = r.number(m.at(k), range, fix);
+  };
+
+  // Rest shape.
+  read_number("length", p.length, positive(), "arc length of the intestine in m, e.g. 4.0");
+  read_number("cylinder_radius", p.cylinder_radius, positive(), "radius in m of the cylinder around the vessel, e.g. 0.15");
+  if (m.has("folds")) p.folds = r.integer(m.at("folds"), 1, 100, "periods of the folded sine, e.g. 5");
+  read_number("angular_span", p.angular_span, {0, 2 * 3.14159265358979323846, true, false},
+           "angle in rad covered around the vessel, < 2 pi keeps the ends apart");
+  read_number("fold_shape", p.fold_shape, closed(0, 2), "0 a plain sine, 1 vertical legs and round crests");
+  if (m.has("axis_origin")) p.axis_origin = r.vec3(m.at("axis_origin"), "centre of the curve on the vessel, m");
+  if (m.has("axis_direction")) p.axis_direction = r.direction(m.at("axis_direction"), "non-zero vessel direction");
+  if (m.has("columns")) {
+    p.columns = r.integer(m.at("columns"), 4, intestine::kMaxIntestineNodes, "masses along the intestine, e.g. 100");
+  }
+  if (m.has("rows")) p.rows = r.integer(m.at("rows"), 2, intestine::kMaxIntestineNodes / 4, "masses across, e.g. 4");
+  if (p.rows * p.columns > intestine::kMaxIntestineNodes) {
+    const char* k = m.has("columns") ? "columns" : "rows";
+    r.fail(m.at(k).line, m.key(k),
+           "rows x columns = " + std::to_string(p.rows * p.columns) + " masses exceed " +
+               std::to_string(intestine::kMaxIntestineNodes),
+           "a BodyState carries at most " + std::to_string(intestine::kMaxIntestineNodes) + " positions");
+  }
+  read_number("intestine_radius", p.intestine_radius, positive(), "tube radius in m, e.g. 0.02");
+  read_number("mesentery_thickness", p.mesentery_thickness, non_negative, "membrane thickness in m, e.g. 0.01");
+  if (!(p.length > p.cylinder_radius * p.angular_span)) {
+    const char* k = m.has("length") ? "length" : m.has("cylinder_radius") ? "cylinder_radius" : "angular_span";
+    r.fail(m.has(k) ? m.at(k).line : f.line, m.key(k),
+           "length " + fmt(p.length) + " m does not exceed the arc the curve covers (cylinder_radius x angular_span = " +
+               fmt(p.cylinder_radius * p.angular_span) + " m)",
+           "a longer intestine, a smaller cylinder or span: the folds need room");
+  }
+
+  // Masses and springs.
+  read_number("intestine_node_mass", p.intestine_node_mass, positive(), "kg per intestine node, e.g. 0.012");
+  read_number("mesentery_node_mass", p.mesentery_node_mass, positive(), "kg per mesentery node, e.g. 0.004");
+  read_number("structural_stiffness", p.structural_stiffness, non_negative, "N/m, e.g. 300");
+  read_number("shear_stiffness", p.shear_stiffness, non_negative, "N/m, e.g. 100");
+  read_number("bending_stiffness", p.bending_stiffness, non_negative, "N/m, e.g. 30");
+  read_number("spring_damping", p.spring_damping, non_negative, "N s/m along every spring, e.g. 0.1");
+  read_number("drag", p.drag, non_negative, "1/s, viscous drag of the surrounding medium, e.g. 2");
+  if (m.has("gravity")) p.gravity = r.vec3(m.at("gravity"), "acceleration in m/s^2, e.g. [0, 0, -9.81]");
+  if (m.has("integrator")) {
+    p.integrator = r.one_of(m.at("integrator"), {"implicit_euler", "symplectic_euler"}) == "implicit_euler"
+                       ? intestine::Integrator::kImplicitEuler
+                       : intestine::Integrator::kSymplecticEuler;
+  }
+
+  // Probe and collisions.
+  read_number("probe_radius", spec.probe_radius, positive(), "radius in m of the sphere at the tool tip, e.g. 0.01");
+  read_number("probe_stiffness", p.probe_stiffness, non_negative, "penalty stiffness of the probe contact in N/m");
+  if (m.has("self_collisions")) p.self_collisions = r.boolean(m.at("self_collisions"));
+  if (m.has("random_pairs")) {
+    p.detection.random_pairs = r.integer(m.at("random_pairs"), 0, 100000, "new pairs drawn per step (n), e.g. 10");
+  }
+  if (m.has("random_mesentery_pairs")) {
+    p.detection.random_mesentery_pairs =
+        r.integer(m.at("random_mesentery_pairs"), 0, 100000, "new intestine-mesentery pairs per step, e.g. 10");
+  }
+  if (m.has("seed")) p.detection.seed = r.integer(m.at("seed"), 1, INT_MAX, "seed of the random pairs, >= 1");
+  if (m.has("response_iterations")) {
+    p.response.iterations = r.integer(m.at("response_iterations"), 0, 100, "sweeps of the collision response, e.g. 4");
+  }
+  if (m.has("contact_capacity")) {
+    p.contact_capacity = r.integer(m.at("contact_capacity"), 1, 100000, "self-collision contacts per step");
+  }
+  return spec;
 }
 
 // Hash helpers: -0.0 and 0.0 hash alike.
@@ -573,6 +657,28 @@ std::uint64_t Scene::hash() const {
   h.value<std::int32_t>(tool.contact_capacity);
 
   hash_double(h, haptic.rate_hz);
+
+  // The intestine's parameters (other models hash as before).
+  if (model == "intestine") {
+    const intestine::IntestineParams& p = intestine.params;
+    for (double v : {p.length, p.cylinder_radius, p.angular_span, p.fold_shape, p.intestine_radius,
+                     p.mesentery_thickness, p.intestine_node_mass, p.mesentery_node_mass, p.structural_stiffness,
+                     p.shear_stiffness, p.bending_stiffness, p.spring_damping, p.drag, p.probe_stiffness,
+                     p.probe_force_limit, p.detection.drop_factor, intestine.probe_radius}) {
+      hash_double(h, v);
+    }
+    for (int v : {p.folds, p.columns, p.rows, p.probe_capacity, p.segment_exclusion, p.cell_exclusion,
+                  p.detection.random_pairs, p.detection.random_mesentery_pairs, p.detection.max_moves,
+                  p.detection.new_pair_moves, p.detection.zone_budget, p.detection.capacity, p.response.iterations,
+                  p.contact_capacity, static_cast<int>(p.integrator), static_cast<int>(p.self_collisions),
+                  static_cast<int>(p.response.correct_velocity), static_cast<int>(p.response.correct_position)}) {
+      h.value<std::int32_t>(v);
+    }
+    hash_vec(h, p.axis_origin);
+    hash_vec(h, p.axis_direction);
+    hash_vec(h, p.gravity);
+    h.value<std::uint64_t>(p.detection.seed);
+  }
   return h.digest();
 }
 
@@ -605,7 +711,8 @@ Scene load_scene(const std::string& path) {
   }
 
   const Map top(r, {root, "", 1},
-                {"name", "model", "mesh", "material", "fixed", "nonlinear", "tool", "haptic", "visual", "trajectory"});
+                {"name", "model", "mesh", "material", "fixed", "nonlinear", "tool", "haptic", "visual", "intestine",
+                 "trajectory"});
   Scene s;
   s.file = abs.string();
   s.dir = abs.parent_path().string();
@@ -625,6 +732,14 @@ Scene load_scene(const std::string& path) {
   if (top.has("tool")) s.tool = read_tool(r, top.at("tool"));
   if (top.has("haptic")) s.haptic = read_haptic(r, top.at("haptic"));
   if (top.has("visual")) s.visual = read_visual(r, top.at("visual"));
+  if (top.has("intestine")) {
+    if (s.model != "intestine") {
+      r.fail(top.at("intestine").line, "intestine", "is only read for 'model: intestine'",
+             "set 'model: intestine' or remove the section");
+    }
+    s.intestine = read_intestine(r, top.at("intestine"));
+  }
+  s.intestine.params.probe_force_limit = s.tool.force_limit;  // the device clamp is the tool's
   if (top.has("trajectory"))
     s.trajectory = r.file(top.at("trajectory"), "a tool trajectory CSV (surgsim-trajectory v1)");
   return s;

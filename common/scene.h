@@ -7,6 +7,8 @@
 #include <utility>
 #include <vector>
 
+#include "intestine_model.h"
+
 namespace surgsim {
 
 /// Where the organ's tetrahedral mesh comes from: a file, or the project's own generator.
@@ -83,6 +85,21 @@ struct VisualSpec {
   bool vtk = false;        // write the deformed mesh as VTK with each PNG
   bool video = false;      // assemble an MP4 with ffmpeg at exit when available
   std::string surface;     // absolute path of a finer visual surface embedded in the mesh; empty = boundary
+  double target_fps = 0;   // Hz, target of the intestine's frame-rate controller (paper eq. 15), 1..1000; 0 = rate_hz
+};
+
+/// The intestine's body (model "intestine"; Raghupathi et al. 2004, DESIGN.md 4.3), YAML `intestine: {...}`.
+/// Every key is optional and defaults to intestine::IntestineParams (the paper's 4 m intestine on 4 x 100 masses):
+///   rest shape: length, cylinder_radius, folds, angular_span, fold_shape, axis_origin, axis_direction, columns, rows
+///     (rows x columns <= 2048, the BodyState bound), intestine_radius, mesentery_thickness;
+///   masses and springs: intestine_node_mass, mesentery_node_mass, structural_stiffness, shear_stiffness,
+///     bending_stiffness, spring_damping, drag, gravity, integrator (implicit_euler | symplectic_euler);
+///   probe (a sphere at the tool tip): probe_radius, probe_stiffness; its force is clamped to tool.force_limit;
+///   collisions: self_collisions, random_pairs (the paper's n), random_mesentery_pairs, seed, response_iterations,
+///     contact_capacity.
+struct IntestineSpec {
+  intestine::IntestineParams params;  // ready for IntestineModel: probe_force_limit = tool.force_limit
+  double probe_radius = 0.01;         // m
 };
 
 struct Scene {
@@ -97,11 +114,13 @@ struct Scene {
   ToolSpec tool;
   HapticSpec haptic;
   VisualSpec visual;
+  IntestineSpec intestine;  // read for model "intestine" only
   std::string trajectory;  // absolute path of the default trajectory, may be empty
 
   /// Hash of everything both nodes must agree on: model, mesh source (file NAME, not path or content; or
   /// generator + target_nodes), material, fixed set, non-linear law (curve file names + degree), tool spec and
-  /// haptic rate. Name, visual settings and trajectory do not enter it. Stable across hosts and runs.
+  /// haptic rate, and for model "intestine" every intestine parameter. Name, visual settings and trajectory do not
+  /// enter it. Stable across hosts and runs.
   std::uint64_t hash() const;
 };
 

@@ -233,41 +233,51 @@ void TrajectoryRecorder::open(const std::string& path, int flush_every) {
   last_t_ = 0;
 }
 
-bool TrajectoryRecorder::append(double t, const Pose5& pose) {
-  if (file_ == nullptr) {
-    ++write_errors_;
-    return false;
-  }
+int TrajectoryRecorder::format(char* buf, std::size_t size, double t, const Pose5& pose) noexcept {
   const double v[kColumns] = {t, pose.pitch, pose.yaw, pose.insertion, pose.roll, pose.jaw};
 
   // Refuse what the loader would refuse, so that a recording always replays.
   for (double x : v) {
     if (!std::isfinite(x)) {
       ++rejected_;
-      return false;
+      return 0;
     }
   }
   if (t < 0 || (has_last_ && !(t > last_t_))) {
     ++rejected_;
-    return false;
+    return 0;
+  }
+  if (size < kLineBytes) {
+    ++write_errors_;
+    return 0;
   }
 
   // Shortest round-trip text (std::to_chars): locale-independent, bit-exact on reload, no allocation.
-  char buf[kColumns * 32];
   char* p = buf;
-  char* const end = buf + sizeof(buf);
+  char* const end = buf + size;
   for (int c = 0; c < kColumns; ++c) {
     const auto r = std::to_chars(p, end - 1, v[c]);  // a double needs at most 24 chars: cannot fail here
     p = r.ptr;
     *p++ = c + 1 < kColumns ? ',' : '\n';
   }
-  const std::size_t len = static_cast<std::size_t>(p - buf);
+  has_last_ = true;
+  last_t_ = t;
+  return static_cast<int>(p - buf);
+}
+
+bool TrajectoryRecorder::append(double t, const Pose5& pose) {
+  if (file_ == nullptr) {
+    ++write_errors_;
+    return false;
+  }
+  char buf[kLineBytes];
+  const int n = format(buf, sizeof buf, t, pose);
+  if (n == 0) return false;
+  const std::size_t len = static_cast<std::size_t>(n);
   if (std::fwrite(buf, 1, len, file_) != len) {
     ++write_errors_;
     return false;
   }
-  has_last_ = true;
-  last_t_ = t;
   if (++since_flush_ >= flush_every_) {
     since_flush_ = 0;
     if (std::fflush(file_) != 0) {

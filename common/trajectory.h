@@ -65,6 +65,14 @@ class TrajectoryRecorder {
   /// and on a sample the loader would refuse: a non-finite value, t < 0 or t not after the previous sample
   /// (counted in rejected(), nothing written). Returns false when not open (counted in write_errors()).
   bool append(double t, const Pose5& pose);
+  /// Bytes a formatted line may need.
+  static constexpr std::size_t kLineBytes = 6 * 32;
+  /// Formats one line (with its newline) into buf without writing it, applying the same refusals as append();
+  /// returns its length, or 0 when refused (counted). For callers that write through their own queue (the haptic
+  /// loop hands lines to a writer thread). No allocation.
+  int format(char* buf, std::size_t size, double t, const Pose5& pose) noexcept;
+  /// The open file (for a caller that writes formatted lines itself), or null.
+  std::FILE* file() const { return file_; }
   /// Flushes and closes; safe to call twice. The destructor calls it.
   void close();
   long write_errors() const { return write_errors_; }

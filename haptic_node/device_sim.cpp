@@ -62,7 +62,7 @@ Pose5 scripted(double t, double depth) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string trajectory, stats, profiles, participant = "surgsim_default";
+  std::string trajectory, stats, profiles, participant;
   double rate = 1000, duration = -1, depth = 0.16, start_delay = 0;
   int domain = -1;
   double wait_for_haptic = 0;
@@ -76,7 +76,7 @@ int main(int argc, char** argv) {
   cli.add_option("--stats", stats, "JSON summary on exit");
   cli.add_option("--domain", domain, "DDS domain id (default $SURGSIM_DOMAIN or 0)");
   cli.add_option("--dds-profiles", profiles, "Fast DDS XML profiles file (default config/dds/profiles.xml)");
-  cli.add_option("--dds-participant", participant, "Participant profile")->capture_default_str();
+  cli.add_option("--dds-participant", participant, "Participant profile (default $SURGSIM_DDS_PARTICIPANT or surgsim_default)");
   CLI11_PARSE(cli, argc, argv);
   (void)start_delay;
 
@@ -107,6 +107,7 @@ int main(int argc, char** argv) {
         struct timespec ts{0, 20000000};
         nanosleep(&ts, nullptr);
       }
+      std::cerr << "device_sim: " << (st.current_count > 0 ? "haptic node matched" : "no haptic node yet") << "\n";
     }
 
     PeriodicTimer timer(static_cast<std::int64_t>(1e9 / rate));

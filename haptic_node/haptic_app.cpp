@@ -112,10 +112,12 @@ class ToolCommandListener : public DataReaderListener {
 }  // namespace
 
 struct HapticApp::Dds {
-  explicit Dds(const dds::DdsOptions& o) : participant(o), visual_status(1 << 16) {}
-  dds::Participant participant;
+  explicit Dds(const dds::DdsOptions& o) : visual_status(1 << 16), participant(o) {}
+  // Listeners first: members are destroyed in reverse order, so the participant (and its readers, whose callbacks
+  // use the listeners) goes before them.
   VisualStatusListener visual_status;
   ToolCommandListener tool_commands;
+  dds::Participant participant;
   Pose5 last_command;
   std::uint64_t last_command_ns = 0;
   std::uint64_t commands_received = 0;
@@ -135,9 +137,11 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   if (!(rate_hz_ >= 1 && rate_hz_ <= 20000)) throw_error("--rate ", rate_hz_, " Hz is out of range [1, 20000]");
   dt_ = 1.0 / rate_hz_;
   const std::string cache = options_.cache_dir.empty() ? default_cache_dir() : options_.cache_dir;
-  mesh_ = load_scene_mesh(scene_, cache, options_.quiet ? nullptr : &std::cerr);
-  surface_ = boundary_surface(mesh_);
-  mesh_hash_ = mesh_hash(mesh_);
+  if (scene_.model != "intestine") {  // the intestine builds its own body: no tetrahedral mesh (hash 0)
+    mesh_ = load_scene_mesh(scene_, cache, options_.quiet ? nullptr : &std::cerr);
+    surface_ = boundary_surface(mesh_);
+    mesh_hash_ = mesh_hash(mesh_);
+  }
   scene_hash_ = scene_.hash() ^ (mesh_hash_ * 0x9E3779B97F4A7C15ull);
 
   // --- init: tool input ---
@@ -166,17 +170,25 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
     law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene_.nonlinear, scene_.material));
     contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene_.tool,
                                                 law_->identity() ? nullptr : law_.get());
+  } else if (scene_.model == "intestine") {
+    // The mass-spring intestine and mesentery only: no mesh, tensors or bucket grid (DESIGN.md 6).
+    intestine_ = std::make_unique<IntestineRunner>(scene_, total_ticks_);
   } else {
     throw_error(scene_.file, ": key 'model': '", scene_.model, "' is not built into this haptic node yet");
   }
 
   // --- init: outputs ---
-  if (!options_.record.empty()) recorder_.open(options_.record);
+  if (!options_.record.empty()) {
+    recorder_.open(options_.record);
+    record_writer_ = std::make_unique<AsyncLineWriter>(recorder_.file(), options_.speed <= 0);
+  }
   if (!options_.log.empty()) {
     log_ = std::fopen(options_.log.c_str(), "w");
     if (log_ == nullptr) throw_error(options_.log, ": cannot create the --log file");
     std::setvbuf(log_, nullptr, _IOFBF, 1 << 16);
     std::fprintf(log_, "tick,t,fx,fy,fz,contacts\n");
+    std::fflush(log_);
+    log_writer_ = std::make_unique<AsyncLineWriter>(log_, options_.speed <= 0);
   }
   tick_us_ = SampleRecorder(total_ticks_ + 16);
   wake_late_us_ = SampleRecorder(total_ticks_ + 16);
@@ -189,7 +201,7 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   dopt.name = "surgsim_haptic";
   dds_ = std::make_unique<Dds>(dopt);
   auto& p = dds_->participant;
-  dds_->contact_writer = p.writer(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()), dds::kStreamWriter);
+  dds_->contact_writer = p.writer(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()), dds::kContactWriter);
   dds_->force_writer = p.writer(p.topic(dds::kForceFeedbackTopic, new msg::ForceFeedbackPubSubType()), dds::kStreamWriter);
   dds_->scene_writer = p.writer(p.topic(dds::kSceneInfoTopic, new msg::SceneInfoPubSubType()), dds::kLatchedWriter);
   if (live_) {
@@ -199,7 +211,9 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   dds_->status_reader = p.reader(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()),
                                  dds::kStreamReader, &dds_->visual_status);
   dds_->frame.contacts().reserve(msg::kMaxContacts);
+  if (!options_.quiet) std::cerr << "haptic_node: DDS " << p.profile() << ": " << p.description() << "\n";
   dds_->frame.scene_hash(scene_hash_);
+  if (intestine_ != nullptr) intestine_->create_writer(p, scene_hash_);  // BodyState, every tick
 
   // SceneInfo is latched (transient local): a visual node that joins later still gets it.
   msg::SceneInfo info;
@@ -210,20 +224,33 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   info.tensor_hash(tensor_hash_);
   info.node_count(static_cast<std::uint32_t>(mesh_.nodes.rows()));
   info.surface_node_count(static_cast<std::uint32_t>(surface_.nodes.size()));
+  if (intestine_ != nullptr) {  // the body's masses, and the intestine's points among them
+    info.node_count(static_cast<std::uint32_t>(intestine_->model().node_count()));
+    info.surface_node_count(static_cast<std::uint32_t>(intestine_->model().columns()));
+  }
   info.haptic_rate_hz(rate_hz_);
   info.visual_rate_hz(scene_.visual.rate_hz);
   info.start_stamp_ns(monotonic_ns());
   dds_->scene_writer->write(&info);
 
   if (!options_.quiet) {
-    std::cerr << "haptic_node: scene '" << scene_.name << "' (" << scene_.file << "), " << mesh_.nodes.rows()
-              << " nodes, " << mesh_.tets.rows() << " tets, " << surface_.nodes.size() << " surface nodes; "
-              << rate_hz_ << " Hz for " << total_ticks_ << " ticks; "
+    std::cerr << "haptic_node: scene '" << scene_.name << "' (" << scene_.file << "), ";
+    if (intestine_ != nullptr) {
+      std::cerr << intestine_->model().rows() << " x " << intestine_->model().columns()
+                << " masses (intestine and mesentery, mass-spring); ";
+    } else {
+      std::cerr << mesh_.nodes.rows() << " nodes, " << mesh_.tets.rows() << " tets, " << surface_.nodes.size()
+                << " surface nodes; ";
+    }
+    std::cerr << rate_hz_ << " Hz for " << total_ticks_ << " ticks; "
               << (live_ ? std::string("live input from the device topic") : "replaying " + replay) << "\n";
   }
 }
 
 HapticApp::~HapticApp() {
+  // The writer threads drain into the files, so they stop before the files close.
+  record_writer_.reset();
+  log_writer_.reset();
   if (log_ != nullptr) std::fclose(log_);
 }
 
@@ -250,14 +277,27 @@ void HapticApp::tick(std::uint64_t k) {
   const ToolGeometry tool = tool_geometry(scene_.tool, pose);
   if (input_ok) {
     held_pose_ = pose;
-    if (recorder_.is_open()) recorder_.append(t, pose);
-    contacts_->step(tool, pose.jaw, result);
+    if (record_writer_ != nullptr) {
+      if (char* line = record_writer_->begin_line()) {
+        const int n = recorder_.format(line, record_writer_->slot_bytes(), t, pose);
+        if (n > 0) record_writer_->commit_line(static_cast<std::size_t>(n));
+      }
+    }
+    if (intestine_ != nullptr) {
+      intestine_->step(&tool, dt_, result);  // the tool tip is the probe
+    } else {
+      contacts_->step(tool, pose.jaw, result);
+    }
   } else {
     ++input_lost_ticks_;
     flags |= msg::kFlagInputLost;
-    contacts_->reset();
+    if (intestine_ != nullptr) {
+      intestine_->step(nullptr, dt_, result);  // the body keeps moving, without the probe
+    } else {
+      contacts_->reset();
+    }
   }
-  const ContactSolution& solution = contacts_->solution();
+  const ContactSolution& solution = contacts_ != nullptr ? contacts_->solution() : no_contacts_;
   if (result.nonfinite) {
     ++nonfinite_rejected_;
     flags |= msg::kFlagNonFiniteHeld;
@@ -300,15 +340,20 @@ void HapticApp::tick(std::uint64_t k) {
   ff.saturated(result.saturated);
   ff.flags(flags);
   dds_->force_writer->write(&ff);
+  if (intestine_ != nullptr) intestine_->publish(frame);  // BodyState: the body's positions this tick
 
-  // --- log and statistics ---
+  // --- log and statistics (contacts: liver contact nodes, or intestine elements the probe touches) ---
   const Eigen::Vector3d& f = result.device_force;
-  if (log_ != nullptr) {
-    std::fprintf(log_, "%llu,%.9f,%.17g,%.17g,%.17g,%d\n", static_cast<unsigned long long>(k), t, f.x(), f.y(), f.z(),
-                 solution.count);
+  const int contacts = intestine_ != nullptr ? result.points_in_contact : solution.count;
+  if (log_writer_ != nullptr) {
+    if (char* line = log_writer_->begin_line()) {
+      const int n = std::snprintf(line, log_writer_->slot_bytes(), "%llu,%.9f,%.17g,%.17g,%.17g,%d\n",
+                                  static_cast<unsigned long long>(k), t, f.x(), f.y(), f.z(), contacts);
+      if (n > 0) log_writer_->commit_line(static_cast<std::size_t>(n));
+    }
   }
-  if (solution.count > contacts_max_) contacts_max_ = solution.count;
-  if (solution.count > 0) ++contact_ticks_;
+  if (contacts > contacts_max_) contacts_max_ = contacts;
+  if (contacts > 0) ++contact_ticks_;
   force_max_n_ = std::max(force_max_n_, f.norm());
 }
 
@@ -334,6 +379,7 @@ int HapticApp::run() {
   PeriodicTimer timer(period_ns);
   timer.start();
   const std::uint64_t wall_start = monotonic_ns();
+  loop_start_ns_ = wall_start;
   for (std::uint64_t k = 0; k < total_ticks_; ++k) {
     if (stop_requested_.load(std::memory_order_relaxed)) break;
     if (paced) wake_late_us_.add(static_cast<double>(timer.wait()) * 1e-3);
@@ -344,7 +390,14 @@ int HapticApp::run() {
   }
   wall_seconds_ = static_cast<double>(monotonic_ns() - wall_start) * 1e-9;
   deadline_misses_ = paced ? timer.misses() : 0;
-  // --- shutdown starts here ---
+  // --- shutdown starts here: the writer threads drain every line before the files close ---
+  for (auto* w : {record_writer_.get(), log_writer_.get()}) {
+    if (w != nullptr) w->finish();
+  }
+  record_writer_stats_ = record_writer_ ? record_writer_->dropped() + record_writer_->write_errors() : 0;
+  log_writer_stats_ = log_writer_ ? log_writer_->dropped() + log_writer_->write_errors() : 0;
+  record_writer_.reset();
+  log_writer_.reset();
   recorder_.close();
   if (log_ != nullptr) std::fflush(log_);
   return 0;
@@ -383,6 +436,13 @@ void HapticApp::shutdown() {
   j["realtime"] = realtime_note_;
   j["scene_hash"] = std::to_string(scene_hash_);
   j["record_write_errors"] = recorder_.write_errors();
+  j["record_lines_lost"] = record_writer_stats_;
+  j["log_lines_lost"] = log_writer_stats_;
+  j["dds_participant"] = dds_->participant.profile();
+  j["loop_start_ns"] = loop_start_ns_;
+  // Which organ model this run built (a liver run builds no intestine objects, an intestine run no liver ones).
+  j["model_built"] = intestine_ != nullptr ? "intestine" : contacts_ != nullptr ? "liver" : "none";
+  if (intestine_ != nullptr) j["intestine"] = intestine_->stats();
   if (!options_.stats.empty()) write_json_file(options_.stats, j);
   if (!options_.quiet) {
     std::cerr << "haptic_node: " << ticks_done_ << " ticks at " << achieved << " Hz (target "
@@ -390,6 +450,14 @@ void HapticApp::shutdown() {
               << tick.p99 << " us, " << deadline_misses_ << " missed deadlines, contacts max " << contacts_max_
               << ", force max " << force_max_n_ << " N, round trip p50 " << rtt.p50
               << " us (" << rtt.count << " echoes)\n";
+  }
+  if (!options_.quiet && intestine_ != nullptr) {
+    const nlohmann::json& in = j["intestine"];
+    std::cerr << "haptic_node: intestine step p50 " << in["step_us"]["p50"].get<double>() << " us p99 "
+              << in["step_us"]["p99"].get<double>() << " us, " << in["faults"].get<std::uint64_t>() << " faults, "
+              << "self-contacts max " << in["self_contacts_max"].get<int>() << ", probe contacts max "
+              << in["probe_contacts_max"].get<int>() << ", " << in["body_states_published"].get<std::uint64_t>()
+              << " body states published\n";
   }
 }
 

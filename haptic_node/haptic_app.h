@@ -6,6 +6,8 @@
 #include <memory>
 #include <string>
 
+#include "async_writer.h"
+#include "intestine_runner.h"
 #include "liver_contacts.h"
 #include "mesh.h"
 #include "nonlinear_law.h"
@@ -30,7 +32,7 @@ struct HapticOptions {
   std::string cache_dir;            // generated meshes and tensors
   int domain = -1;                  // DDS domain; < 0 = default ($SURGSIM_DOMAIN or 0)
   std::string dds_profiles;         // Fast DDS XML; empty = <config>/dds/profiles.xml
-  std::string dds_participant = "surgsim_default";
+  std::string dds_participant;      // empty: $SURGSIM_DDS_PARTICIPANT, else surgsim_default
   int rt_priority = 80;             // SCHED_FIFO priority; 0 = normal scheduling
   bool lock_memory = true;
   int cpu = -1;                     // pin the loop thread to this CPU (-1: don't)
@@ -69,9 +71,13 @@ class HapticApp {
   Trajectory trajectory_;
   TrajectoryRecorder recorder_;
   std::FILE* log_ = nullptr;
+  std::unique_ptr<AsyncLineWriter> log_writer_;     // --log lines, written off the loop thread
+  std::unique_ptr<AsyncLineWriter> record_writer_;  // --record lines, written off the loop thread
   Tensors tensors_;                        // "haptic" block only
   std::unique_ptr<NonlinearLaw> law_;      // identity when the scene has no curves
   std::unique_ptr<LiverContacts> contacts_;
+  std::unique_ptr<IntestineRunner> intestine_;  // model "intestine" only (then no mesh, tensors or contacts_)
+  ContactSolution no_contacts_;                 // what the intestine's ContactFrames carry: no contact entries
   std::uint64_t tensor_hash_ = 0;
   std::unique_ptr<Dds> dds_;
   Pose5 held_pose_;                         // last good pose (held while device input is lost)
@@ -97,7 +103,10 @@ class HapticApp {
   std::uint64_t saturated_ticks_ = 0;
   std::uint64_t input_lost_ticks_ = 0;
   std::uint64_t contact_ticks_ = 0;
+  std::uint64_t record_writer_stats_ = 0;   // lines dropped (ring full) or failed to write
+  std::uint64_t log_writer_stats_ = 0;
   double wall_seconds_ = 0;
+  std::uint64_t loop_start_ns_ = 0;  // monotonic, when tick 0 was due (stats: lets tests line up other processes)
 };
 
 }  // namespace surgsim

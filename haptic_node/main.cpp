@@ -33,7 +33,8 @@ int main(int argc, char** argv) {
   cli.add_option("--cache", o.cache_dir, "Cache folder for generated meshes and tensors (default $SURGSIM_CACHE_DIR or ~/.cache/surgsim)");
   cli.add_option("--domain", o.domain, "DDS domain id (default $SURGSIM_DOMAIN or 0)");
   cli.add_option("--dds-profiles", o.dds_profiles, "Fast DDS XML profiles file (default config/dds/profiles.xml)");
-  cli.add_option("--dds-participant", o.dds_participant, "Participant profile: surgsim_default, surgsim_shm, surgsim_udp")->capture_default_str();
+  cli.add_option("--dds-participant", o.dds_participant, "Participant profile: surgsim_default, surgsim_shm, surgsim_udp, "
+                 "surgsim_udp_peers, surgsim_ds_client (default $SURGSIM_DDS_PARTICIPANT or surgsim_default)");
   cli.add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority for the loop (0 = normal scheduling)")->capture_default_str();
   cli.add_flag("!--no-mlock", o.lock_memory, "Do not lock memory");
   cli.add_option("--cpu", o.cpu, "Pin the loop thread to this CPU (default: not pinned)");

@@ -1,9 +1,13 @@
 #!/usr/bin/python3
-"""Writes the shipped liver tool trajectories (config/trajectories/liver_*.csv) from smooth scripted motions.
+"""Writes the shipped tool trajectories (config/trajectories/liver_*.csv, intestine_*.csv) from smooth scripted motions.
 
-Geometry (config/liver.yaml): trocar at (0.03, 0, 0.20), shaft straight down at pitch = yaw = 0; the generated liver's
-top surface under the trocar is at z ~ 0.042, i.e. insertion ~ 0.158 m touches it. Units: s, rad, m.
-Run: /usr/bin/python3 scripts/make_trajectories.py   (stdlib only)
+Liver geometry (config/liver.yaml): trocar at (0.03, 0, 0.20), shaft straight down at pitch = yaw = 0; the generated
+liver's top surface under the trocar is at z ~ 0.042, i.e. insertion ~ 0.158 m touches it.
+Intestine geometry (config/intestine.yaml): vessel along x through the origin, the folds hang below it once gravity
+has acted (about 0.5 s): x in [-0.19, 0.20], y in [-0.12, 0.13], z in [-0.15, 0.04] m, intestine radius 2 cm. Trocar
+at (0, 0.40, -0.12), shaft along -y at pitch = yaw = 0 (tip at y = 0.40 - insertion); positive pitch raises the tip,
+yaw swings it along x. Units: s, rad, m.
+Run: /usr/bin/python3 scripts/make_trajectories.py [liver|intestine]   (stdlib only; no argument: all)
 """
 import math
 import os
@@ -74,7 +78,32 @@ def fast_stab(t):
     return (0.0, 0.0, ins, 0.0, 0.5)
 
 
+def intestine_push(t):
+    # Wait for the folds to settle, push 22 cm in from the side (tip y 0.24 -> 0.02, through the near folds towards
+    # the vessel), swing 0.2 rad along the vessel and back while pushed, withdraw.
+    ins = ramp(t, 0.8, 2.8, 0.16, 0.38) if t < 4.6 else ramp(t, 4.6, 5.6, 0.38, 0.16)
+    yaw = ramp(t, 3.0, 3.7, 0.0, 0.2) if t < 3.8 else ramp(t, 3.8, 4.5, 0.2, 0.0)
+    return (0.0, yaw, ins, 0.0, 0.5)
+
+
+def intestine_lift(t):
+    # Slide in under the folds (pitch -0.25: the tip passes 4 cm below them), tilt up to pitch +0.15 (the tip rises
+    # about 14 cm and lifts the folds it carries), hold, lower them again, withdraw.
+    ins = ramp(t, 0.8, 2.4, 0.16, 0.36) if t < 5.9 else ramp(t, 5.9, 6.8, 0.36, 0.16)
+    pitch = ramp(t, 2.5, 4.3, -0.25, 0.15) if t < 4.8 else ramp(t, 4.8, 5.8, 0.15, -0.25)
+    return (pitch, 0.0, ins, 0.0, 0.5)
+
+
 if __name__ == "__main__":
+    import sys
+    which = sys.argv[1] if len(sys.argv) > 1 else "all"
+    if which in ("all", "intestine"):
+        write("intestine_push.csv", 6.0, intestine_push,
+              "intestine: push the folds 22 cm in from the side, swing along the vessel, withdraw")
+        write("intestine_lift.csv", 7.0, intestine_lift,
+              "intestine: slide under the folds, tilt up 0.4 rad to lift them, lower, withdraw")
+    if which not in ("all", "liver"):
+        sys.exit(0)
     write("liver_press_slide.csv", 5.5, press_and_slide, "press 1 cm into the liver top, slide 4 cm (yaw), withdraw")
     write("liver_grasp_pull.csv", 5.5, grasp_and_pull, "press, close the jaw (grasp), pull 1.5 cm up, open, withdraw")
     write("liver_sweep.csv", 6.0, sweep, "three 8 mm dips at different pitch/yaw")

@@ -28,7 +28,8 @@ int main(int argc, char** argv) {
   cli.add_option("--cache", o.cache_dir, "Cache folder for generated meshes and tensors");
   cli.add_option("--domain", o.domain, "DDS domain id (default $SURGSIM_DOMAIN or 0)");
   cli.add_option("--dds-profiles", o.dds_profiles, "Fast DDS XML profiles file (default config/dds/profiles.xml)");
-  cli.add_option("--dds-participant", o.dds_participant, "Participant profile: surgsim_default, surgsim_shm, surgsim_udp")->capture_default_str();
+  cli.add_option("--dds-participant", o.dds_participant, "Participant profile: surgsim_default, surgsim_shm, surgsim_udp, "
+                 "surgsim_udp_peers, surgsim_ds_client (default $SURGSIM_DDS_PARTICIPANT or surgsim_default)");
   cli.add_flag("--quiet", o.quiet, "Print nothing but errors");
   CLI11_PARSE(cli, argc, argv);
 

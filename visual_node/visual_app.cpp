@@ -18,6 +18,7 @@
 #include "dds_support.h"
 #include "error.h"
 #include "image.h"
+#include "intestine_view.h"
 #include "renderer.h"
 #include "liver_setup.h"
 #include "scene_mesh.h"
@@ -39,11 +40,20 @@ class ContactFrameListener : public DataReaderListener {
   /// Every received frame's stamp is echoed at once on `echo` (VisualStatus), so the haptic node measures the
   /// network round trip on its own clock, independent of the frame rate.
   void set_echo(DataWriter* echo) { echo_ = echo; }
+  /// Lost / back detection of the haptic node (deadline and liveliness QoS of the contact reader).
+  void set_watch(HapticWatch* watch) { watch_ = watch; }
+  void on_requested_deadline_missed(DataReader*, const eprosima::fastdds::dds::RequestedDeadlineMissedStatus&) override {
+    if (watch_ != nullptr) watch_->on_deadline_missed(monotonic_ns());
+  }
+  void on_liveliness_changed(DataReader*, const eprosima::fastdds::dds::LivelinessChangedStatus& s) override {
+    if (watch_ != nullptr) watch_->on_liveliness_changed(s.alive_count, s.not_alive_count_change, monotonic_ns());
+  }
   void on_data_available(DataReader* reader) override {
     SampleInfo info;
     while (reader->take_next_sample(&incoming_, &info) == ReturnCode_t::RETCODE_OK) {
       if (!info.valid_data) continue;
       const std::uint64_t now = monotonic_ns();
+      if (watch_ != nullptr) watch_->on_frame(now);
       if (echo_ != nullptr) {
         echo_msg_.stamp_ns(now);
         echo_msg_.echoed_stamp_ns(incoming_.stamp_ns());
@@ -82,6 +92,7 @@ class ContactFrameListener : public DataReaderListener {
  private:
   std::mutex mutex_;
   DataWriter* echo_ = nullptr;
+  HapticWatch* watch_ = nullptr;
   msg::VisualStatus echo_msg_;
   msg::ContactFrame incoming_;
   msg::ContactFrame newest_;
@@ -131,24 +142,30 @@ Pose5 from_msg(const msg::ToolPose& p) {
 
 struct VisualApp::Dds {
   explicit Dds(const dds::DdsOptions& o) : participant(o) {}
-  dds::Participant participant;
+  // Listeners first: members are destroyed in reverse order, so the participant (and its readers, whose callbacks
+  // use the listeners, e.g. a deadline timer firing during shutdown) goes before them.
   ContactFrameListener frames;
   SceneInfoListener scene_info;
+  dds::Participant participant;
   DataReader* frame_reader = nullptr;
   DataReader* scene_reader = nullptr;
   DataWriter* status_writer = nullptr;
   msg::VisualStatus status;
 };
 
-VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
+VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(monotonic_ns(), options.quiet) {
   // --- init: scene and the visible mesh ---
   scene_ = load_scene(resolve_scene_path(options_.scene));
   rate_hz_ = options_.rate_hz > 0 ? options_.rate_hz : scene_.visual.rate_hz;
   png_every_ = options_.png_every >= 0 ? options_.png_every : scene_.visual.png_every;
   const std::string cache = options_.cache_dir.empty() ? default_cache_dir() : options_.cache_dir;
-  mesh_ = load_scene_mesh(scene_, cache, options_.quiet ? nullptr : &std::cerr);
-  surface_ = boundary_surface(mesh_);
-  scene_hash_ = scene_.hash() ^ (mesh_hash(mesh_) * 0x9E3779B97F4A7C15ull);
+  std::uint64_t scene_mesh_hash = 0;  // the intestine has no tetrahedral mesh (hash 0, as in the haptic node)
+  if (scene_.model != "intestine") {
+    mesh_ = load_scene_mesh(scene_, cache, options_.quiet ? nullptr : &std::cerr);
+    surface_ = boundary_surface(mesh_);
+    scene_mesh_hash = mesh_hash(mesh_);
+  }
+  scene_hash_ = scene_.hash() ^ (scene_mesh_hash * 0x9E3779B97F4A7C15ull);
 
   // --- init: the visual rows of the tensors (visible x surface), from the cache both nodes share ---
   if (scene_.model == "liver") {
@@ -157,19 +174,24 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
                                   nullptr, scene_.file);
     tensor_hash_ = setup.key.combined();
   }
-  law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene_.nonlinear, scene_.material));
-  deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, scene_.model == "liver" ? &tensors_ : nullptr,
-                                                law_->identity() ? nullptr : law_.get());
-  markers_.resize(kMaxContacts, 3);
-  if (!scene_.visual.surface.empty()) {
-    // A finer visual surface embedded in the mechanical boundary (within 1 % of the organ's size).
-    const double size = (mesh_.nodes.colwise().maxCoeff() - mesh_.nodes.colwise().minCoeff()).norm();
-    try {
-      deformer_->embed(read_obj(scene_.visual.surface), mesh_, surface_, 0.01 * size);
-    } catch (const Error& e) {
-      throw_error(scene_.file, ": key 'visual.surface': ", e.what());
+  if (scene_.model == "intestine") {
+    // The intestine: a skinned tube and the mesentery from BodyStates (intestine_view.h); no deformer, no tensors.
+    intestine_ = std::make_unique<IntestineView>(scene_, scene_hash_);
+  } else {
+    law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene_.nonlinear, scene_.material));
+    deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, scene_.model == "liver" ? &tensors_ : nullptr,
+                                                  law_->identity() ? nullptr : law_.get());
+    if (!scene_.visual.surface.empty()) {
+      // A finer visual surface embedded in the mechanical boundary (within 1 % of the organ's size).
+      const double size = (mesh_.nodes.colwise().maxCoeff() - mesh_.nodes.colwise().minCoeff()).norm();
+      try {
+        deformer_->embed(read_obj(scene_.visual.surface), mesh_, surface_, 0.01 * size);
+      } catch (const Error& e) {
+        throw_error(scene_.file, ": key 'visual.surface': ", e.what());
+      }
     }
   }
+  markers_.resize(kMaxContacts, 3);
 
   // --- init: renderer (no GL context at all when headless) ---
   renderer_ = make_renderer(options_.headless ? "null" : "osmesa", scene_.visual.width, scene_.visual.height);
@@ -193,15 +215,23 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options) {
   auto& p = dds_->participant;
   dds_->scene_reader = p.reader(p.topic(dds::kSceneInfoTopic, new msg::SceneInfoPubSubType()), dds::kLatchedReader,
                                 &dds_->scene_info);
+  dds_->frames.set_watch(&watch_);
   dds_->frame_reader = p.reader(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()),
-                                dds::kStreamReader, &dds_->frames);
+                                dds::kContactReader, &dds_->frames);
   dds_->status_writer = p.writer(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()), dds::kStreamWriter);
   dds_->frames.set_echo(dds_->status_writer);
+  watch_.mark_dds_ready(monotonic_ns());
+  if (intestine_ != nullptr) intestine_->subscribe(p);  // BodyState
+  if (!options_.quiet) std::cerr << "visual_node: DDS " << p.profile() << ": " << p.description() << "\n";
 
   if (!options_.quiet) {
     std::cerr << "visual_node: scene '" << scene_.name << "', " << surface_.tris.rows() << " surface triangles, "
               << renderer_->name() << " renderer " << scene_.visual.width << "x" << scene_.visual.height << " at "
               << rate_hz_ << " Hz\n";
+  }
+  if (!options_.quiet && intestine_ != nullptr) {
+    std::cerr << "visual_node: intestine: tube skinned on the CPU + mesentery strip, LOD by the frame-rate "
+              << "controller (target " << intestine_->controller().params().target_hz << " Hz)\n";
   }
 }
 
@@ -252,8 +282,9 @@ int VisualApp::run() {
     if (fresh) have_frame = true;
 
     // Deformation of the visible mesh from the newest contacts: u_n = sum_k G_nk lambda_k over the visible rows.
-    const int m = have_frame ? std::min<int>(static_cast<int>(frame.contacts().size()), kMaxContacts) : 0;
-    if (fresh) {
+    const int m = have_frame && deformer_ != nullptr
+                      ? std::min<int>(static_cast<int>(frame.contacts().size()), kMaxContacts) : 0;
+    if (fresh && deformer_ != nullptr) {
       const std::uint64_t d0 = monotonic_ns();
       for (int l = 0; l < m; ++l) {
         const auto& e = frame.contacts()[static_cast<std::size_t>(l)];
@@ -272,13 +303,20 @@ int VisualApp::run() {
       const int v = deformer_->vertex_of(contact_nodes_[static_cast<std::size_t>(l)]);
       if (v >= 0) markers_.row(marker_count++) = deformer_->positions().row(v);
     }
+    // Intestine: the newest BodyState as tube and mesentery, at the LOD the frame-rate controller chose.
+    const std::uint64_t work0 = monotonic_ns();
+    if (intestine_ != nullptr && intestine_->update()) {
+      deform_us_.add(static_cast<double>(monotonic_ns() - work0) * 1e-3);
+    }
 
     const std::uint64_t r0 = monotonic_ns();
     renderer_->begin_frame(scene_.visual.camera);
-    renderer_->draw_surface(deformer_->drawn_positions(), deformer_->drawn_tris(), organ_rgb);
+    if (deformer_ != nullptr) renderer_->draw_surface(deformer_->drawn_positions(), deformer_->drawn_tris(), organ_rgb);
+    if (intestine_ != nullptr) intestine_->draw(*renderer_);
     if (have_frame) renderer_->draw_tool(tool_geometry(scene_.tool, from_msg(frame.pose())), scene_.tool.shaft_radius);
     if (marker_count > 0) renderer_->draw_points(markers_.topRows(marker_count), 0.0015f, kMarkerRgb);
     renderer_->end_frame();
+    if (intestine_ != nullptr) intestine_->frame_done(static_cast<double>(monotonic_ns() - work0) * 1e-9);
     ++frames_rendered_;
     if (png_every_ > 0 && !options_.headless && frames_rendered_ % static_cast<std::uint64_t>(png_every_) == 0) {
       if (renderer_->read_image(image_)) {
@@ -288,14 +326,15 @@ int VisualApp::run() {
         // A full disk must not stop the display: count the failure, keep drawing.
         try {
           write_png(path, image_);
-          if (scene_.visual.vtk) {
+          if (scene_.visual.vtk && deformer_ != nullptr) {
             write_vtk_surface(path.substr(0, path.size() - 4) + ".vtk", deformer_->drawn_positions().cast<double>(),
                               deformer_->drawn_tris());
             ++vtk_written_;
           }
           if (index_ != nullptr) {
             std::fprintf(index_, "%s,%llu,%.6f,%d,%.9g\n", name, static_cast<unsigned long long>(frame.seq()),
-                         have_frame ? frame.sim_time() : -1.0, m, deformer_->max_displacement());
+                         have_frame ? frame.sim_time() : -1.0, m,
+                         deformer_ != nullptr ? deformer_->max_displacement() : 0.0);
           }
           if (first_png_.empty()) first_png_ = path;
           last_png_ = path;
@@ -311,7 +350,7 @@ int VisualApp::run() {
     auto& st = dds_->status;
     st.stamp_ns(monotonic_ns());
     st.fps(rate_hz_);
-    st.lod(0);
+    st.lod(intestine_ != nullptr ? static_cast<std::uint32_t>(intestine_->lod()) : 0);
     st.last_seq_shown(have_frame ? frame.seq() : 0);
     st.echoed_stamp_ns(0);  // round trips are echoed by the frame listener, on arrival
     st.frames_rendered(frames_rendered_);
@@ -370,7 +409,7 @@ void VisualApp::shutdown() {
   j["vtk_written"] = vtk_written_;
   j["video"] = video_;
   j["deform_errors"] = deform_errors_;
-  j["visible_nodes"] = deformer_->visible_nodes().size();
+  j["visible_nodes"] = deformer_ != nullptr ? deformer_->visible_nodes().size() : 0;
   j["tensor_rows"] = tensors_.find("visual") != nullptr ? tensors_.find("visual")->row_count() : 0;
   j["fps"] = wall_seconds_ > 0 ? static_cast<double>(frames_rendered_) / wall_seconds_ : 0.0;
   j["wall_seconds"] = wall_seconds_;
@@ -383,11 +422,28 @@ void VisualApp::shutdown() {
   j["out"] = options_.out;
   j["first_png"] = first_png_;
   j["last_png"] = last_png_;
+  j["dds_participant"] = dds_->participant.profile();
+  watch_.add_stats(j);
+  // Which organ model this run built (a liver run builds no intestine objects, an intestine run no mesh or tensors).
+  j["model_built"] = intestine_ != nullptr ? "intestine" : "liver";
+  if (intestine_ != nullptr) {
+    j["intestine"] = intestine_->stats();
+    j["lod_mean"] = j["intestine"]["lod_mean"];
+    j["lod_target_fps"] = j["intestine"]["target_fps"];
+  }
   if (!options_.stats.empty()) write_json_file(options_.stats, j);
   if (!options_.quiet) {
     std::cerr << "visual_node: " << frames_rendered_ << " frames rendered (" << j["fps"].get<double>() << " fps), "
               << j["frames_received"].get<std::uint64_t>() << " contact frames received, latency p50 " << latency.p50
               << " us p99 " << latency.p99 << " us, " << pngs_written_ << " PNG in " << options_.out << "\n";
+  }
+  if (!options_.quiet && intestine_ != nullptr) {
+    const nlohmann::json& in = j["intestine"];
+    std::cerr << "visual_node: intestine: " << in["body_states_received"].get<std::uint64_t>()
+              << " body states received, LOD mean " << in["lod_mean"].get<double>() << " (final "
+              << in["lod_final"].get<int>() << ", target " << in["target_fps"].get<double>() << " Hz, frame work p50 "
+              << in["work_ms"]["p50"].get<double>() << " ms), tube up to " << in["tube_triangles_max"].get<int>()
+              << " triangles\n";
   }
 }
 

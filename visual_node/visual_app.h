@@ -8,6 +8,7 @@
 #include <memory>
 #include <string>
 
+#include "haptic_watch.h"
 #include "image.h"
 #include "mesh.h"
 #include "precompute.h"
@@ -19,6 +20,7 @@
 namespace surgsim {
 
 class Renderer;
+class IntestineView;
 
 struct VisualOptions {
   std::string scene = "liver";
@@ -30,7 +32,7 @@ struct VisualOptions {
   std::string cache_dir;
   int domain = -1;
   std::string dds_profiles;
-  std::string dds_participant = "surgsim_default";
+  std::string dds_participant;   // empty: $SURGSIM_DDS_PARTICIPANT, else surgsim_default
   double rate_hz = 0;            // > 0 overrides the scene's visual rate
   int png_every = -1;            // >= 0 overrides the scene's png_every
   bool video = false;            // assemble out/video.mp4 with ffmpeg at exit (also when the scene asks)
@@ -59,7 +61,8 @@ class VisualApp {
   std::uint64_t tensor_hash_ = 0;
   Tensors tensors_;                         // "visual" block only (no interior rows)
   std::unique_ptr<NonlinearLaw> law_;
-  std::unique_ptr<SurfaceDeformer> deformer_;
+  std::unique_ptr<SurfaceDeformer> deformer_;    // liver-type scenes only
+  std::unique_ptr<IntestineView> intestine_;     // model "intestine" only (then no mesh, tensors or deformer_)
   std::FILE* index_ = nullptr;              // frames.csv: which contact frame each PNG shows
   std::array<int, 64> contact_nodes_{};
   std::array<Eigen::Vector3d, 64> contact_lambda_{};
@@ -67,6 +70,7 @@ class VisualApp {
   std::uint64_t deform_errors_ = 0;
   std::uint64_t vtk_written_ = 0;
   std::unique_ptr<Renderer> renderer_;
+  HapticWatch watch_;                       // built before the constructor body: its clock origin is the node's start
   std::unique_ptr<Dds> dds_;
   std::atomic<bool> stop_requested_{false};
 

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "error.h"
+#include "tool.h"
 #include "trajectory.h"
 
 namespace surgsim {
@@ -192,6 +193,62 @@ TEST(SceneLoad, IntestineNeedsNoMesh) {
   EXPECT_EQ(s.model, "intestine");
   EXPECT_TRUE(s.mesh.generate.empty());
   EXPECT_TRUE(s.mesh.file.empty());
+  // Without an `intestine` section the body is the model's default, its probe clamped to the tool's force limit.
+  const intestine::IntestineParams defaults;
+  EXPECT_EQ(s.intestine.params.columns, defaults.columns);
+  EXPECT_EQ(s.intestine.params.rows, defaults.rows);
+  EXPECT_EQ(s.intestine.params.probe_force_limit, s.tool.force_limit);
+  EXPECT_EQ(s.visual.target_fps, 0.0);  // = the visual rate
+}
+
+TEST(SceneLoad, IntestineKeysFillTheModelParameters) {
+  const fs::path dir = test_dir();
+  const Scene s = load_scene(write(dir / "i.yaml",
+                                   "name: gut\nmodel: intestine\n"
+                                   "intestine:\n"
+                                   "  length: 3.0\n  cylinder_radius: 0.12\n  folds: 4\n  angular_span: 5.0\n"
+                                   "  fold_shape: 0.5\n  axis_origin: [0, 0, 0.1]\n  axis_direction: [0, 2, 0]\n"
+                                   "  columns: 80\n  rows: 5\n  intestine_radius: 0.015\n  mesentery_thickness: 0\n"
+                                   "  intestine_node_mass: 0.01\n  mesentery_node_mass: 0.003\n"
+                                   "  structural_stiffness: 1000\n  shear_stiffness: 200\n  bending_stiffness: 20\n"
+                                   "  spring_damping: 0.2\n  drag: 1.5\n  gravity: [0, 0, -5]\n"
+                                   "  integrator: symplectic_euler\n  probe_radius: 0.008\n  probe_stiffness: 500\n"
+                                   "  self_collisions: false\n  random_pairs: 20\n  random_mesentery_pairs: 5\n"
+                                   "  seed: 7\n  response_iterations: 2\n  contact_capacity: 256\n"
+                                   "tool: {force_limit: 5}\n"
+                                   "visual: {rate_hz: 30, target_fps: 45}\n"));
+  const intestine::IntestineParams& p = s.intestine.params;
+  EXPECT_EQ(p.length, 3.0);
+  EXPECT_EQ(p.cylinder_radius, 0.12);
+  EXPECT_EQ(p.folds, 4);
+  EXPECT_EQ(p.angular_span, 5.0);
+  EXPECT_EQ(p.fold_shape, 0.5);
+  EXPECT_EQ(p.axis_origin, Eigen::Vector3d(0, 0, 0.1));
+  EXPECT_EQ(p.axis_direction, Eigen::Vector3d(0, 1, 0));  // normalized
+  EXPECT_EQ(p.columns, 80);
+  EXPECT_EQ(p.rows, 5);
+  EXPECT_EQ(p.intestine_radius, 0.015);
+  EXPECT_EQ(p.mesentery_thickness, 0.0);
+  EXPECT_EQ(p.intestine_node_mass, 0.01);
+  EXPECT_EQ(p.mesentery_node_mass, 0.003);
+  EXPECT_EQ(p.structural_stiffness, 1000.0);
+  EXPECT_EQ(p.shear_stiffness, 200.0);
+  EXPECT_EQ(p.bending_stiffness, 20.0);
+  EXPECT_EQ(p.spring_damping, 0.2);
+  EXPECT_EQ(p.drag, 1.5);
+  EXPECT_EQ(p.gravity, Eigen::Vector3d(0, 0, -5));
+  EXPECT_EQ(p.integrator, intestine::Integrator::kSymplecticEuler);
+  EXPECT_EQ(s.intestine.probe_radius, 0.008);
+  EXPECT_EQ(p.probe_stiffness, 500.0);
+  EXPECT_EQ(p.probe_force_limit, 5.0);
+  EXPECT_FALSE(p.self_collisions);
+  EXPECT_EQ(p.detection.random_pairs, 20);
+  EXPECT_EQ(p.detection.random_mesentery_pairs, 5);
+  EXPECT_EQ(p.detection.seed, 7u);
+  EXPECT_EQ(p.response.iterations, 2);
+  EXPECT_EQ(p.contact_capacity, 256);
+  EXPECT_EQ(s.visual.target_fps, 45.0);
+  EXPECT_NO_THROW(intestine::IntestineModel model(p));  // what the scene says, the model accepts
 }
 
 TEST(FixedRegion, FixesListedNodesBoxesAndPlaneSide) {
@@ -261,6 +318,30 @@ TEST(ShippedScenes, AllThreeLoadAndMatchTheirGeometry) {
 }
 
 // The poses the shipped trajectories drive: the tip starts above the top surface and goes the stated depth in.
+// The intestine scene: the paper's body, and a tool whose tip reaches the hanging folds (x [-0.19, 0.2],
+// y [-0.12, 0.13], z [-0.15, 0.04] m once gravity has acted) in both shipped trajectories.
+TEST(ShippedScenes, IntestineLoadsAndItsTrajectoriesReachTheFolds) {
+  const Scene s = load_scene((fs::path(shipped_config_dir()) / "intestine.yaml").string());
+  EXPECT_EQ(s.model, "intestine");
+  EXPECT_TRUE(s.mesh.generate.empty() && s.mesh.file.empty());
+  EXPECT_EQ(s.intestine.params.columns * s.intestine.params.rows, 400);
+  EXPECT_EQ(s.intestine.params.length, 4.0);
+  EXPECT_GE(s.haptic.rate_hz, 1000.0);
+  EXPECT_GT(s.visual.target_fps, 0.0);
+  EXPECT_NO_THROW(intestine::IntestineModel model(s.intestine.params));
+  for (const char* name : {"intestine_push.csv", "intestine_lift.csv"}) {
+    SCOPED_TRACE(name);
+    const Trajectory traj = Trajectory::load((fs::path(shipped_config_dir()) / "trajectories" / name).string());
+    const auto tip = [&](const Pose5& p) { return tool_geometry(s.tool, p).tip; };
+    const Eigen::Vector3d first = tip(traj.samples().front().pose);
+    EXPECT_GT(first.y(), 0.13 + s.intestine.params.intestine_radius);  // starts clear of the folds
+    double deepest_y = 1e9;
+    for (const auto& smp : traj.samples()) deepest_y = std::min(deepest_y, tip(smp.pose).y());
+    EXPECT_LT(deepest_y, 0.06);  // well inside the folds
+    EXPECT_EQ(traj.samples().front().pose.insertion, traj.samples().back().pose.insertion);
+  }
+}
+
 TEST(ShippedScenes, TrajectoriesReachTheStatedDepth) {
   struct Case {
     const char* scene;
@@ -312,6 +393,19 @@ TEST(SceneHash, IgnoresVisualSettingsButNotPhysics) {
                                  "name: mini\nmesh: {generate: liver, target_nodes: 1400}\n"
                                  "material: {young_modulus: 3000}\n"))
                     .hash());
+}
+
+TEST(SceneHash, IntestineParametersEnterTheHash) {
+  const fs::path dir = test_dir();
+  const std::string base = "name: gut\nmodel: intestine\n";
+  const std::uint64_t h0 = load_scene(write(dir / "a.yaml", base)).hash();
+  EXPECT_EQ(h0, load_scene(write(dir / "b.yaml", base + "intestine: {columns: 100}\n")).hash());  // the default
+  EXPECT_EQ(h0, load_scene(write(dir / "c.yaml", base + "visual: {target_fps: 20}\n")).hash());
+  for (const char* change : {"intestine: {columns: 90}\n", "intestine: {random_pairs: 11}\n", "intestine: {seed: 2}\n",
+                             "intestine: {probe_radius: 0.02}\n", "intestine: {gravity: [0, 0, -9]}\n",
+                             "intestine: {integrator: symplectic_euler}\n", "tool: {force_limit: 4}\n"}) {
+    EXPECT_NE(h0, load_scene(write(dir / "d.yaml", base + change)).hash()) << change;
+  }
 }
 
 TEST(SceneHash, UsesMeshFileNameNotFolder) {
@@ -368,6 +462,7 @@ TEST_P(SceneError, NamesFileLineAndKey) {
 }
 
 const std::string kHead = "name: t\nmesh: {generate: liver}\n";  // 2 lines
+const std::string kIntestine = "name: t\nmodel: intestine\n";    // 2 lines
 
 INSTANTIATE_TEST_SUITE_P(
     Cases, SceneError,
@@ -486,7 +581,38 @@ INSTANTIATE_TEST_SUITE_P(
                   "not found"},
         ErrorCase{"SurfaceMissing", kHead + "visual: {surface: meshes/none.vtk}\n", 3, "key 'visual.surface'",
                   "not found"},
-        ErrorCase{"TrajectoryIsFolder", kHead + "trajectory: .\n", 3, "key 'trajectory'", "not a regular file"}),
+        ErrorCase{"TrajectoryIsFolder", kHead + "trajectory: .\n", 3, "key 'trajectory'", "not a regular file"},
+        // The intestine section
+        ErrorCase{"IntestineForLiver", kHead + "intestine: {columns: 100}\n", 3, "key 'intestine'",
+                  "model: intestine"},
+        ErrorCase{"IntestineUnknownKey", kIntestine + "intestine:\n  colums: 100\n", 4, "key 'intestine.colums'",
+                  "did you mean 'columns'"},
+        ErrorCase{"IntestineTooManyMasses", kIntestine + "intestine:\n  rows: 5\n  columns: 500\n", 5,
+                  "key 'intestine.columns'", "exceed 2048"},
+        ErrorCase{"IntestineColumnsLow", kIntestine + "intestine: {columns: 3}\n", 3, "key 'intestine.columns'",
+                  "[4, 2048]"},
+        ErrorCase{"IntestineRowsLow", kIntestine + "intestine: {rows: 1}\n", 3, "key 'intestine.rows'", "out of range"},
+        ErrorCase{"IntestineRadius", kIntestine + "intestine: {intestine_radius: 0}\n", 3,
+                  "key 'intestine.intestine_radius'", "out of range"},
+        ErrorCase{"IntestineShort", kIntestine + "intestine:\n  length: 0.5\n", 4, "key 'intestine.length'",
+                  "does not exceed the arc"},
+        ErrorCase{"IntestineSpan", kIntestine + "intestine: {angular_span: 7}\n", 3, "key 'intestine.angular_span'",
+                  "out of range"},
+        ErrorCase{"IntestineStiffness", kIntestine + "intestine: {structural_stiffness: -1}\n", 3,
+                  "key 'intestine.structural_stiffness'", "out of range"},
+        ErrorCase{"IntestineMass", kIntestine + "intestine: {mesentery_node_mass: 0}\n", 3,
+                  "key 'intestine.mesentery_node_mass'", "out of range"},
+        ErrorCase{"IntestineIntegrator", kIntestine + "intestine: {integrator: rk4}\n", 3,
+                  "key 'intestine.integrator'", "implicit_euler, symplectic_euler"},
+        ErrorCase{"IntestineSeedZero", kIntestine + "intestine: {seed: 0}\n", 3, "key 'intestine.seed'",
+                  "out of range"},
+        ErrorCase{"IntestinePairs", kIntestine + "intestine: {random_pairs: -1}\n", 3, "key 'intestine.random_pairs'",
+                  "out of range"},
+        ErrorCase{"IntestineBool", kIntestine + "intestine: {self_collisions: sometimes}\n", 3,
+                  "key 'intestine.self_collisions'", "true or false"},
+        ErrorCase{"IntestineAxis", kIntestine + "intestine: {axis_direction: [0, 0, 0]}\n", 3,
+                  "key 'intestine.axis_direction'", "zero vector"},
+        ErrorCase{"TargetFps", kIntestine + "visual: {target_fps: 0}\n", 3, "key 'visual.target_fps'", "[1, 1000]"}),
     [](const ::testing::TestParamInfo<ErrorCase>& info) { return std::string(info.param.name); });
 
 TEST(SceneLoad, MissingFileIsAnErrorNamingIt) {

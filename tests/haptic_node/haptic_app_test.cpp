@@ -42,5 +42,23 @@ TEST(HapticApp, TickAllocatesNothingOnceWarm) {
   EXPECT_EQ(allocations, 0) << "ticks " << warm << ".." << app.total_ticks();
 }
 
+// The intestine scene: mass-spring step, probe force, ContactFrame, ForceFeedback and BodyState every tick.
+TEST(HapticApp, IntestineTickAllocatesNothingOnceWarm) {
+  HapticOptions o = test_options();
+  o.scene = "intestine";
+  o.duration = 3.0;  // the push reaches the folds at about 1.9 s
+  o.log = ::testing::TempDir() + "/haptic_app_intestine_alloc_log.csv";
+  HapticApp app(o);
+  const std::uint64_t warm = 200;  // first DDS sends, first self-contacts while the folds fall
+  for (std::uint64_t k = 0; k < warm; ++k) app.tick(k);
+  long allocations = 0;
+  {
+    test::AllocationCounter counter;
+    for (std::uint64_t k = warm; k < app.total_ticks(); ++k) app.tick(k);
+    allocations = counter.count();
+  }
+  EXPECT_EQ(allocations, 0) << "ticks " << warm << ".." << app.total_ticks();
+}
+
 }  // namespace
 }  // namespace surgsim

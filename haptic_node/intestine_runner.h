@@ -1,0 +1,73 @@
+// The intestine scene in the haptic node (DESIGN.md 4.3, issue 6): the mass-spring intestine and mesentery stepped
+// every tick with the tool tip as the probe, the probe force for the device, and the body's positions published as
+// BodyState for the visual node. A liver scene never builds one (HapticApp makes it for model "intestine" only), and
+// an intestine scene builds no mesh, tensors or bucket grid.
+//
+// Phases: the constructor and create_writer() allocate (model, state, step-time storage, the DDS writer and its
+// sample sized once to the body's node count); step() and publish() allocate nothing; stats() is for shutdown.
+#pragma once
+#include <cstdint>
+#include <nlohmann/json.hpp>
+
+#include "Surgsim.h"
+#include "dds_support.h"
+#include "intestine_model.h"
+#include "liver_contacts.h"
+#include "scene.h"
+#include "stats.h"
+#include "tool.h"
+
+namespace surgsim {
+
+class IntestineRunner {
+ public:
+  /// Init (allocates; throws surgsim::Error on bad parameters): the model and state of scene.intestine, room for
+  /// `ticks` step times.
+  IntestineRunner(const Scene& scene, std::uint64_t ticks);
+
+  /// Init: the BodyState writer (stream profile: best effort, keep last 1) and its preallocated sample.
+  void create_writer(dds::Participant& participant, std::uint64_t scene_hash);
+
+  /// Run phase, noexcept, no allocation: one step of dt (s) with the probe at the tool tip (no probe when `tool` is
+  /// null, e.g. while the device input is lost: the body keeps moving, the force is zero). Fills `out` as
+  /// LiverContacts::step does: force (N, on the tool, before the device clamp), device_force (clamped to
+  /// tool.force_limit, always finite), saturated, over_capacity (probe or self-contact capacity exceeded), nonfinite
+  /// (the step was refused and the state restored: a fault), points_in_contact (elements the probe touches).
+  void step(const ToolGeometry* tool, double dt, ContactTick& out) noexcept;
+
+  /// Run phase, no allocation: publishes the positions as BodyState with the seq, sim time, pose and tip of `frame`
+  /// (the ContactFrame of the same tick). Nothing when create_writer() was not called.
+  void publish(const msg::ContactFrame& frame) noexcept;
+
+  const intestine::IntestineModel& model() const { return model_; }
+  const intestine::IntestineState& state() const { return state_; }
+  const intestine::StepReport& report() const { return report_; }
+  std::uint64_t faults() const { return faults_; }
+
+  /// Shutdown: step time percentiles (us), faults, contacts, published states, for the haptic stats JSON.
+  nlohmann::json stats() const;
+
+ private:
+  intestine::IntestineModel model_;
+  intestine::IntestineState state_;
+  intestine::StepReport report_;
+  double probe_radius_ = 0.01;  // m
+  SampleRecorder step_us_;
+  std::uint64_t steps_ = 0;
+  std::uint64_t faults_ = 0;
+  std::uint64_t status_counts_[4] = {0, 0, 0, 0};  // by intestine::StepStatus
+  int self_contacts_max_ = 0;
+  double self_contacts_sum_ = 0;
+  int probe_contacts_max_ = 0;
+  std::uint64_t probe_contact_ticks_ = 0;
+  std::uint64_t probe_overflow_ticks_ = 0;
+  std::uint64_t contacts_overflow_ticks_ = 0;
+  std::uint64_t saturated_ticks_ = 0;
+  double penetration_after_max_ = 0;  // m, largest self-collision penetration left after the response
+  int active_pairs_max_ = 0;
+  eprosima::fastdds::dds::DataWriter* writer_ = nullptr;
+  msg::BodyState sample_;
+  std::uint64_t published_ = 0;
+};
+
+}  // namespace surgsim

@@ -1,0 +1,193 @@
+// Faults between real processes on one host (issue 7): kill -9 of the visual node and its restart, kill -9 of the
+// haptic node seen by the visual node (ContactFrame deadline and liveliness QoS in config/dds/profiles.xml), and a
+// device driver killed mid-press (the force goes to exactly zero; no stale force is sent).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "process.h"
+
+namespace surgsim {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::Process;
+
+std::uint64_t now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
+}
+
+class Faults : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::path(::testing::TempDir()) / ("surgsim_faults_" + std::to_string(getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    env_ = {"SURGSIM_DOMAIN=" + std::to_string(testing::private_domain(11)),
+            "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR, "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(dir_);
+  }
+  std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  /// Waits until `file` contains `text` (true) or `timeout_s` passes (false).
+  static bool wait_for_text(const std::string& file, const std::string& text, double timeout_s) {
+    const std::uint64_t until = now_ns() + static_cast<std::uint64_t>(timeout_s * 1e9);
+    while (now_ns() < until) {
+      if (testing::read_file(file).find(text) != std::string::npos) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return false;
+  }
+  static nlohmann::json json(const std::string& file) { return nlohmann::json::parse(testing::read_file(file)); }
+  static void sleep_s(double s) { std::this_thread::sleep_for(std::chrono::duration<double>(s)); }
+  fs::path dir_;
+  std::vector<std::string> env_;
+};
+
+TEST_F(Faults, VisualKilledThenRestartedHapticUnaffected) {
+  // The haptic loop runs 5 s; the visual node is killed (SIGKILL) 1 s in and a new one starts 1 s later. Over UDPv4
+  // (surgsim_udp): Fast DDS 2.9's shared-memory transport does not reliably rediscover a peer restarted after a
+  // crash (README, "Faults").
+  env_.push_back("SURGSIM_DDS_PARTICIPANT=surgsim_udp");
+  Process visual_a(bin("visual_node"), {"--scene", "liver", "--headless", "--stats", path("visual_a.json")}, env_,
+                   path("visual_a.log"));
+  Process haptic(bin("haptic_node"),
+                 {"--scene", "liver", "--duration", "5", "--wait-for-visual", "60", "--stats", path("haptic.json")},
+                 env_, path("haptic.log"));
+  ASSERT_TRUE(wait_for_text(path("visual_a.log"), "first contact frame", 60)) << testing::read_file(path("haptic.log"));
+  sleep_s(1.0);
+  visual_a.signal(SIGKILL);
+  EXPECT_EQ(visual_a.wait(10), 128 + SIGKILL);
+  sleep_s(1.0);
+  const std::uint64_t restart_ns = now_ns();
+  Process visual_b(bin("visual_node"), {"--scene", "liver", "--headless", "--stats", path("visual_b.json")}, env_,
+                   path("visual_b.log"));
+  ASSERT_TRUE(wait_for_text(path("visual_b.log"), "first contact frame", 10)) << testing::read_file(path("visual_b.log"));
+  const double resync_ms = static_cast<double>(now_ns() - restart_ns) * 1e-6;
+  ASSERT_EQ(haptic.wait(60), 0) << testing::read_file(path("haptic.log"));
+  visual_b.signal(SIGINT);
+  ASSERT_EQ(visual_b.wait(30), 0) << testing::read_file(path("visual_b.log"));
+
+  // The haptic loop (SCHED_FIFO, as deployed) never waited on the dead reader: every tick ran, the tick's own time
+  // stayed in budget and the rate held. Missed deadlines are bounded loosely: on the 2-vCPU CI virtual machines any
+  // process start (the restarted visual node loads ~90 MB of tensors) can stall a SCHED_FIFO wake-up by tens of ms,
+  // with or without a kill (README, "Faults", has the comparison).
+  const auto h = json(path("haptic.json"));
+  const double ticks = h["ticks"].get<double>();
+  EXPECT_EQ(ticks, 5.0 * h["rate_hz"].get<double>());
+  EXPECT_GE(h["achieved_hz"].get<double>(), 0.97 * h["rate_hz"].get<double>()) << h.dump(2);
+  EXPECT_LE(h["deadline_misses"].get<double>(), std::max(5.0, 0.05 * ticks)) << h.dump(2);
+  EXPECT_LT(h["tick_us"]["p99"].get<double>(), 1000.0) << h.dump(2);
+  // The restarted node: SceneInfo (transient local) from the haptic node that was already running, the current
+  // state within a second of its start, frames until the end.
+  const auto v = json(path("visual_b.json"));
+  EXPECT_TRUE(v["scene_info_received"].get<bool>());
+  EXPECT_TRUE(v["scene_hash_ok"].get<bool>());
+  EXPECT_GT(v["first_frame_ms"].get<double>(), 0.0);
+  // Typically ~0.25 s (node start-up included); a discovery message lost or raced costs one 1 s heartbeat of Fast
+  // DDS 2.9's endpoint discovery (fixed in the library), hence the margin.
+  EXPECT_LT(v["first_frame_ms"].get<double>(), 2500.0) << v.dump(2);
+  EXPECT_LT(resync_ms, 3000.0) << "process start to the first frame, as seen from outside";
+  EXPECT_GT(v["frames_received"].get<double>(), 0.5 * h["rate_hz"].get<double>()) << v.dump(2);
+  RecordProperty("visual_resync_ms", std::to_string(v["first_frame_ms"].get<double>()));
+}
+
+TEST_F(Faults, LostHapticNodeIsDetectedAndRecovered) {
+  Process visual(bin("visual_node"), {"--scene", "liver", "--headless", "--stats", path("visual.json")}, env_,
+                 path("visual.log"));
+  {
+    Process haptic_a(bin("haptic_node"),
+                     {"--scene", "liver", "--duration", "30", "--wait-for-visual", "60", "--rt-priority", "0"}, env_,
+                     path("haptic_a.log"));
+    ASSERT_TRUE(wait_for_text(path("visual.log"), "first contact frame", 60)) << testing::read_file(path("haptic_a.log"));
+    sleep_s(0.5);
+    haptic_a.signal(SIGKILL);
+    EXPECT_EQ(haptic_a.wait(10), 128 + SIGKILL);
+  }
+  const std::uint64_t kill_ns = now_ns();
+  ASSERT_TRUE(wait_for_text(path("visual.log"), "haptic node lost", 2)) << testing::read_file(path("visual.log"));
+  const double seen_ms = static_cast<double>(now_ns() - kill_ns) * 1e-6;
+  // Liveliness (1 s lease) then says the participant itself is gone, not just late.
+  ASSERT_TRUE(wait_for_text(path("visual.log"), "haptic participant not alive", 3)) << testing::read_file(path("visual.log"));
+  // A new haptic node: the visual node recovers and draws again.
+  Process haptic_b(bin("haptic_node"), {"--scene", "liver", "--duration", "30", "--rt-priority", "0"}, env_,
+                   path("haptic_b.log"));
+  ASSERT_TRUE(wait_for_text(path("visual.log"), "haptic node back", 30)) << testing::read_file(path("haptic_b.log"));
+  sleep_s(0.3);
+  visual.signal(SIGINT);
+  ASSERT_EQ(visual.wait(30), 0) << testing::read_file(path("visual.log"));
+  haptic_b.signal(SIGINT);
+  EXPECT_EQ(haptic_b.wait(30), 0);
+
+  const auto v = json(path("visual.json"));
+  EXPECT_EQ(v["haptic_lost_events"].get<int>(), 1) << v.dump(2);
+  EXPECT_EQ(v["haptic_recoveries"].get<int>(), 1) << v.dump(2);
+  EXPECT_FALSE(v["haptic_lost_at_exit"].get<bool>());
+  EXPECT_GE(v["haptic_liveliness_lost"].get<int>(), 1);
+  // Stated deadline: the ContactFrame deadline is 100 ms; detected within 100 ms + 50 ms of timer slack after the
+  // last frame (the log line is polled every 10 ms from outside).
+  const double detect_ms = v["haptic_lost_detect_ms"]["max"].get<double>();
+  EXPECT_GE(detect_ms, 90.0);
+  EXPECT_LE(detect_ms, 150.0) << v.dump(2);
+  EXPECT_LE(seen_ms, 250.0);
+  RecordProperty("haptic_lost_detect_ms", std::to_string(detect_ms));
+}
+
+TEST_F(Faults, DeviceKilledMidPressZeroesTheForce) {
+  // The device plays liver_press_slide (in contact from 1.15 s to 3.3 s of its motion) and is killed 2 s after it
+  // matched the haptic node, mid-press; the haptic node must send exactly zero force from
+  // --input-timeout after the last command on, and hold the tool.
+  const double timeout_s = 0.1;
+  Process haptic(bin("haptic_node"),
+                 {"--scene", "liver", "--input", "device", "--input-timeout", "0.1", "--duration", "4",
+                  "--rt-priority", "0", "--stats", path("haptic.json"), "--log", path("haptic_log.csv")},
+                 env_, path("haptic.log"));
+  Process device(bin("surgsim-device-sim"),
+                 {"--trajectory", std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/liver_press_slide.csv", "--rate",
+                  "1000", "--wait-for-haptic", "60"},
+                 env_, path("device.log"));
+  ASSERT_TRUE(wait_for_text(path("device.log"), "haptic node matched", 60)) << testing::read_file(path("device.log"));
+  sleep_s(2.0);
+  device.signal(SIGKILL);
+  const std::uint64_t kill_ns = now_ns();
+  EXPECT_EQ(device.wait(10), 128 + SIGKILL);
+  ASSERT_EQ(haptic.wait(60), 0) << testing::read_file(path("haptic.log"));
+
+  const auto h = json(path("haptic.json"));
+  const double rate = h["rate_hz"].get<double>();
+  const double kill_t = static_cast<double>(kill_ns - h["loop_start_ns"].get<std::uint64_t>()) * 1e-9;
+  ASSERT_GT(kill_t, 0.5);
+  ASSERT_LT(kill_t, 3.7);
+  // Per-tick force from the --log: tick,t,fx,fy,fz,contacts.
+  std::istringstream log(testing::read_file(path("haptic_log.csv")));
+  std::string line;
+  std::getline(log, line);
+  double pressed_before = 0, first_zero_after = -1;
+  long nonzero_late = 0, zero_late = 0;
+  while (std::getline(log, line)) {
+    std::stringstream ss(line);
+    std::string f[6];
+    for (auto& x : f) std::getline(ss, x, ',');
+    const double t = std::stod(f[1]);
+    const double force = std::hypot(std::stod(f[2]), std::stod(f[3]), std::stod(f[4]));
+    if (t > kill_t - 0.3 && t < kill_t) pressed_before = std::max(pressed_before, force);
+    if (t >= kill_t && force == 0.0 && first_zero_after < 0) first_zero_after = t;
+    if (t > kill_t + timeout_s + 0.05) (force == 0.0 ? zero_late : nonzero_late)++;
+  }
+  EXPECT_GT(pressed_before, 0.1) << "the tool pressed the organ when the device died";
+  ASSERT_GE(first_zero_after, 0.0) << "the force never went to zero after the device died";
+  EXPECT_LE(first_zero_after - kill_t, timeout_s + 0.05) << "zero force within --input-timeout of the loss";
+  EXPECT_EQ(nonzero_late, 0) << "no stale force after the loss";
+  EXPECT_GT(zero_late, static_cast<long>(0.5 * rate));
+  EXPECT_GE(h["input_lost_ticks"].get<double>(), static_cast<double>(zero_late)) << h.dump(2);
+}
+
+}  // namespace
+}  // namespace surgsim

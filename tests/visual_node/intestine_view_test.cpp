@@ -1,0 +1,97 @@
+// IntestineView without DDS or GL: body states in, tube and mesentery drawn on the null renderer, LOD control.
+#include "intestine_view.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "intestine_model.h"
+#include "renderer.h"
+
+namespace surgsim {
+namespace {
+
+Scene shipped_intestine() { return load_scene(std::string(SURGSIM_TEST_CONFIG_DIR) + "/intestine.yaml"); }
+
+// The rest shape of the scene's model, as a BodyState carries it.
+std::vector<double> rest_positions(const Scene& scene) {
+  const intestine::IntestineModel model(scene.intestine.params);
+  return std::vector<double>(model.rest().data(), model.rest().data() + model.rest().size());
+}
+
+TEST(IntestineView, DrawsTubeAndMesenteryOfABodyState) {
+  const Scene scene = shipped_intestine();
+  IntestineView view(scene, scene.hash());
+  auto renderer = make_renderer("null", 64, 48);
+
+  // Nothing to draw before the first body state.
+  EXPECT_FALSE(view.has_body());
+  renderer->begin_frame(scene.visual.camera);
+  view.draw(*renderer);
+  renderer->end_frame();
+  EXPECT_EQ(renderer->counts().surfaces, 0u);
+
+  const std::vector<double> x = rest_positions(scene);
+  ASSERT_TRUE(view.set_positions(x.data(), static_cast<int>(x.size() / 3)));
+  EXPECT_TRUE(view.has_body());
+  EXPECT_EQ(view.lod(), intestine::kTubeMaxLod);  // starts at the finest level
+  ASSERT_GT(view.tube_vertices(), 0);
+  EXPECT_GT(view.tube_triangles(), 1000);
+  // The tube surrounds the intestine's points: every vertex within about a radius of the axis' bounding box.
+  const Eigen::Map<const Eigen::Matrix3Xd> pts(x.data(), 3, scene.intestine.params.columns);
+  const Eigen::Vector3f lo = pts.rowwise().minCoeff().cast<float>(), hi = pts.rowwise().maxCoeff().cast<float>();
+  const float r = static_cast<float>(scene.intestine.params.intestine_radius) * 1.01f;
+  for (int v = 0; v < view.tube_vertices(); ++v) {
+    const Eigen::Vector3f p = view.tube_positions().row(v).transpose();
+    ASSERT_TRUE(p.allFinite());
+    ASSERT_TRUE(((p.array() >= lo.array() - r) && (p.array() <= hi.array() + r)).all()) << v;
+  }
+  renderer->begin_frame(scene.visual.camera);
+  view.draw(*renderer);
+  renderer->end_frame();
+  EXPECT_EQ(renderer->counts().surfaces, 2u);  // mesentery and tube
+  EXPECT_EQ(renderer->counts().rejected, 0u);
+}
+
+TEST(IntestineView, RefusesWrongCountsAndNonFiniteValues) {
+  const Scene scene = shipped_intestine();
+  IntestineView view(scene, scene.hash());
+  std::vector<double> x = rest_positions(scene);
+  EXPECT_FALSE(view.set_positions(x.data(), static_cast<int>(x.size() / 3) - 1));
+  x[7] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(view.set_positions(x.data(), static_cast<int>(x.size() / 3)));
+  EXPECT_FALSE(view.has_body());
+  EXPECT_EQ(view.stats()["body_states_rejected"].get<int>(), 2);
+}
+
+// Frames whose work allows only half the target rate: the controller removes levels of detail (paper eq. 15), and
+// frames that leave room bring them back.
+TEST(IntestineView, FrameRateControllerLowersAndRaisesTheLod) {
+  const Scene scene = shipped_intestine();
+  IntestineView view(scene, scene.hash());
+  const std::vector<double> x = rest_positions(scene);
+  ASSERT_TRUE(view.set_positions(x.data(), static_cast<int>(x.size() / 3)));
+  const double target = view.controller().params().target_hz;
+  const int full = view.tube_triangles();
+  for (int k = 0; k < 2000; ++k) {
+    view.frame_done(2.0 / target);
+    view.update();
+  }
+  EXPECT_LT(view.lod(), intestine::kTubeMaxLod);
+  EXPECT_LT(view.tube_triangles(), full) << "the rebuilt tube follows the controller's LOD";
+  const int low = view.lod();
+  for (int k = 0; k < 4000; ++k) {
+    view.frame_done(0.25 / target);
+    view.update();
+  }
+  EXPECT_GT(view.lod(), low);
+  const auto s = view.stats();
+  EXPECT_EQ(s["target_fps"].get<double>(), target);
+  EXPECT_EQ(s["lod_histogram"].size(), static_cast<std::size_t>(intestine::kTubeMaxLod + 1));
+  EXPECT_GE(s["lod_mean"].get<double>(), 0.0);
+}
+
+}  // namespace
+}  // namespace surgsim

@@ -1,0 +1,238 @@
+#include "intestine_view.h"
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+
+#include "Surgsim.h"
+#include "SurgsimPubSubTypes.h"
+#include "clock.h"
+#include "renderer.h"
+
+namespace surgsim {
+
+using eprosima::fastdds::dds::DataReader;
+using eprosima::fastdds::dds::DataReaderListener;
+using eprosima::fastdds::dds::SampleInfo;
+using eprosima::fastrtps::types::ReturnCode_t;
+
+// Keeps the newest BodyState (runs on the DDS listener thread; the frame loop copies it out under the lock).
+class BodyStateListener : public DataReaderListener {
+ public:
+  BodyStateListener() {
+    incoming_.positions().reserve(msg::kMaxBodyPoints);
+    newest_.positions().reserve(msg::kMaxBodyPoints);
+  }
+  void on_data_available(DataReader* reader) override {
+    SampleInfo info;
+    while (reader->take_next_sample(&incoming_, &info) == ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      std::lock_guard<std::mutex> lock(mutex_);
+      newest_ = incoming_;  // within the reserved capacity
+      ++received_;
+    }
+  }
+  /// Copies the newest state's positions into `xyz` (room for kMaxBodyPoints points) if it is newer than the last
+  /// one taken: returns its point count, else -1.
+  int take(double* xyz, std::uint64_t& seq, std::uint64_t& scene_hash, std::uint64_t& received) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    received = received_;
+    if (received_ == taken_) return -1;
+    taken_ = received_;
+    const auto& p = newest_.positions();
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      xyz[3 * i] = p[i].x();
+      xyz[3 * i + 1] = p[i].y();
+      xyz[3 * i + 2] = p[i].z();
+    }
+    seq = newest_.seq();
+    scene_hash = newest_.scene_hash();
+    return static_cast<int>(p.size());
+  }
+
+ private:
+  std::mutex mutex_;
+  msg::BodyState incoming_;
+  msg::BodyState newest_;
+  std::uint64_t received_ = 0;
+  std::uint64_t taken_ = 0;
+};
+
+namespace {
+
+intestine::TubeParams tube_params(const Scene& scene) {
+  intestine::TubeParams p;
+  p.radius = scene.intestine.params.intestine_radius;
+  return p;
+}
+
+intestine::FrameRateParams rate_params(const Scene& scene) {
+  intestine::FrameRateParams p;  // the paper's alpha and beta
+  p.target_hz = scene.visual.target_fps > 0 ? scene.visual.target_fps : scene.visual.rate_hz;
+  p.lod_min = 0;
+  p.lod_max = intestine::kTubeMaxLod;
+  p.initial_lod = intestine::kTubeMaxLod;
+  return p;
+}
+
+}  // namespace
+
+IntestineView::IntestineView(const Scene& scene, std::uint64_t scene_hash)
+    : rows_(scene.intestine.params.rows),
+      cols_(scene.intestine.params.columns),
+      scene_hash_(scene_hash),
+      target_fps_(rate_params(scene).target_hz),
+      points_(static_cast<std::size_t>(3 * rows_ * cols_), 0.0),
+      builder_(tube_params(scene), cols_),
+      tube_(builder_.make_mesh(intestine::kTubeMaxLod)),
+      mesentery_(intestine::make_mesentery_mesh(rows_, cols_)),
+      controller_(rate_params(scene)),
+      incoming_(3 * static_cast<std::size_t>(msg::kMaxBodyPoints), 0.0) {
+  tube_positions_.resize(static_cast<Eigen::Index>(tube_.positions.size() / 3), 3);
+  tube_tris_.resize(static_cast<Eigen::Index>(tube_.indices.size() / 3), 3);
+  mesentery_positions_.resize(mesentery_.vertex_count, 3);
+
+  // The strip unrolled into triangles once (the renderer draws triangle lists): every other triangle is flipped to
+  // keep one winding, the degenerate joins between rows are skipped.
+  std::vector<Eigen::Vector3i> tris;
+  const auto& s = mesentery_.strip;
+  for (std::size_t i = 0; i + 2 < s.size(); ++i) {
+    const int a = static_cast<int>(s[i]), b = static_cast<int>(s[i + 1]), c = static_cast<int>(s[i + 2]);
+    if (a == b || b == c || a == c) continue;
+    tris.push_back(i % 2 == 0 ? Eigen::Vector3i(a, b, c) : Eigen::Vector3i(b, a, c));
+  }
+  mesentery_tris_.resize(static_cast<Eigen::Index>(tris.size()), 3);
+  for (std::size_t i = 0; i < tris.size(); ++i) mesentery_tris_.row(static_cast<Eigen::Index>(i)) = tris[i].transpose();
+}
+
+IntestineView::~IntestineView() = default;
+
+void IntestineView::subscribe(dds::Participant& participant) {
+  listener_ = std::make_unique<BodyStateListener>();
+  participant.reader(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()), dds::kStreamReader,
+                     listener_.get());
+}
+
+bool IntestineView::accept(const double* xyz, int count) noexcept {
+  if (count != rows_ * cols_) return false;
+  for (int i = 0; i < 3 * count; ++i) {
+    if (!std::isfinite(xyz[i])) return false;
+  }
+  std::copy(xyz, xyz + 3 * count, points_.begin());
+  have_body_ = true;
+  ++states_shown_;
+  return true;
+}
+
+bool IntestineView::update() noexcept {
+  bool fresh = false;
+  if (listener_ != nullptr) {
+    std::uint64_t seq = 0, hash = 0;
+    const int count = listener_->take(incoming_.data(), seq, hash, states_received_);
+    if (count >= 0) {
+      if (hash == scene_hash_ && accept(incoming_.data(), count)) {
+        fresh = true;
+        last_seq_ = seq;
+      } else {
+        ++states_rejected_;
+      }
+    }
+  }
+  const int lod = controller_.lod();
+  if (have_body_ && (fresh || lod != built_lod_)) rebuild(lod);
+  return fresh;
+}
+
+bool IntestineView::set_positions(const double* xyz, int count) noexcept {
+  if (!accept(xyz, count)) {
+    ++states_rejected_;
+    return false;
+  }
+  rebuild(controller_.lod());
+  return true;
+}
+
+void IntestineView::rebuild(int lod) noexcept {
+  const std::uint64_t t0 = monotonic_ns();
+  // The tube through the intestine's points (row 0 of the grid), skinned on the CPU.
+  if (builder_.build(points_.data(), cols_, lod, tube_)) {
+    for (int v = 0; v < tube_.vertex_count; ++v) {
+      tube_positions_.row(v) << tube_.positions[3 * static_cast<std::size_t>(v)],
+          tube_.positions[3 * static_cast<std::size_t>(v) + 1], tube_.positions[3 * static_cast<std::size_t>(v) + 2];
+    }
+    const int tris = tube_.index_count / 3;
+    for (int t = 0; t < tris; ++t) {
+      for (int k = 0; k < 3; ++k) {
+        tube_tris_(t, k) = static_cast<int>(tube_.indices[3 * static_cast<std::size_t>(t) + static_cast<std::size_t>(k)]);
+      }
+    }
+    tube_vertices_max_ = std::max(tube_vertices_max_, tube_.vertex_count);
+    tube_triangles_max_ = std::max(tube_triangles_max_, tris);
+  } else {
+    ++build_failures_;  // the tube is not drawn until a build succeeds
+  }
+  // The mesentery over the whole grid.
+  if (intestine::mesentery_strip(points_.data(), mesentery_)) {
+    for (int v = 0; v < mesentery_.vertex_count; ++v) {
+      mesentery_positions_.row(v) << mesentery_.positions[3 * static_cast<std::size_t>(v)],
+          mesentery_.positions[3 * static_cast<std::size_t>(v) + 1],
+          mesentery_.positions[3 * static_cast<std::size_t>(v) + 2];
+    }
+  }
+  built_lod_ = lod;
+  build_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
+}
+
+void IntestineView::draw(Renderer& renderer) const {
+  if (!have_body_) return;
+  renderer.draw_surface(mesentery_positions_, mesentery_tris_, kMesenteryRgb);
+  if (tube_.vertex_count > 0) {
+    renderer.draw_surface(tube_positions_.topRows(tube_.vertex_count), tube_tris_.topRows(tube_.index_count / 3),
+                          kIntestineRgb);
+  }
+}
+
+void IntestineView::frame_done(double work_seconds) noexcept {
+  if (have_body_) ++lod_frames_[static_cast<std::size_t>(std::clamp(built_lod_, 0, intestine::kTubeMaxLod))];
+  if (work_seconds > 0 && std::isfinite(work_seconds)) {
+    work_ms_.add(work_seconds * 1e3);
+    controller_.update_from_frame_time(work_seconds);
+  }
+}
+
+nlohmann::json IntestineView::stats() const {
+  nlohmann::json j;
+  j["body_states_received"] = states_received_;
+  j["body_states_shown"] = states_shown_;
+  j["body_states_rejected"] = states_rejected_;
+  j["last_seq"] = last_seq_;
+  j["build_failures"] = build_failures_;
+  std::uint64_t frames = 0;
+  double lod_sum = 0;
+  for (std::size_t l = 0; l < lod_frames_.size(); ++l) {
+    frames += lod_frames_[l];
+    lod_sum += static_cast<double>(l) * static_cast<double>(lod_frames_[l]);
+  }
+  j["lod_histogram"] = lod_frames_;  // frames drawn at LOD 0..6
+  j["lod_mean"] = frames > 0 ? lod_sum / static_cast<double>(frames) : 0.0;
+  j["lod_final"] = controller_.lod();
+  j["target_fps"] = target_fps_;
+  const Percentiles work = work_ms_.summary();
+  j["work_ms"] = to_json(work);
+  j["work_fps_mean"] = work.mean > 0 ? 1e3 / work.mean : 0.0;  // the rate the frames' work alone would allow
+  j["build_us"] = to_json(build_us_.summary());
+  j["tube_vertices_max"] = tube_vertices_max_;
+  j["tube_triangles_max"] = tube_triangles_max_;
+  j["mesentery_triangles"] = mesentery_tris_.rows();
+  const intestine::TubeStats& ts = builder_.stats();
+  j["tube_last"] = {{"samples", ts.samples},
+                    {"flagged_segments", ts.flagged_segments},
+                    {"extra_samples", ts.extra_samples},
+                    {"removed_samples", ts.removed_samples},
+                    {"tilted_rings", ts.tilted_rings},
+                    {"narrowed_rings", ts.narrowed_rings},
+                    {"min_radius_m", ts.min_radius}};
+  return j;
+}
+
+}  // namespace surgsim

@@ -1,0 +1,115 @@
+// The intestine scene in the visual node (DESIGN.md 4.4, issue 6): the newest BodyState from the haptic node drawn
+// as a generalized cylinder around the intestine's points (cardinal spline, curvature-refined samples, rotation-
+// minimizing frames, two-matrix skinning of a cylinder primitive: TubeBuilder) and the mesentery as a membrane over
+// the whole grid, with the tube's level of detail chosen by the guaranteed-frame-rate controller (paper eq. 15).
+// A liver scene never builds one, and an intestine scene loads no tetrahedral mesh and no tensors.
+//
+// Skinning runs on the CPU (TubeBuilder::build writes skinned positions): the Renderer interface draws triangle
+// surfaces, and at LOD 6 the tube is about 33k vertices (66k triangles): spline, frames, skinning and the strip take
+// about 0.6 ms (p50) per body state on this machine, small next to OSMesa's ~19 ms to draw them. The per-interval
+// matrices (TubeMesh::skin) and the primitives (TubeBuilder::primitive) are what a vertex-shader path would upload
+// instead.
+//
+// The controller is fed with each frame's work time (update + draw + end_frame, not the pacing sleep): the LOD is the
+// finest whose work still allows the target rate (visual.target_fps; visual.rate_hz when 0), so the displayed rate
+// (visual.rate_hz) holds with the margin the target leaves.
+//
+// Phases: construction allocates everything (tube meshes for the finest LOD, the mesentery's triangles, the
+// BodyState sample); update(), set_positions(), frame_done() allocate nothing; stats() is for shutdown.
+#pragma once
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "dds_support.h"
+#include "frame_rate_controller.h"
+#include "scene.h"
+#include "stats.h"
+#include "tube_geometry.h"
+
+namespace surgsim {
+
+class Renderer;
+class BodyStateListener;
+
+/// Colours, linear RGB in [0, 1].
+inline const Eigen::Vector3f kIntestineRgb(0.86f, 0.46f, 0.42f);  // pink bowel wall
+inline const Eigen::Vector3f kMesenteryRgb(0.92f, 0.76f, 0.50f);  // yellowish fatty membrane
+
+class IntestineView {
+ public:
+  /// Init (allocates; throws surgsim::Error on bad parameters): the tube builder for scene.intestine's columns, the
+  /// meshes at the finest LOD, the mesentery strip as triangles, the frame-rate controller. BodyStates whose scene
+  /// hash differs from `scene_hash` are refused.
+  IntestineView(const Scene& scene, std::uint64_t scene_hash);
+  ~IntestineView();
+  IntestineView(const IntestineView&) = delete;
+  IntestineView& operator=(const IntestineView&) = delete;
+
+  /// Init: the BodyState reader (stream profile: best effort, keep last 1; the listener keeps the newest).
+  void subscribe(dds::Participant& participant);
+
+  /// Per frame, no allocation: takes the newest BodyState when there is a newer one, and rebuilds the tube and the
+  /// mesentery when the body or the controller's LOD changed. True when a new body state was taken.
+  bool update() noexcept;
+  /// The same from positions (tests, no DDS): `count` points (x, y, z; m), node (r, c) at r columns + c. False (and
+  /// the previous shape kept) on a wrong count or a non-finite value.
+  bool set_positions(const double* xyz, int count) noexcept;
+
+  /// Draws the tube and the mesentery (nothing before the first body state).
+  void draw(Renderer& renderer) const;
+  /// Feeds the frame-rate controller with this frame's work time (s); the next update() uses the LOD it returns.
+  void frame_done(double work_seconds) noexcept;
+
+  int lod() const { return controller_.lod(); }
+  bool has_body() const { return have_body_; }
+  std::uint64_t states_received() const { return states_received_; }
+  std::uint64_t last_seq() const { return last_seq_; }
+  int tube_vertices() const { return tube_.vertex_count; }
+  int tube_triangles() const { return tube_.index_count / 3; }
+  const Eigen::MatrixX3f& tube_positions() const { return tube_positions_; }  // first tube_vertices() rows
+  const intestine::FrameRateController& controller() const { return controller_; }
+
+  /// Shutdown: states, LOD histogram and mean, the controller's target, work and build times, tube sizes.
+  nlohmann::json stats() const;
+
+ private:
+  bool accept(const double* xyz, int count) noexcept;
+  void rebuild(int lod) noexcept;
+
+  int rows_ = 0, cols_ = 0;
+  std::uint64_t scene_hash_ = 0;
+  double target_fps_ = 0;
+  std::vector<double> points_;  // 3 rows cols, the shown body state
+  intestine::TubeBuilder builder_;
+  intestine::TubeMesh tube_;
+  intestine::MesenteryMesh mesentery_;
+  intestine::FrameRateController controller_;
+  // What the renderer draws (column-major copies, sized for the finest LOD).
+  Eigen::MatrixX3f tube_positions_;
+  Eigen::MatrixX3i tube_tris_;
+  Eigen::MatrixX3f mesentery_positions_;
+  Eigen::MatrixX3i mesentery_tris_;  // the strip unrolled once into triangles (degenerate joins skipped)
+  int built_lod_ = -1;
+  bool have_body_ = false;
+
+  std::unique_ptr<BodyStateListener> listener_;
+  std::vector<double> incoming_;  // 3 x kMaxBodyPoints, the listener's newest copied out under its lock
+
+  // Statistics (fixed storage).
+  std::uint64_t states_received_ = 0;
+  std::uint64_t states_shown_ = 0;
+  std::uint64_t states_rejected_ = 0;  // another scene's hash, a wrong point count or a non-finite value
+  std::uint64_t build_failures_ = 0;
+  std::uint64_t last_seq_ = 0;
+  std::array<std::uint64_t, intestine::kTubeMaxLod + 1> lod_frames_{};
+  SampleRecorder work_ms_{1 << 18};
+  SampleRecorder build_us_{1 << 18};
+  int tube_vertices_max_ = 0;
+  int tube_triangles_max_ = 0;
+};
+
+}  // namespace surgsim
