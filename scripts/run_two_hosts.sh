@@ -5,12 +5,14 @@
 # Prints and writes (OUT/summary.json) frames received, round trip, haptic rate and missed deadlines.
 #
 #   scripts/run_two_hosts.sh [--scene liver] [--duration S] [--rate HZ] [--transport udp|peers|ds]
-#                            [--impair "delay=5ms,jitter=2ms,loss=5%[,reorder=1%]"] [--seed N] [--render]
-#                            [--out DIR]
+#                            [--impair "delay=5ms,jitter=2ms,loss=5%[,reorder=1%]"] [--seed N]
+#                            [--wire user|kernel] [--render] [--out DIR]
 #   --transport udp    surgsim_udp: multicast discovery over the link (default)
 #               peers  surgsim_udp_peers: unicast discovery to 192.168.77.1/.2, multicast switched off on the link
 #               ds     surgsim_ds_client: `fastdds discovery` runs in the haptic namespace (port 11888, given to the
 #                      nodes by SURGSIM_DISCOVERY_SERVER), multicast switched off on the link
+#   --wire user        --impair through surgsim-netem and TAP devices (default: seeded, the same on every kernel)
+#          kernel      --impair with the kernel's netem qdisc on the veth, where the kernel has it (no seed)
 # Needs root (CAP_SYS_ADMIN and CAP_NET_ADMIN: ip netns, veth, TAP, mount). If the machine refuses one of them the
 # script says which and exits with status 4. Namespaces, links and every process started in them are removed on
 # exit. Environment: SURGSIM_BUILD_DIR (default build), HAPTIC_ARGS, VISUAL_ARGS.
@@ -21,7 +23,7 @@ bin=$build/bin
 export SURGSIM_CACHE_DIR=${SURGSIM_CACHE_DIR:-$build/cache}
 export SURGSIM_CONFIG_DIR=${SURGSIM_CONFIG_DIR:-$root/config}
 
-scene=liver duration="" rate="" transport=udp impair="" seed=1 render=0 out=""
+scene=liver duration="" rate="" transport=udp impair="" seed=1 wire=user render=0 out=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --scene) scene=$2; shift 2 ;;
@@ -30,9 +32,10 @@ while [ $# -gt 0 ]; do
     --transport) transport=$2; shift 2 ;;
     --impair) impair=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
+    --wire) wire=$2; shift 2 ;;
     --render) render=1; shift ;;
     --out) out=$2; shift 2 ;;
-    -h|--help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; exit 0 ;;
     *) echo "run_two_hosts: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -42,9 +45,10 @@ case "$transport" in
   ds) profile=surgsim_ds_client ;;
   *) echo "run_two_hosts: --transport '$transport' is not udp, peers or ds" >&2; exit 2 ;;
 esac
+case "$wire" in user|kernel) ;; *) echo "run_two_hosts: --wire '$wire' is not user or kernel" >&2; exit 2 ;; esac
 out=${out:-$root/out/two_hosts_$transport${impair:+_impaired}}
 need=(haptic_node visual_node)
-[ -n "$impair" ] && need+=(surgsim-netem)
+[ -n "$impair" ] && [ "$wire" = user ] && need+=(surgsim-netem)
 for p in "${need[@]}"; do
   [ -x "$bin/$p" ] || { echo "run_two_hosts: $bin/$p not found: build it first (scripts/build.sh)" >&2; exit 1; }
 done
@@ -85,7 +89,7 @@ err=$(ip netns add "$ns_v" 2>&1) || refused "ip netns add $ns_v: $err"
 for ns in "$ns_h" "$ns_v"; do ip -n "$ns" link set lo up; done
 
 # The link: a veth pair, or two TAP devices bridged by surgsim-netem in user space (these kernels have no netem).
-if [ -z "$impair" ]; then
+if [ -z "$impair" ] || [ "$wire" = kernel ]; then
   link="veth"
   err=$(ip link add "h$id" netns "$ns_h" type veth peer name "v$id" netns "$ns_v" 2>&1) ||
     refused "ip link add ... type veth: $err"
@@ -102,6 +106,27 @@ else
     sleep 0.05
   done
   [ -e "$out/netem.ready" ] || refused "surgsim-netem did not create its TAP devices: $(cat "$out/netem.log")"
+fi
+if [ -n "$impair" ] && [ "$wire" = kernel ]; then
+  # The same impairment with the kernel's netem on both ends of the veth (each direction delayed once).
+  delay=0ms jitter="" loss="" reorder=""
+  IFS=, read -ra items <<< "$impair"
+  for item in "${items[@]}"; do
+    case "$item" in
+      delay=*) delay=${item#delay=} ;;
+      jitter=*) jitter=${item#jitter=} ;;
+      loss=*) loss=${item#loss=} ;;
+      reorder=*) reorder=${item#reorder=} ;;
+      seed=*|"") ;;
+      *) echo "run_two_hosts: --impair: unknown key in '$item' (delay, jitter, loss, reorder)" >&2; exit 2 ;;
+    esac
+  done
+  netem=(delay "$delay" ${jitter:+"$jitter"} ${loss:+loss "$loss"} ${reorder:+reorder "$reorder"})
+  link="veth + kernel netem (${netem[*]})"
+  for ns in "$ns_h" "$ns_v"; do
+    err=$(ip netns exec "$ns" tc qdisc add dev "$dev" root netem "${netem[@]}" 2>&1) ||
+      refused "tc qdisc add ... netem ${netem[*]}: $err (use --wire user)"
+  done
 fi
 ip -n "$ns_h" addr add "$addr_h/24" dev "$dev"
 ip -n "$ns_v" addr add "$addr_v/24" dev "$dev"
