@@ -12,6 +12,7 @@ packages=(
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev           # scenes, command lines, stats JSON
   libgtest-dev libgmock-dev libbenchmark-dev                # tests and benchmarks
   iproute2 procps                     # two-host tests (namespaces), process control in scripts
+  openssl                             # test CA and certificates for the DDS Security profile
 )
 [ "${SURGSIM_WITH_VIDEO:-0}" = 1 ] && packages+=(ffmpeg)
 
