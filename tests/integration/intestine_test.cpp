@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "png_rgb.h"
 #include "process.h"
 
 namespace surgsim {
@@ -19,23 +20,8 @@ namespace {
 namespace fs = std::filesystem;
 using testing::Process;
 
-struct Rgb {
-  int width = 0, height = 0;
-  std::vector<unsigned char> data;  // rgb
-};
-
-Rgb read_png_rgb(const std::string& path) {
-  png_image img{};
-  img.version = PNG_IMAGE_VERSION;
-  Rgb out;
-  if (!png_image_begin_read_from_file(&img, path.c_str())) return out;
-  img.format = PNG_FORMAT_RGB;
-  out.width = static_cast<int>(img.width);
-  out.height = static_cast<int>(img.height);
-  out.data.resize(PNG_IMAGE_SIZE(img));
-  if (!png_image_finish_read(&img, nullptr, out.data.data(), 0, nullptr)) out.data.clear();
-  return out;
-}
+using testing::Rgb;
+using testing::read_png_rgb;
 
 class IntestineNodes : public ::testing::Test {
  protected:
