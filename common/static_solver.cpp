@@ -18,17 +18,9 @@ SolveMethod parse_solve_method(const std::string& text) {
   throw_error("unknown solve method '", text, "' (expected direct or cg)");
 }
 
-namespace {
-
-// The imposed components in free-dof numbering, sorted by free index, with their values.
-struct Constraints {
-  std::vector<int> dofs;  // free-dof indices, ascending
-  Eigen::VectorXd values;  // m
-  std::vector<int> nodes;  // nodes with an imposed component, ascending
-};
-
-Constraints gather(const ElasticModel& model, const std::vector<ImposedDisplacement>& imposed) {
-  const int n = model.node_count();
+std::vector<std::pair<int, double>> imposed_dof_values(const FixedSet& fixed,
+                                                       const std::vector<ImposedDisplacement>& imposed) {
+  const int n = fixed.node_count();
   std::map<int, double> by_dof;  // global dof -> value
   for (const auto& im : imposed) {
     if (im.node < 0 || im.node >= n)
@@ -39,7 +31,7 @@ Constraints gather(const ElasticModel& model, const std::vector<ImposedDisplacem
       const double v = im.value[c];
       if (!std::isfinite(v)) throw_error("imposed node ", im.node, ": non-finite displacement component ", "xyz"[c]);
       const int dof = 3 * im.node + c;
-      if (model.fixed.dof_fixed(dof))
+      if (fixed.dof_fixed(dof))
         throw_error("imposed node ", im.node, ": component ", "xyz"[c],
                     " is fixed (clamped at zero); remove it from the imposed set or from the fixed set");
       auto [it, inserted] = by_dof.emplace(dof, v);
@@ -48,7 +40,21 @@ Constraints gather(const ElasticModel& model, const std::vector<ImposedDisplacem
                     it->second, " and ", v, ")");
     }
   }
+  return {by_dof.begin(), by_dof.end()};
+}
+
+namespace {
+
+// The imposed components in free-dof numbering, sorted by free index, with their values.
+struct Constraints {
+  std::vector<int> dofs;  // free-dof indices, ascending
+  Eigen::VectorXd values;  // m
+  std::vector<int> nodes;  // nodes with an imposed component, ascending
+};
+
+Constraints gather(const ElasticModel& model, const std::vector<ImposedDisplacement>& imposed) {
   Constraints c;
+  const auto by_dof = imposed_dof_values(model.fixed, imposed);
   c.values.resize(static_cast<Eigen::Index>(by_dof.size()));
   for (const auto& [dof, v] : by_dof) {
     c.values[static_cast<Eigen::Index>(c.dofs.size())] = v;

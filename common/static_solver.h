@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cholmod_solver.h"
@@ -28,6 +29,12 @@ struct ImposedDisplacement {
   Eigen::Vector3d value = Eigen::Vector3d::Zero();  // m; only the imposed components are read
   std::uint8_t components = 7;                      // bit c set: component c (x, y, z) imposed; others stay free
 };
+
+/// The imposed components as (global dof 3 node + c, value), ascending by dof; repeats with equal values merged.
+/// Throws surgsim::Error for a node out of range, a non-finite value, no component selected, a component that is
+/// fixed, or the same component imposed twice with different values. Shared by StaticSolver and HyperelasticSolver.
+std::vector<std::pair<int, double>> imposed_dof_values(const FixedSet& fixed,
+                                                       const std::vector<ImposedDisplacement>& imposed);
 
 struct StaticSolverOptions {
   SolveMethod method = SolveMethod::kDirect;
