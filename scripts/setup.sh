@@ -15,6 +15,7 @@ packages=(
   openssl                             # test CA and certificates for the DDS Security profile
 )
 [ "${SURGSIM_WITH_VIDEO:-0}" = 1 ] && packages+=(ffmpeg)
+[ "${SURGSIM_WITH_REPORT:-0}" = 1 ] && packages+=(python3-numpy python3-matplotlib)   # scripts/report.sh plots
 
 missing=()
 for p in "${packages[@]}"; do

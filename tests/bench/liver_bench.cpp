@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "box_mesh.h"
+#include "csv_out.h"
 #include "fem.h"
 #include "fixed_set.h"
 #include "precompute.h"
@@ -200,7 +201,7 @@ std::vector<Contact> contact_patch(const Organ& o, int m, std::mt19937& rng) {
   return out;
 }
 
-void table1(const Organ& o, int repeats, double cg_tol) {
+void table1(const Organ& o, int repeats, double cg_tol, bench::CsvOut& csv) {
   PrecomputeOptions opts;
   opts.memory_limit_mb = 0;
   const auto tp = Clock::now();
@@ -253,6 +254,8 @@ void table1(const Organ& o, int repeats, double cg_tol) {
     }
     std::printf("%8d | %12.2f %12.2f %12.2f | %12.3f %14.3f %12.3f | %10.2e\n", m, haptic_us, visual_us,
                 haptic_us + visual_us, direct_ms, scratch_ms, cg_ms, err / scale);
+    csv.row("%d,%d,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f,%.3e", o.model->node_count(), m, haptic_us, visual_us,
+            haptic_us + visual_us, direct_ms, scratch_ms, cg_ms, err / scale);
   }
 }
 
@@ -261,6 +264,7 @@ void table1(const Organ& o, int repeats, double cg_tol) {
 int main(int argc, char** argv) {
   std::vector<int> sizes = {500, 1500, 5000};
   bool large = false, box = false, skip_table = false;
+  std::string out;
   int cg_columns = 300, repeats = 2000, block = 192, table_nodes = 1500;
   double cg_tol = 1e-8;
   CLI::App app{"liver_bench: precompute time and peak memory (direct vs CG) and the paper's Table 1 (tensor evaluation "
@@ -274,10 +278,17 @@ int main(int argc, char** argv) {
   app.add_option("--repeats", repeats, "Repeats per tensor timing (median)")->capture_default_str();
   app.add_option("--table-nodes", table_nodes, "Organ size for Table 1 (the closest of --sizes)")->capture_default_str();
   app.add_flag("--skip-table", skip_table, "Only the precompute table");
+  app.add_option("--out", out, "Also write liver_precompute.csv and liver_table1.csv into this existing folder");
   CLI11_PARSE(app, argc, argv);
   if (large) sizes.push_back(20000);
 
   try {
+    bench::CsvOut pre_csv(out, "liver_precompute",
+                          "organ,nodes,tets,contactable,columns,direct_s,direct_peak_mib,estimate_mib,cg_s,cg_extrapolated,"
+                          "cg_columns_solved,cg_iterations_max,cg_rel_error,tensor_mib");
+    bench::CsvOut table_csv(out, "liver_table1",
+                            "nodes,contacts,haptic_us,visual_us,tensor_total_us,ref_direct_ms,ref_factor_and_solve_ms,"
+                            "ref_cg_ms,rel_error");
     std::printf("Precompute (G = K_ff^-1 on 3S contactable columns; rows: haptic = contactable, visual = boundary; "
                 "double). CG tol %.0e, Jacobi preconditioner, columns sampled and extrapolated when more than %d.\n",
                 cg_tol, cg_columns);
@@ -300,13 +311,18 @@ int main(int argc, char** argv) {
                   o->model->node_count(), static_cast<int>(o->mesh.tets.rows()), static_cast<int>(o->contacts.size()),
                   3 * static_cast<int>(o->contacts.size()), d.seconds, d.rss_peak_mib, d.rss_peak_mib - d.rss_start_mib,
                   d.estimate_mib, cg_s, c.columns_solved, c.rss_peak_mib, c.cg_iterations, c.cg_error, d.tensor_mib);
+      pre_csv.row("%s,%d,%d,%d,%d,%.4f,%.1f,%.1f,%.3f,%d,%d,%d,%.3e,%.2f", o->kind.c_str(), o->model->node_count(),
+                  static_cast<int>(o->mesh.tets.rows()), static_cast<int>(o->contacts.size()),
+                  3 * static_cast<int>(o->contacts.size()), d.seconds, d.rss_peak_mib, d.estimate_mib, c.extrapolated,
+                  c.columns_solved < 3 * static_cast<int>(o->contacts.size()) ? 1 : 0, c.columns_solved, c.cg_iterations,
+                  c.cg_error, d.tensor_mib);
       std::fflush(stdout);
       if (!table_organ || std::abs(n - table_nodes) < std::abs(static_cast<int>(table_organ->model->node_count()) - table_nodes))
         table_organ = std::move(o);
     }
     std::printf("(peak MiB: the child's ru_maxrss, including the mesh and model inherited at fork; +MiB: above its "
                 "resident size at start; est MiB: estimate_precompute_memory.)\n");
-    if (table_organ && !skip_table) table1(*table_organ, repeats, cg_tol);
+    if (table_organ && !skip_table) table1(*table_organ, repeats, cg_tol, table_csv);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "liver_bench: %s\n", e.what());
     return 1;

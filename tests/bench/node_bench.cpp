@@ -2,7 +2,8 @@
 //   haptic tick (collision on the deformed surface + G_CC solve + force) against contact count and mesh size;
 //   visual deformation of every visible node against mesh size; render time at 640x480 and 1280x720.
 // A plain program printing tables (run by hand, never a pass/fail test):
-//   build/bench/node_bench [--sizes 1500,5000] [--reps 2000] [--no-render]
+//   build/bench/node_bench [--sizes 1500,5000] [--reps 2000] [--no-render] [--out DIR]
+// --out DIR also writes node_tick.csv, node_deform.csv and node_render.csv there (scripts/report.sh).
 // Tensors come from the shared cache ($SURGSIM_CACHE_DIR), built on first use (20k nodes: ~1.5 min, ~4 GB).
 #include <CLI/CLI.hpp>
 #include <chrono>
@@ -11,6 +12,7 @@
 #include <random>
 
 #include "clock.h"
+#include "csv_out.h"
 #include "collision.h"
 #include "liver_contacts.h"
 #include "liver_setup.h"
@@ -36,12 +38,18 @@ int main(int argc, char** argv) {
   std::vector<int> sizes = {1500, 5000};
   int reps = 2000;
   bool render = true;
+  std::string out;
   CLI::App cli{"surgsim node benchmarks: haptic tick against contacts and mesh size, visual deformation and render "
                "times (percentiles, side by side in one run)."};
   cli.add_option("--sizes", sizes, "Liver node counts (generated)")->delimiter(',')->capture_default_str();
   cli.add_option("--reps", reps, "Repetitions per measurement")->capture_default_str();
   cli.add_flag("!--no-render", render, "Skip the OSMesa render timings");
+  cli.add_option("--out", out, "Also write the tables as CSV files into this existing folder");
   CLI11_PARSE(cli, argc, argv);
+  try {
+  bench::CsvOut tick_csv(out, "node_tick", "nodes,surface_nodes,contacts,tick_us_p50,tick_us_p90,tick_us_p99,tick_us_max");
+  bench::CsvOut deform_csv(out, "node_deform", "visible_nodes,contacts,deform_us_p50,deform_us_p99,deform_us_max");
+  bench::CsvOut render_csv(out, "node_render", "width,height,visible_nodes,frame_ms_p50,frame_ms_p99,frame_ms_max");
 
   const Scene base = load_scene(resolve_scene_path("liver"));
   const std::string cache = default_cache_dir();
@@ -93,6 +101,8 @@ int main(int argc, char** argv) {
       const Percentiles p = rec.summary();
       std::printf("%7d %8zu %9d | %8.2f %8.2f %8.2f %8.2f\n", static_cast<int>(mesh.nodes.rows()), surface.nodes.size(),
                   m, p.p50, p.p90, p.p99, p.max);
+      tick_csv.row("%d,%zu,%d,%.3f,%.3f,%.3f,%.3f", static_cast<int>(mesh.nodes.rows()), surface.nodes.size(), m, p.p50,
+                   p.p90, p.p99, p.max);
     }
 
     // Visual deformation of every visible node for 10 contacts.
@@ -128,12 +138,20 @@ int main(int argc, char** argv) {
         }
         const Percentiles p = rr.summary();
         std::printf("%4dx%-5d | %8.2f %8.2f %8.2f\n", w, h, p.p50, p.p99, p.max);
+        render_csv.row("%d,%d,%zu,%.3f,%.3f,%.3f", w, h, surface.nodes.size(), p.p50, p.p99, p.max);
       }
       std::printf("\nHaptic tick table continues:\n");
     }
   }
   std::printf("\nVisual deformation, u_n = sum_k G_nk lambda_k for every visible node, 10 contacts, us\n");
   std::printf("%8s | %8s %8s %8s\n", "visible", "p50", "p99", "max");
-  for (const auto& [v, p] : deform_rows) std::printf("%8d | %8.1f %8.1f %8.1f\n", v, p.p50, p.p99, p.max);
+  for (const auto& [v, p] : deform_rows) {
+    std::printf("%8d | %8.1f %8.1f %8.1f\n", v, p.p50, p.p99, p.max);
+    deform_csv.row("%d,10,%.3f,%.3f,%.3f", v, p.p50, p.p99, p.max);
+  }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "node_bench: %s\n", e.what());
+    return 1;
+  }
   return 0;
 }

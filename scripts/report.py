@@ -1,0 +1,594 @@
+#!/usr/bin/python3
+"""Turns the measurements of scripts/report.sh into report/README.md (Markdown tables) and report/plots/*.png.
+
+    /usr/bin/python3 scripts/report.py REPORT_DIR
+
+Reads REPORT_DIR/meta.json (machine, commit, command), REPORT_DIR/csv/*.csv (written by the bench programs with
+--out), REPORT_DIR/raw/ (haptic logs at several rates, live-run stats JSON, step times) and REPORT_DIR/logs/. Every
+number in the report comes from those files; a part whose input is missing is reported as missing, not invented.
+Uses Debian's python3-numpy and python3-matplotlib only.
+"""
+import csv
+import glob
+import json
+import math
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+# DESIGN.md section 8.
+BUDGETS = {
+    "precompute_1k4_s": 2.0,
+    "tick_p99_us": 100.0,
+    "missed_fraction": 0.001,
+    "latency_p50_us": 150.0,
+    "latency_p99_us": 1000.0,
+    "deform_ms": 1.0,
+    "fps": 50.0,
+    "intestine_step_hz": 1000.0,
+}
+
+
+class Report:
+    def __init__(self, root):
+        self.root = root
+        self.meta = self.load_json("meta.json") or {}
+        end = self.load_json("raw/end.json") or {}
+        self.meta.update(end)
+        self.lines = []
+        self.headline = []  # (what, value, budget or reference, verdict)
+        self.missing = []
+
+    # ---- inputs -----------------------------------------------------------------------------------------------
+    def load_json(self, rel):
+        path = os.path.join(self.root, rel)
+        if not os.path.exists(path):
+            return None
+        with open(path) as f:
+            return json.load(f)
+
+    def csv_rows(self, name):
+        """Rows of csv/NAME.csv as dicts, numbers converted; None when the file is missing."""
+        path = os.path.join(self.root, "csv", name + ".csv")
+        if not os.path.exists(path):
+            if "csv/%s.csv" % name not in self.missing:
+                self.missing.append("csv/%s.csv" % name)
+            return None
+        with open(path) as f:
+            lines = [ln for ln in f if not ln.startswith("#")]
+        return [{k: convert(v) for k, v in row.items()} for row in csv.DictReader(lines)]
+
+    def stamp(self):
+        return "%s, %s cores, %s GiB; commit %s%s; %s; %s" % (
+            self.meta.get("cpu", "?"), self.meta.get("cores", "?"), self.meta.get("memory_gib", "?"),
+            str(self.meta.get("commit", "?"))[:12], " (modified)" if self.meta.get("dirty") else "",
+            self.meta.get("command", "?"), self.meta.get("date", "?"))
+
+    def stamp_csv_files(self):
+        """Puts the machine/commit/command line at the top of every CSV (a '#' comment; readers skip it)."""
+        line = "# " + self.stamp() + "\n"
+        for path in sorted(glob.glob(os.path.join(self.root, "csv", "*.csv"))):
+            with open(path) as f:
+                text = f.read()
+            if not text.startswith("#"):
+                with open(path, "w") as f:
+                    f.write(line + text)
+
+    # ---- output -----------------------------------------------------------------------------------------------
+    def md(self, text=""):
+        self.lines.append(text)
+
+    def table(self, rows, columns=None, headers=None):
+        if not rows:
+            self.md("(no rows)")
+            self.md()
+            return
+        columns = columns or list(rows[0].keys())
+        headers = headers or columns
+        self.md("| " + " | ".join(headers) + " |")
+        self.md("|" + "---|" * len(columns))
+        for r in rows:
+            self.md("| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |")
+        self.md()
+
+    def csv_section(self, name, title, text, columns=None):
+        rows = self.csv_rows(name)
+        self.md("### " + title)
+        self.md()
+        if text:
+            self.md(text)
+            self.md()
+        if rows is None:
+            self.md("**Missing**: `csv/%s.csv` was not written (see the step logs below)." % name)
+            self.md()
+            return None
+        self.md("Data: [`csv/%s.csv`](csv/%s.csv)" % (name, name))
+        self.md()
+        self.table(rows, columns)
+        return rows
+
+    def save(self, fig, name, caption):
+        fig.text(0.005, 0.005, self.stamp(), fontsize=5.5, color="0.35", ha="left", va="bottom")
+        fig.tight_layout(rect=(0, 0.03, 1, 1))
+        path = os.path.join(self.root, "plots", name + ".png")
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        self.md("![%s](plots/%s.png)" % (caption, name))
+        self.md()
+        self.md("*%s*" % caption)
+        self.md()
+
+    def write(self):
+        head = [
+            "# surgsim benchmark report",
+            "",
+            "Made by `%s` on %s." % (self.meta.get("command", "scripts/report.sh"), self.meta.get("date", "?")),
+            "",
+            "| machine | commit | load (1/5/15 min) start / end | build s | total s |",
+            "|---|---|---|---|---|",
+            "| %s, %s cores, %s GiB, %s, kernel %s | `%s`%s | %s / %s | %s | %s |" % (
+                self.meta.get("cpu"), self.meta.get("cores"), self.meta.get("memory_gib"), self.meta.get("os"),
+                self.meta.get("kernel"), self.meta.get("commit"), " (modified tree)" if self.meta.get("dirty") else "",
+                self.meta.get("load_at_start"), self.meta.get("load_at_end"), self.meta.get("build_s"),
+                self.meta.get("total_s")),
+            "",
+            "Every number below comes from this run; the CSV files carry the same machine/commit/command line, and",
+            "each plot states it in its footer. The machine is shared: timings are percentiles of what it gave us.",
+            "",
+            "## Headline",
+            "",
+            "| what | measured | budget / reference | verdict |",
+            "|---|---|---|---|",
+        ]
+        for what, value, budget, verdict in self.headline:
+            head.append("| %s | %s | %s | %s |" % (what, value, budget, verdict))
+        head.append("")
+        if self.missing:
+            head.append("Missing inputs: " + ", ".join("`%s`" % m for m in self.missing))
+            head.append("")
+        with open(os.path.join(self.root, "README.md"), "w") as f:
+            f.write("\n".join(head + self.lines) + "\n")
+
+
+def convert(v):
+    if v is None:
+        return ""
+    s = v.strip()
+    try:
+        if s.lstrip("-").isdigit():
+            return int(s)
+        return float(s)
+    except ValueError:
+        return s
+
+
+def fmt(v):
+    if isinstance(v, float):
+        if math.isnan(v) or math.isinf(v):
+            return str(v)
+        if v == 0:
+            return "0"
+        a = abs(v)
+        if a >= 1e5 or a < 1e-3:
+            return "%.3g" % v
+        if a >= 100:
+            return "%.1f" % v
+        return "%.4g" % v
+    return str(v)
+
+
+def verdict(ok):
+    return "within" if ok else "**over**"
+
+
+def number(x):
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+# ---- liver ----------------------------------------------------------------------------------------------------
+def liver_section(rep):
+    rep.md("## 1. Error against run time: liver")
+    rep.md()
+    rows = rep.csv_section(
+        "liver_error_time", "Every shortcut: error against time per frame",
+        "Reference: the exact direct solve in double of the same contact frames. Errors are relative (displacement "
+        "of the visible nodes, total contact force); time per frame is what the method pays each frame.")
+    if rows:
+        fig, ax = plt.subplots(figsize=(8, 5.5))
+        fams = sorted({r["family"] for r in rows})
+        markers = "osD^v<>ph*"
+        for i, fam in enumerate(fams):
+            pts = [r for r in rows if r["family"] == fam and number(r.get("time_per_frame_us_p50"))
+                   and number(r.get("disp_rel_error"))]
+            if not pts:
+                continue
+            x = [r["time_per_frame_us_p50"] for r in pts]
+            y = [max(r["disp_rel_error"], 1e-17) for r in pts]
+            ax.scatter(x, y, marker=markers[i % len(markers)], label=fam, s=36)
+            for r, xi, yi in zip(pts, x, y):
+                ax.annotate(str(r.get("variant", "")), (xi, yi), fontsize=6, xytext=(3, 3),
+                            textcoords="offset points")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("time per frame, us (p50)")
+        ax.set_ylabel("relative displacement error (visible nodes)")
+        ax.set_title("Liver: error against time per frame")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+        rep.save(fig, "liver_error_vs_time", "Liver: each method's error against its time per frame (log-log).")
+        tensors = [r for r in rows if r["family"] == "tensors_double"]
+        full = [r for r in rows if r["family"] == "full_solve"]
+        if tensors and full and number(tensors[0]["time_per_frame_us_p50"]) and number(full[0]["time_per_frame_us_p50"]):
+            rep.headline.append((
+                "liver: precomputed tensors vs per-frame full solve (time per frame p50)",
+                "%s us vs %s us (x%.0f faster), error %s" % (
+                    fmt(tensors[0]["time_per_frame_us_p50"]), fmt(full[0]["time_per_frame_us_p50"]),
+                    full[0]["time_per_frame_us_p50"] / max(tensors[0]["time_per_frame_us_p50"], 1e-9),
+                    fmt(tensors[0]["disp_rel_error"])),
+                "the reference is exact linear elasticity", ""))
+    # Detailed tables the liver error bench may write.
+    for name, title, text in [
+        ("liver_mesh_convergence", "Discretization: meshes against the finest",
+         "The same indenter load on livers meshed at several sizes, compared with the finest mesh."),
+        ("liver_nonlinear", "Linear and quasi non-linear against a neo-Hookean Newton reference",
+         "A flat indenter pushed into the top at indentations given as a fraction of the organ size."),
+    ]:
+        rows = rep.csv_section(name, title, text)
+        if rows and name == "liver_nonlinear":
+            plot_nonlinear(rep, rows)
+        if rows and name == "liver_mesh_convergence":
+            plot_mesh(rep, rows)
+    for path in sorted(glob.glob(os.path.join(rep.root, "csv", "liver_error_*.csv"))):
+        name = os.path.basename(path)[:-4]
+        if name != "liver_error_time":
+            rep.csv_section(name, name.replace("_", " "), "")
+    haptic_rates(rep)
+
+
+def first_key(row, *candidates):
+    for c in candidates:
+        if c in row:
+            return c
+    for c in row:
+        for cand in candidates:
+            if cand in c:
+                return c
+    return None
+
+
+def plot_nonlinear(rep, rows):
+    xk = first_key(rows[0], "indentation_percent", "indentation")
+    if not xk:
+        return
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for ax, what in zip(axes, ("force", "disp")):
+        for col in [c for c in rows[0] if what in c and "error" in c]:
+            pts = [(r[xk], r[col]) for r in rows if number(r[xk]) and number(r[col])]
+            if pts:
+                ax.plot(*zip(*pts), marker="o", label=col)
+        ax.set_xlabel(xk)
+        ax.set_ylabel("relative error against neo-Hookean")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    rep.save(fig, "liver_nonlinear", "Liver: linear and quasi non-linear errors against the neo-Hookean reference.")
+
+
+def plot_mesh(rep, rows):
+    xk = first_key(rows[0], "nodes")
+    if not xk:
+        return
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for col in [c for c in rows[0] if "error" in c]:
+        pts = [(r[xk], r[col]) for r in rows if number(r[xk]) and number(r[col]) and r[col] > 0]
+        if pts:
+            ax.loglog(*zip(*pts), marker="o", label=col)
+    ax.set_xlabel("nodes")
+    ax.set_ylabel("relative error against the finest mesh")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    rep.save(fig, "liver_mesh_convergence", "Liver: discretization error against mesh size.")
+
+
+def read_log(path):
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    return data["t"], np.stack([data["fx"], data["fy"], data["fz"]], axis=1)
+
+
+def haptic_rates(rep):
+    rep.md("### Haptic rate against a 10 kHz reference (force signal)")
+    rep.md()
+    rep.md("The real haptic node replays each trajectory tick-exact (`--speed max`) at each rate; a device holds each "
+           "force until the next tick, so the lower rate's signal is compared, held, with the 10 kHz one at every "
+           "10 kHz tick. Errors are relative to the reference signal's RMS; time per tick from the node's stats.")
+    rep.md()
+    folder = os.path.join(rep.root, "raw", "rates")
+    refs = sorted(glob.glob(os.path.join(folder, "*_10000.csv")))
+    if not refs:
+        rep.missing.append("raw/rates")
+        rep.md("**Missing**: no 10 kHz reference log (step haptic_rates failed?).")
+        rep.md()
+        return
+    out_rows = []
+    fig, axes = plt.subplots(len(refs), 1, figsize=(9, 3.2 * len(refs)), squeeze=False)
+    for ax, ref in zip(axes[:, 0], refs):
+        traj = os.path.basename(ref)[: -len("_10000.csv")]
+        t_ref, f_ref = read_log(ref)
+        ref_rms = float(np.sqrt(np.mean(np.sum(f_ref ** 2, axis=1))))
+        ax.plot(t_ref, np.linalg.norm(f_ref, axis=1), lw=0.8, color="k", label="10000 Hz")
+        for log in sorted(glob.glob(os.path.join(folder, traj + "_*.csv")), key=lambda p: int(p.rsplit("_", 1)[1][:-4])):
+            rate = int(log.rsplit("_", 1)[1][:-4])
+            stats = rep.load_json(os.path.relpath(log[:-4] + ".json", rep.root)) or {}
+            tick = stats.get("tick_us", {})
+            row = {"trajectory": traj, "rate_hz": rate, "ticks": stats.get("ticks", ""),
+                   "tick_us_p50": tick.get("p50", ""), "tick_us_p99": tick.get("p99", ""),
+                   "cpu_ms_per_sim_s": rate * tick.get("mean", float("nan")) / 1000.0 if tick else ""}
+            if rate != 10000:
+                t, f = read_log(log)
+                idx = np.clip(np.floor(t_ref * rate + 1e-9).astype(int), 0, len(f) - 1)
+                diff = np.linalg.norm(f[idx] - f_ref, axis=1)
+                row.update({"force_rms_rel_error": float(np.sqrt(np.mean(diff ** 2))) / max(ref_rms, 1e-12),
+                            "force_max_error_n": float(diff.max()), "peak_force_n": float(np.linalg.norm(f, axis=1).max())})
+                ax.step(t, np.linalg.norm(f, axis=1), where="post", lw=0.8, label="%d Hz" % rate)
+            else:
+                row.update({"force_rms_rel_error": 0.0, "force_max_error_n": 0.0,
+                            "peak_force_n": float(np.linalg.norm(f_ref, axis=1).max())})
+            out_rows.append(row)
+        ax.set_title(traj)
+        ax.set_xlabel("t, s")
+        ax.set_ylabel("|force|, N")
+        ax.legend(fontsize=7)
+        ax.grid(True, alpha=0.3)
+    cols = ["trajectory", "rate_hz", "ticks", "tick_us_p50", "tick_us_p99", "cpu_ms_per_sim_s",
+            "force_rms_rel_error", "force_max_error_n", "peak_force_n"]
+    with open(os.path.join(rep.root, "csv", "liver_haptic_rate.csv"), "w", newline="") as f:
+        f.write("# " + rep.stamp() + "\n")
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        for r in out_rows:
+            w.writerow(r)
+    rep.md("Data: [`csv/liver_haptic_rate.csv`](csv/liver_haptic_rate.csv)")
+    rep.md()
+    rep.table(out_rows, cols)
+    rep.save(fig, "liver_haptic_rate", "Liver: tool force magnitude at each haptic rate against the 10 kHz reference.")
+    for r in out_rows:
+        if r["rate_hz"] == 1000 and number(r.get("force_rms_rel_error")):
+            rep.headline.append(("liver: force error of 1 kHz against 10 kHz (%s)" % r["trajectory"],
+                                 "RMS %.2g %%, max %.3g N" % (100 * r["force_rms_rel_error"], r["force_max_error_n"]),
+                                 "", ""))
+
+
+# ---- intestine ------------------------------------------------------------------------------------------------
+def intestine_section(rep):
+    rep.md("## 2. Error against run time: intestine")
+    rep.md()
+    ts = rep.csv_section("intestine_timestep", "Time step against a fine-step reference",
+                         "The scripted probe run integrated at several steps, compared with the finest step.")
+    if ts:
+        xk = first_key(ts[0], "dt_ms")
+        ek = first_key(ts[0], "pos_rms_error_mm", "error")
+        tk = first_key(ts[0], "cpu_s_per_sim_s", "step_us_p50")
+        if xk and ek and tk:
+            fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+            pts = [r for r in ts if number(r[xk]) and number(r[ek])]
+            ax[0].loglog([r[xk] for r in pts], [max(r[ek], 1e-12) for r in pts], marker="o")
+            ax[0].set_xlabel(xk)
+            ax[0].set_ylabel(ek)
+            ax[0].grid(True, which="both", alpha=0.3)
+            pts = [r for r in ts if number(r[tk]) and number(r[ek])]
+            ax[1].loglog([r[tk] for r in pts], [max(r[ek], 1e-12) for r in pts], marker="o")
+            for r in pts:
+                ax[1].annotate("%g ms" % r[xk], (r[tk], max(r[ek], 1e-12)), fontsize=7)
+            ax[1].set_xlabel(tk)
+            ax[1].set_ylabel(ek)
+            ax[1].grid(True, which="both", alpha=0.3)
+            rep.save(fig, "intestine_timestep", "Intestine: error against time step and against cost.")
+    pairs = rep.csv_section("intestine_pairs", "Random pairs n: recall and time per step",
+                            "Recall against the brute-force detector over the scripted run (the paper's fig. 14).")
+    if pairs:
+        nk = first_key(pairs[0], "n", "random_pairs")
+        rk = first_key(pairs[0], "recall")
+        tk = first_key(pairs[0], "step_us_p50", "us_p50")
+        if nk and rk:
+            fig, ax = plt.subplots(figsize=(7, 4))
+            pts = [r for r in pairs if number(r[nk]) and number(r[rk])]
+            ax.plot([r[nk] for r in pts], [r[rk] for r in pts], marker="o", color="C0")
+            ax.set_xscale("symlog", linthresh=1)
+            ax.set_xlabel("random pairs per step n")
+            ax.set_ylabel(rk, color="C0")
+            if tk:
+                ax2 = ax.twinx()
+                pts = [r for r in pairs if number(r[nk]) and number(r[tk])]
+                ax2.plot([r[nk] for r in pts], [r[tk] for r in pts], marker="s", color="C1")
+                ax2.set_ylabel(tk, color="C1")
+            ax.grid(True, alpha=0.3)
+            rep.save(fig, "intestine_pairs", "Intestine: detection recall and time per step against n.")
+    lod = rep.csv_section("intestine_lod", "Level of detail: geometric error and frame time", "")
+    if lod:
+        lk = first_key(lod[0], "lod")
+        ek = first_key(lod[0], "max_error_mm", "error")
+        fk = first_key(lod[0], "frame_ms_p50", "frame_ms")
+        if lk and ek:
+            fig, ax = plt.subplots(figsize=(7, 4))
+            pts = [r for r in lod if number(r[lk]) and number(r[ek])]
+            ax.semilogy([r[lk] for r in pts], [max(r[ek], 1e-9) for r in pts], marker="o", color="C0")
+            ax.set_xlabel("LOD")
+            ax.set_ylabel(ek, color="C0")
+            if fk:
+                ax2 = ax.twinx()
+                pts = [r for r in lod if number(r[lk]) and number(r[fk])]
+                ax2.plot([r[lk] for r in pts], [r[fk] for r in pts], marker="s", color="C1")
+                ax2.set_ylabel(fk, color="C1")
+            ax.grid(True, alpha=0.3)
+            rep.save(fig, "intestine_lod", "Intestine: tube geometric error and frame time per level of detail.")
+    rep.csv_section("intestine_frame_rate", "Guaranteed frame rate (paper eq. 15) on the real renderer", "")
+    for path in sorted(glob.glob(os.path.join(rep.root, "csv", "intestine_*.csv"))):
+        name = os.path.basename(path)[:-4]
+        if name not in ("intestine_timestep", "intestine_pairs", "intestine_lod", "intestine_frame_rate"):
+            rep.csv_section(name, name.replace("_", " "), "")
+
+
+# ---- stability ------------------------------------------------------------------------------------------------
+def stability_section(rep):
+    rep.md("## 3. Stability on stiff and extreme cases")
+    rep.md()
+    rows = rep.csv_section("stability", "Every case: what happens",
+                           "Outcome per case (converged, clamped, refused, detected ...), with residuals and condition "
+                           "estimates; `all_finite` says whether every output was checked finite.")
+    if rows:
+        finite = [r for r in rows if str(r.get("all_finite")).lower() in ("1", "true", "yes")]
+        outcomes = {}
+        for r in rows:
+            outcomes[r.get("outcome")] = outcomes.get(r.get("outcome"), 0) + 1
+        rep.headline.append(("stability: cases with only finite outputs", "%d of %d" % (len(finite), len(rows)),
+                             "all", verdict(len(finite) == len(rows))))
+        rep.headline.append(("stability: outcomes", ", ".join("%s %d" % kv for kv in sorted(outcomes.items())), "", ""))
+
+
+# ---- benchmarks -----------------------------------------------------------------------------------------------
+def bench_section(rep):
+    rep.md("## 4. Benchmarks against the budgets of DESIGN.md section 8")
+    rep.md()
+    rows = []
+    pre = rep.csv_rows("liver_precompute") or []
+    near = sorted(pre, key=lambda r: abs(r["nodes"] - 1400))[:1]
+    for r in near:
+        rows.append(("precompute, %d-node liver (direct, double)" % r["nodes"], "%.2f s" % r["direct_s"],
+                     "<= 2 s", verdict(r["direct_s"] <= BUDGETS["precompute_1k4_s"])))
+    for r in pre:
+        if r not in near:
+            rows.append(("precompute, %d-node liver" % r["nodes"], "%.2f s, peak %.0f MiB" % (r["direct_s"], r["direct_peak_mib"]),
+                         "", ""))
+    ticks = rep.csv_rows("node_tick") or []
+    small = min((r["nodes"] for r in ticks), default=None)
+    for r in ticks:
+        if r["contacts"] == 10:
+            budget = "p99 <= 100 us" if r["nodes"] == small else ""
+            rows.append(("haptic tick, %d nodes, 10 contacts (bench)" % r["nodes"],
+                         "p50 %.1f / p99 %.1f us" % (r["tick_us_p50"], r["tick_us_p99"]), budget,
+                         verdict(r["tick_us_p99"] <= BUDGETS["tick_p99_us"]) if budget else ""))
+    h = rep.load_json("raw/live_liver/haptic_stats.json")
+    v = rep.load_json("raw/live_liver/visual_stats.json")
+    if h:
+        missed = h.get("deadline_misses", 0) / max(h.get("ticks", 1), 1)
+        rows.append(("live liver: haptic loop at %g Hz, %d ticks (%s)" % (h.get("rate_hz", 0), h.get("ticks", 0),
+                                                                        h.get("realtime", "")),
+                     "%.1f Hz, %d missed (%.3f %%), tick p50 %.1f / p99 %.1f us" % (
+                         h.get("achieved_hz", 0), h.get("deadline_misses", 0), 100 * missed, h["tick_us"]["p50"],
+                         h["tick_us"]["p99"]),
+                     "< 0.1 % missed", verdict(missed < BUDGETS["missed_fraction"])))
+        rt = h.get("round_trip_us", {})
+        if rt.get("count"):
+            rows.append(("live liver: haptic -> visual -> haptic round trip", "p50 %.0f / p99 %.0f us" % (rt["p50"], rt["p99"]),
+                         "", ""))
+    else:
+        rep.missing.append("raw/live_liver/haptic_stats.json")
+    if v:
+        lat = v.get("latency_us", {})
+        rows.append(("live liver: haptic -> visual latency, one host", "p50 %.0f / p99 %.0f us" % (lat.get("p50", -1), lat.get("p99", -1)),
+                     "p50 <= 150 us, p99 <= 1 ms",
+                     verdict(lat.get("p50", 1e9) <= BUDGETS["latency_p50_us"] and lat.get("p99", 1e9) <= BUDGETS["latency_p99_us"])))
+        rows.append(("live liver: visual frames at %sx%s" % ("640", "480"), "%.1f fps, render p50 %.1f ms" % (
+            v.get("fps", 0), v.get("render_ms", {}).get("p50", -1)), ">= 50 Hz (scene rate 50 Hz)",
+            verdict(v.get("fps", 0) >= 0.97 * BUDGETS["fps"])))
+        d = v.get("deform_us", {})
+        rows.append(("live liver: deformation of %d visible nodes" % v.get("visible_nodes", 0),
+                     "p50 %.0f / p99 %.0f us" % (d.get("p50", -1), d.get("p99", -1)), "<= 1 ms",
+                     verdict(d.get("p99", 1e9) <= 1000 * BUDGETS["deform_ms"])))
+    for r in rep.csv_rows("node_deform") or []:
+        rows.append(("deformation, %d visible nodes, 10 contacts (bench)" % r["visible_nodes"],
+                     "p50 %.0f / p99 %.0f us" % (r["deform_us_p50"], r["deform_us_p99"]), "<= 1 ms",
+                     verdict(r["deform_us_p99"] <= 1000 * BUDGETS["deform_ms"])))
+    for r in rep.csv_rows("node_render") or []:
+        rows.append(("render %dx%d, %d visible nodes + tool (bench)" % (r["width"], r["height"], r["visible_nodes"]),
+                     "p50 %.2f / p99 %.2f ms (%.0f fps capable)" % (r["frame_ms_p50"], r["frame_ms_p99"], 1000 / r["frame_ms_p50"]),
+                     ">= 50 Hz" if r["width"] == 640 else "", verdict(1000 / r["frame_ms_p50"] >= BUDGETS["fps"]) if r["width"] == 640 else ""))
+    ts = rep.csv_rows("intestine_timestep") or []
+    for r in ts:
+        dk = first_key(r, "dt_ms")
+        pk = first_key(r, "step_us_p99")
+        if dk and pk and r[dk] == 1 and number(r[pk]):
+            rows.append(("intestine step (400 masses + collisions), dt 1 ms", "p99 %.0f us (%.0f Hz capable)" % (r[pk], 1e6 / r[pk]),
+                         ">= 1 kHz capable", verdict(1e6 / r[pk] >= BUDGETS["intestine_step_hz"])))
+    hi = rep.load_json("raw/live_intestine/haptic_stats.json")
+    vi = rep.load_json("raw/live_intestine/visual_stats.json")
+    if hi:
+        rows.append(("live intestine: haptic loop at %g Hz" % hi.get("rate_hz", 0),
+                     "%.1f Hz, %d missed, tick p50 %.0f / p99 %.0f us" % (hi.get("achieved_hz", 0), hi.get("deadline_misses", 0),
+                                                                       hi["tick_us"]["p50"], hi["tick_us"]["p99"]), "", ""))
+    if vi:
+        rows.append(("live intestine: visual", "%.1f fps, latency p50 %.0f us" % (vi.get("fps", 0), vi.get("latency_us", {}).get("p50", -1)),
+                     "", ""))
+    rep.md("| what | measured | budget | verdict |")
+    rep.md("|---|---|---|---|")
+    for r in rows:
+        rep.md("| %s | %s | %s | %s |" % r)
+    rep.md()
+    for r in rows:
+        if r[2]:
+            rep.headline.append(r)
+    rep.csv_section("liver_precompute", "Precompute: time and memory (direct CHOLMOD against CG per column)", "")
+    rep.csv_section("liver_table1", "The paper's Table 1: tensor evaluation against the reference solve", "")
+    rep.csv_section("node_tick", "Haptic tick against contacts and mesh size", "")
+    path = os.path.join(rep.root, "logs", "network.log")
+    if os.path.exists(path):
+        rep.md("### Round trips: one host and two hosts (scripts/network_figures.sh)")
+        rep.md()
+        with open(path) as f:
+            for line in f:
+                if line.startswith("|") or line.startswith("("):
+                    rep.md(line.rstrip())
+        rep.md()
+    for name in ("intestine_bench",):
+        path = os.path.join(rep.root, "logs", name + ".log")
+        if os.path.exists(path):
+            rep.md("### intestine_bench (its printed tables)")
+            rep.md()
+            rep.md("```")
+            with open(path) as f:
+                rep.md(f.read().rstrip())
+            rep.md("```")
+            rep.md()
+
+
+def steps_section(rep):
+    rep.md("## 5. How this report was made")
+    rep.md()
+    path = os.path.join(rep.root, "raw", "steps.csv")
+    if os.path.exists(path):
+        with open(path) as f:
+            rows = [{k: convert(v) for k, v in r.items()} for r in csv.DictReader(f)]
+        rep.table(rows)
+    rep.md("Command: `%s`. Programs: `build/bench/*` and `build/bin/*` of this commit; logs in `logs/`." %
+           rep.meta.get("command"))
+    rep.md()
+
+
+def main():
+    if len(sys.argv) != 2 or sys.argv[1] in ("-h", "--help"):
+        print(__doc__)
+        return 0 if len(sys.argv) == 2 else 2
+    root = sys.argv[1]
+    if not os.path.exists(os.path.join(root, "meta.json")):
+        print("report.py: %s/meta.json not found (run scripts/report.sh, which writes it)" % root, file=sys.stderr)
+        return 1
+    rep = Report(root)
+    rep.stamp_csv_files()
+    for section in (liver_section, intestine_section, stability_section, bench_section, steps_section):
+        try:
+            section(rep)
+        except Exception as e:  # a broken input must not lose the rest of the report
+            rep.md("**%s failed**: %s: %s" % (section.__name__, type(e).__name__, e))
+            rep.md()
+            rep.missing.append(section.__name__)
+    rep.write()
+    print("report.py: wrote %s/README.md" % root)
+    return 1 if any(m.endswith("_section") for m in rep.missing) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

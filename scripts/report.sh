@@ -1,0 +1,169 @@
+#!/usr/bin/env bash
+# The benchmark report (issue 8): error against run time (liver and intestine), the stability suite and the speed
+# figures behind every claim, all measured in this run on this machine, written to report/ as Markdown tables, CSV
+# files and PNG plots (Debian's python3-matplotlib).
+#
+#   scripts/report.sh [--quick] [--out DIR] [--no-build]
+#
+#   --quick     smaller meshes and shorter runs (a few minutes; for trying the pipeline, not for quoting)
+#   --out DIR   where the report goes (default: report/ in the repository; emptied first)
+#   --no-build  use the programs already in build/ (default: setup + build first, as on a fresh clone)
+#
+# Every step runs even when an earlier one failed; the report names the failed steps and their logs, and the script
+# then exits non-zero. The whole default run takes about 20 minutes on the 2-core CI machine (build included).
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+quick=0
+out=$root/report
+build_first=1
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --quick) quick=1 ;;
+    --out) out=${2:?--out needs a folder}; shift ;;
+    --no-build) build_first=0 ;;
+    -h|--help) sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "report: unknown option '$1' (see --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+command_line="scripts/report.sh $*"
+[ $quick = 1 ] && command_line="scripts/report.sh --quick"
+
+build=${SURGSIM_BUILD_DIR:-$root/build}
+start_all=$(date +%s)
+if [ $build_first = 1 ]; then
+  SURGSIM_WITH_REPORT=1 "$root/scripts/setup.sh"
+  "$root/scripts/build.sh"
+fi
+/usr/bin/python3 -c 'import numpy, matplotlib' 2>/dev/null || {
+  echo "report: /usr/bin/python3 lacks numpy/matplotlib: run SURGSIM_WITH_REPORT=1 scripts/setup.sh" >&2; exit 1; }
+for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench; do
+  [ -x "$build/$p" ] || { echo "report: $build/$p not found: run scripts/build.sh first" >&2; exit 1; }
+done
+build_s=$(( $(date +%s) - start_all ))
+
+rm -rf "$out"
+mkdir -p "$out/csv" "$out/logs" "$out/raw" "$out/plots"
+# Tensors and meshes are made by this run (their precompute times are part of the report), not taken from a cache.
+export SURGSIM_CACHE_DIR=$out/raw/cache
+export SURGSIM_CONFIG_DIR=$root/config
+# A DDS domain of our own so that a report never talks to a demo running on the same host.
+export SURGSIM_DOMAIN=${SURGSIM_DOMAIN:-57}
+
+# Machine and commit, stated in every file of the report.
+{
+  echo "{"
+  echo "  \"commit\": \"$(git -C "$root" rev-parse HEAD 2>/dev/null || echo unknown)\","
+  echo "  \"dirty\": $( [ -z "$(git -C "$root" status --porcelain --untracked-files=no 2>/dev/null)" ] && echo false || echo true),"
+  echo "  \"command\": \"$command_line\","
+  echo "  \"cpu\": \"$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//' | tr -d '"')\","
+  echo "  \"cores\": $(nproc),"
+  echo "  \"memory_gib\": $(awk '/MemTotal/ {printf "%.1f", $2 / 1048576}' /proc/meminfo),"
+  echo "  \"kernel\": \"$(uname -r)\","
+  echo "  \"os\": \"$(. /etc/os-release 2>/dev/null && echo "$PRETTY_NAME")\","
+  echo "  \"load_at_start\": \"$(cut -d' ' -f1-3 /proc/loadavg)\","
+  echo "  \"date\": \"$(date -u +%Y-%m-%dT%H:%M:%SZ)\","
+  echo "  \"quick\": $quick,"
+  echo "  \"build_s\": $build_s"
+  echo "}"
+} >"$out/meta.json"
+
+failed=()
+steps_csv=$out/raw/steps.csv
+echo "step,seconds,status,log" >"$steps_csv"
+# step NAME COMMAND...: runs one part, its output in logs/NAME.log, its time and status in raw/steps.csv.
+step() {
+  local name=$1; shift
+  local t0 status
+  t0=$(date +%s%N)
+  echo "report: $name ..." >&2
+  if "$@" >"$out/logs/$name.log" 2>&1; then status=ok; else status=failed; failed+=("$name"); fi
+  local s
+  s=$(awk "BEGIN {printf \"%.1f\", ($(date +%s%N) - $t0) / 1e9}")
+  echo "$name,$s,$status,logs/$name.log" >>"$steps_csv"
+  echo "report: $name $status in $s s" >&2
+}
+
+bench=$build/bench
+bin=$build/bin
+csv=$out/csv
+
+# 1. Liver: error against time per frame (solvers, precision, far-field dropping, meshes, non-linear reference).
+if [ -x "$bench/liver_error_bench" ]; then
+  if [ $quick = 1 ]; then step liver_error "$bench/liver_error_bench" --quick --out "$csv"
+  else step liver_error "$bench/liver_error_bench" --out "$csv"; fi
+else
+  failed+=(liver_error); echo "liver_error,0,missing,$bench/liver_error_bench not built" >>"$steps_csv"
+fi
+
+# 2. Liver: haptic rate against a 10 kHz reference on replayed trajectories (the real haptic node, tick-exact).
+haptic_rates() {
+  local rates=(100 300 1000 10000)
+  local trajs=(liver_press_slide liver_fast_stab)
+  mkdir -p "$out/raw/rates"
+  for t in "${trajs[@]}"; do
+    for r in "${rates[@]}"; do
+      echo "== $t at $r Hz"
+      "$bin/haptic_node" --scene liver --replay "$root/config/trajectories/$t.csv" --speed max --rate "$r" \
+        --rt-priority 0 --log "$out/raw/rates/${t}_${r}.csv" --stats "$out/raw/rates/${t}_${r}.json"
+    done
+  done
+}
+step haptic_rates haptic_rates
+
+# 3. Intestine: time step, random pairs, level of detail.
+if [ -x "$bench/intestine_error_bench" ]; then
+  if [ $quick = 1 ]; then step intestine_error "$bench/intestine_error_bench" --quick --out "$csv"
+  else step intestine_error "$bench/intestine_error_bench" --out "$csv"; fi
+else
+  failed+=(intestine_error); echo "intestine_error,0,missing,$bench/intestine_error_bench not built" >>"$steps_csv"
+fi
+
+# 4. Stability on stiff and extreme cases.
+if [ -x "$bench/stability_report" ]; then
+  step stability "$bench/stability_report" --out "$csv"
+else
+  failed+=(stability); echo "stability,0,missing,$bench/stability_report not built" >>"$steps_csv"
+fi
+
+# 5. Benchmarks: precompute and Table 1, node costs, intestine step, live runs of both nodes.
+if [ $quick = 1 ]; then
+  step liver_bench "$bench/liver_bench" --sizes 500,1500 --cg-columns 30 --repeats 300 --out "$csv"
+  step node_bench "$bench/node_bench" --sizes 1500 --reps 500 --out "$csv"
+  step intestine_bench "$bench/intestine_bench" --quick
+else
+  step liver_bench "$bench/liver_bench" --sizes 500,1500,5000 --cg-columns 60 --repeats 1000 --out "$csv"
+  step node_bench "$bench/node_bench" --sizes 1500,5000 --reps 2000 --out "$csv"
+  step intestine_bench "$bench/intestine_bench"
+fi
+
+# Live: both nodes on one host, SCHED_FIFO haptic loop at 1 kHz, the liver sweeping for `live_s` seconds; then the
+# intestine at its scene rate.
+live_s=20
+[ $quick = 1 ] && live_s=6
+live_liver() {
+  SURGSIM_OUT=$out/raw/live_liver HAPTIC_ARGS="--rate 1000 --duration $live_s" VISUAL_ARGS="--png-every 50" \
+    "$root/scripts/run_local.sh" liver "$root/config/trajectories/liver_sweep.csv"
+}
+live_intestine() {
+  SURGSIM_OUT=$out/raw/live_intestine HAPTIC_ARGS="--duration $live_s" VISUAL_ARGS="--png-every 50" \
+    "$root/scripts/run_local.sh" intestine "$root/config/trajectories/intestine_push.csv"
+}
+step live_liver live_liver
+step live_intestine live_intestine
+# Issue 7's round trips: one host (shared memory, UDP), two hosts over veth and through the user-space impairment.
+if [ $quick = 1 ]; then step network "$root/scripts/network_figures.sh" 2 1000
+else step network "$root/scripts/network_figures.sh" 5 1000; fi
+
+echo "{\"load_at_end\": \"$(cut -d' ' -f1-3 /proc/loadavg)\", \"total_s\": $(( $(date +%s) - start_all ))}" \
+  >"$out/raw/end.json"
+
+# 6. Tables and plots.
+step render /usr/bin/python3 "$root/scripts/report.py" "$out"
+
+echo
+echo "report: $out/README.md ($(( $(date +%s) - start_all )) s in all)"
+if [ ${#failed[@]} -gt 0 ]; then
+  echo "report: failed steps: ${failed[*]} (logs in $out/logs)" >&2
+  exit 1
+fi
