@@ -390,46 +390,42 @@ def intestine_section(rep):
     pairs = rep.csv_section("intestine_pairs", "Random pairs n: recall and time per step",
                             "Recall against the brute-force detector over the scripted run (the paper's fig. 14).")
     if pairs:
-        nk = first_key(pairs[0], "n", "random_pairs")
-        rk = first_key(pairs[0], "recall")
-        tk = first_key(pairs[0], "step_us_p50", "us_p50")
-        if nk and rk:
-            fig, ax = plt.subplots(figsize=(7, 4))
-            pts = [r for r in pairs if number(r[nk]) and number(r[rk])]
-            ax.plot([r[nk] for r in pts], [r[rk] for r in pts], marker="o", color="C0")
-            ax.set_xscale("symlog", linthresh=1)
-            ax.set_xlabel("random pairs per step n")
-            ax.set_ylabel(rk, color="C0")
-            if tk:
-                ax2 = ax.twinx()
-                pts = [r for r in pairs if number(r[nk]) and number(r[tk])]
-                ax2.plot([r[nk] for r in pts], [r[tk] for r in pts], marker="s", color="C1")
-                ax2.set_ylabel(tk, color="C1")
-            ax.grid(True, alpha=0.3)
-            rep.save(fig, "intestine_pairs", "Intestine: detection recall and time per step against n.")
+        twin_plot(rep, pairs, first_key(pairs[0], "n", "random_pairs"), first_key(pairs[0], "recall"),
+                  first_key(pairs[0], "step_us_p50", "us_p50"), "intestine_pairs",
+                  "Intestine: detection recall and time per step against n.", xlabel="random pairs per step n",
+                  xscale="symlog")
     lod = rep.csv_section("intestine_lod", "Level of detail: geometric error and frame time", "")
     if lod:
-        lk = first_key(lod[0], "lod")
-        ek = first_key(lod[0], "max_error_mm", "error")
-        fk = first_key(lod[0], "frame_ms_p50", "frame_ms")
-        if lk and ek:
-            fig, ax = plt.subplots(figsize=(7, 4))
-            pts = [r for r in lod if number(r[lk]) and number(r[ek])]
-            ax.semilogy([r[lk] for r in pts], [max(r[ek], 1e-9) for r in pts], marker="o", color="C0")
-            ax.set_xlabel("LOD")
-            ax.set_ylabel(ek, color="C0")
-            if fk:
-                ax2 = ax.twinx()
-                pts = [r for r in lod if number(r[lk]) and number(r[fk])]
-                ax2.plot([r[lk] for r in pts], [r[fk] for r in pts], marker="s", color="C1")
-                ax2.set_ylabel(fk, color="C1")
-            ax.grid(True, alpha=0.3)
-            rep.save(fig, "intestine_lod", "Intestine: tube geometric error and frame time per level of detail.")
+        twin_plot(rep, lod, first_key(lod[0], "lod"), first_key(lod[0], "max_error_mm", "error"),
+                  first_key(lod[0], "frame_ms_p50", "frame_ms"), "intestine_lod",
+                  "Intestine: tube geometric error and frame time per level of detail.", xlabel="LOD", yscale="log")
     rep.csv_section("intestine_frame_rate", "Guaranteed frame rate (paper eq. 15) on the real renderer", "")
     for path in sorted(glob.glob(os.path.join(rep.root, "csv", "intestine_*.csv"))):
         name = os.path.basename(path)[:-4]
         if name not in ("intestine_timestep", "intestine_pairs", "intestine_lod", "intestine_frame_rate"):
             rep.csv_section(name, name.replace("_", " "), "")
+
+
+def twin_plot(rep, rows, xk, yk, y2k, name, caption, xlabel, xscale="linear", yscale="linear"):
+    """yk (left axis) and y2k (right axis, optional) against xk."""
+    if not xk or not yk:
+        return
+    fig, ax = plt.subplots(figsize=(7, 4))
+    pts = [r for r in rows if number(r[xk]) and number(r[yk])]
+    ax.plot([r[xk] for r in pts], [max(r[yk], 1e-12) if yscale == "log" else r[yk] for r in pts], marker="o",
+            color="C0")
+    if xscale == "symlog":
+        ax.set_xscale("symlog", linthresh=1)
+    ax.set_yscale(yscale)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(yk, color="C0")
+    if y2k:
+        ax2 = ax.twinx()
+        pts = [r for r in rows if number(r[xk]) and number(r[y2k])]
+        ax2.plot([r[xk] for r in pts], [r[y2k] for r in pts], marker="s", color="C1")
+        ax2.set_ylabel(y2k, color="C1")
+    ax.grid(True, alpha=0.3)
+    rep.save(fig, name, caption)
 
 
 # ---- stability ------------------------------------------------------------------------------------------------
