@@ -109,6 +109,11 @@ void CholmodSolver::factorize() {
 bool CholmodSolver::factorized() const { return impl_->factorized; }
 int CholmodSolver::rows() const { return impl_->a ? static_cast<int>(impl_->a->nrow) : 0; }
 
+double CholmodSolver::rcond() const {
+  Impl& s = *impl_;
+  return s.factorized ? cholmod_rcond(s.l, &s.common) : 0.0;
+}
+
 void CholmodSolver::solve(const Eigen::Ref<const Eigen::MatrixXd>& b, Eigen::Ref<Eigen::MatrixXd> x) {
   Impl& s = *impl_;
   if (!s.factorized) throw_error("CholmodSolver: solve() before factorize()");

@@ -38,6 +38,9 @@ class CholmodSolver {
 
   bool factorized() const;
   int rows() const;
+  /// CHOLMOD's reciprocal condition estimate of the factored matrix, (min / max diagonal of L)^2 (cholmod_rcond):
+  /// cheap, a rough lower bound on 1 / cond(A) in the 1-norm. 0 before factorize().
+  double rcond() const;
 
   /// x = A^-1 b for any number of columns (b and x: rows() x k; x must already have that size). Not thread-safe:
   /// CHOLMOD's workspace is reused between calls. Throws surgsim::Error on a size mismatch or CHOLMOD failure.

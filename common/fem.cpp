@@ -161,6 +161,27 @@ Eigen::SparseMatrix<double> free_stiffness(const Eigen::SparseMatrix<double>& k,
   return out;
 }
 
+TetInversion count_inverted_tets(const TetMesh& mesh, const Eigen::MatrixX3d& displacement) {
+  if (displacement.rows() != mesh.nodes.rows())
+    throw_error("count_inverted_tets: ", displacement.rows(), " displacement rows for ", mesh.nodes.rows(), " nodes");
+  TetInversion out;
+  for (Eigen::Index t = 0; t < mesh.tets.rows(); ++t) {
+    Eigen::Matrix3d rest, deformed;
+    for (int a = 0; a < 3; ++a) {
+      const int i0 = mesh.tets(t, 0), ia = mesh.tets(t, a + 1);
+      rest.col(a) = (mesh.nodes.row(ia) - mesh.nodes.row(i0)).transpose();
+      deformed.col(a) = rest.col(a) + (displacement.row(ia) - displacement.row(i0)).transpose();
+    }
+    const double ratio = deformed.determinant() / rest.determinant();
+    if (!(ratio > 0)) ++out.inverted;  // NaN counts: such a tet cannot be trusted
+    if (out.worst_tet < 0 || !(ratio >= out.min_volume_ratio)) {
+      out.worst_tet = static_cast<int>(t);
+      out.min_volume_ratio = ratio;
+    }
+  }
+  return out;
+}
+
 ElasticModel build_elastic_model(const TetMesh& mesh, const Material& material, const FixedSet& fixed,
                                  const std::string& where) {
   const std::string prefix = where.empty() ? std::string() : where + ": ";

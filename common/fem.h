@@ -29,6 +29,17 @@ Eigen::SparseMatrix<double> assemble_stiffness(const TetMesh& mesh, const Materi
 /// Rows and columns of the free dofs of `fixed` (K_ff in fixed.free_index() numbering). Both triangles.
 Eigen::SparseMatrix<double> free_stiffness(const Eigen::SparseMatrix<double>& k, const FixedSet& fixed);
 
+/// Tets a displacement field turns inside out: the deformed signed volume det[x1-x0, x2-x0, x3-x0] / 6 of each tet
+/// against its rest volume. Linear elasticity keeps going where the real tissue could not: a displacement larger
+/// than an element (a deep poke) inverts the tets next to it, and this says so.
+struct TetInversion {
+  int inverted = 0;               // tets whose deformed volume is <= 0 (or not finite)
+  int worst_tet = -1;             // tet with the smallest deformed / rest volume ratio (-1 for an empty mesh)
+  double min_volume_ratio = 1;    // that ratio (negative: inverted)
+};
+/// `displacement` #V x 3 (m). Throws surgsim::Error on a size mismatch. Cheap: one determinant per tet.
+TetInversion count_inverted_tets(const TetMesh& mesh, const Eigen::MatrixX3d& displacement);
+
 /// An assembled linear-elastic organ: the immutable model every liver solver and the precomputation read.
 /// The mesh is referenced, not copied: it must outlive the model.
 struct ElasticModel {

@@ -133,6 +133,7 @@ inline double dot(const double* a, const double* b, int n) {
 struct Band {
   double* a;
   int n, p;
+  double max_pivot = 0;  // largest pivot of the last factor()
   double* col(int c) { return a + static_cast<std::size_t>(c) * static_cast<std::size_t>(p + 1); }
   double& at(int r, int c) { return col(c)[r - c]; }
 
@@ -150,9 +151,11 @@ struct Band {
     }
   }
 
-  // In-place Cholesky A = L L^T, left-looking by columns. Returns the smallest pivot (<= 0: not positive definite).
+  // In-place Cholesky A = L L^T, left-looking by columns. Returns the smallest pivot (<= 0: not positive definite);
+  // the largest is left in max_pivot.
   double factor() {
     double min_pivot = 1e300;
+    max_pivot = 0;
     for (int j = 0; j < n; ++j) {
       double* cj = col(j);
       const int rows = std::min(p, n - 1 - j) + 1;  // rows j .. j + rows - 1
@@ -184,6 +187,7 @@ struct Band {
       cj[0] = l;
       for (int t = 1; t < rows; ++t) cj[t] *= inv;
       min_pivot = std::min(min_pivot, l);
+      max_pivot = std::max(max_pivot, l);
     }
     return min_pivot;
   }
@@ -314,6 +318,7 @@ IntegrateStatus integrate(const MassSpring& sys, Integrator integrator, const Pe
       }
     }
     w.min_pivot_ = band.factor();
+    w.max_pivot_ = band.max_pivot;
     if (!(w.min_pivot_ > 0)) return restore(IntegrateStatus::kNotPositive);
     band.solve(w.rhs_.data());
     for (int s = 0; s < sys.free_count(); ++s) {

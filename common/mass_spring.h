@@ -113,6 +113,9 @@ class MassSpringWorkspace {
 
   /// Smallest Cholesky pivot of the last implicit step, sqrt(kg): a conditioning indicator (> 0 when the step solved).
   double min_pivot() const { return min_pivot_; }
+  /// Largest Cholesky pivot of the last implicit step, sqrt(kg). (max_pivot / min_pivot)^2 estimates the condition
+  /// number of the implicit matrix M - h D - h^2 K (a lower bound, as CHOLMOD's rcond).
+  double max_pivot() const { return max_pivot_; }
 
  private:
   friend IntegrateStatus integrate(const MassSpring&, Integrator, const PenaltyContact*, int, double,
@@ -125,6 +128,7 @@ class MassSpringWorkspace {
   Eigen::Matrix3Xd kv_;       // 3 x N: K v
   Eigen::Matrix3Xd x0_, v0_;  // backup for the non-finite guard
   double min_pivot_ = 0;
+  double max_pivot_ = 0;
 };
 
 /// Run phase, no allocation: advances (x, v) by dt (s) with `contacts` penalty contacts (may be null when count is

@@ -1005,6 +1005,14 @@ double tet_volume(const TetMesh& mesh, int t) {
   return (x1 - x0).dot((x2 - x0).cross(x3 - x0)) / 6.0;
 }
 
+double tet_quality(const TetMesh& mesh, int t) {
+  double sum = 0;
+  for (int a = 0; a < 4; ++a)
+    for (int b = a + 1; b < 4; ++b) sum += (mesh.nodes.row(mesh.tets(t, a)) - mesh.nodes.row(mesh.tets(t, b))).squaredNorm();
+  const double l_rms = std::sqrt(sum / 6);
+  return l_rms > 0 ? 6 * std::sqrt(2.0) * std::abs(tet_volume(mesh, t)) / (l_rms * l_rms * l_rms) : 0.0;
+}
+
 SurfaceMesh boundary_surface(const TetMesh& mesh) {
   check_indices(mesh, "boundary_surface");
   const std::vector<Face> faces = sorted_faces(mesh.tets);

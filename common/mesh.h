@@ -59,6 +59,10 @@ SurfaceMesh boundary_surface(const TetMesh& mesh);
 /// det[x1-x0, x2-x0, x3-x0] / 6 > 0).
 double tet_volume(const TetMesh& mesh, int t);
 
+/// Shape quality of tet t: 6 sqrt(2) |V| / l_rms^3 with l_rms the root mean square of its six edge lengths; 1 for
+/// the regular tet, 0 for a flat one (slivers, needles and caps all score low). Scale invariant.
+double tet_quality(const TetMesh& mesh, int t);
+
 struct MeshValidation {
   bool fix_orientation = true;      // flip negatively oriented tets instead of refusing them
   double min_volume_ratio = 1e-12;  // |vol| below ratio * mean |vol| is a zero-volume error

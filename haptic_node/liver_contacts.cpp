@@ -124,6 +124,19 @@ void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& 
     const PointContact& c = points_[static_cast<std::size_t>(i)];
     if (!c.active) continue;
     const Eigen::Vector3d d = geometry.points[static_cast<std::size_t>(i)] - c.anchor;
+    // Two points dragging the same triangle would have their displacements averaged by the merge of duplicate
+    // nodes. This happens when a fast stab carries the tip and the shaft points behind it through the surface in one
+    // tick; a slow stab never activates the trailing points (they stay inside the tip's dent). The deepest point
+    // holds the triangle (ties: the first), so the force does not depend on the speed of the tool.
+    bool shadowed = false;
+    for (int j = 0; j < n_points && !shadowed; ++j) {
+      const PointContact& o = points_[static_cast<std::size_t>(j)];
+      if (j == i || !o.active || o.triangle != c.triangle) continue;
+      const double depth_i = -d.dot(c.normal);
+      const double depth_j = -(geometry.points[static_cast<std::size_t>(j)] - o.anchor).dot(o.normal);
+      shadowed = depth_j > depth_i || (depth_j == depth_i && j < i);
+    }
+    if (shadowed) continue;
     const Eigen::Vector3d alpha = barycentric_weights(c.bary);
     int added = 0;
     for (int v = 0; v < 3; ++v) {

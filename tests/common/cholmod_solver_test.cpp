@@ -64,5 +64,18 @@ TEST(CholmodSolver, MisuseIsAnError) {
   EXPECT_THROW(solver.analyze(a), Error);
 }
 
+// rcond: CHOLMOD's (min / max diagonal of L)^2; diag(1, 4, 100) has L = diag(1, 2, 10).
+TEST(CholmodSolver, ReciprocalConditionEstimate) {
+  Eigen::SparseMatrix<double> a(3, 3);
+  a.insert(0, 0) = 1;
+  a.insert(1, 1) = 4;
+  a.insert(2, 2) = 100;
+  CholmodSolver solver;
+  solver.analyze(a);
+  EXPECT_EQ(solver.rcond(), 0.0) << "not factorized yet";
+  solver.factorize();
+  EXPECT_NEAR(solver.rcond(), 0.01, 1e-15);
+}
+
 }  // namespace
 }  // namespace surgsim

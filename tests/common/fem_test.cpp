@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
+#include <limits>
 
 #include "box_mesh.h"
 #include "error.h"
@@ -105,6 +106,31 @@ TEST(Fem, FreeStiffnessDropsFixedDofs) {
   for (int j = 0; j < model.k_ff.cols(); j += 7)
     for (int i = 0; i < model.k_ff.rows(); i += 5)
       EXPECT_EQ(model.k_ff.coeff(i, j), model.k.coeff(dofs[static_cast<std::size_t>(i)], dofs[static_cast<std::size_t>(j)]));
+}
+
+TEST(Fem, CountInvertedTetsFindsTetsTurnedInsideOut) {
+  const TetMesh m = make_box_mesh(2, 2, 2, Eigen::Vector3d::Constant(0.02));
+  Eigen::MatrixX3d u = Eigen::MatrixX3d::Zero(m.nodes.rows(), 3);
+  TetInversion inv = count_inverted_tets(m, u);
+  EXPECT_EQ(inv.inverted, 0);
+  EXPECT_NEAR(inv.min_volume_ratio, 1.0, 1e-12);
+  // A mirror image (z -> -z) turns every tet inside out.
+  u.col(2) = -2 * m.nodes.col(2);
+  inv = count_inverted_tets(m, u);
+  EXPECT_EQ(inv.inverted, m.tets.rows());
+  EXPECT_NEAR(inv.min_volume_ratio, -1.0, 1e-12);
+  // The centre node pushed down by 3 edges: only tets around it, and a NaN counts as inverted.
+  u.setZero();
+  const int centre = box_node(2, 2, 1, 1, 1);
+  u(centre, 2) = -0.03;
+  inv = count_inverted_tets(m, u);
+  EXPECT_GT(inv.inverted, 0);
+  EXPECT_LT(inv.inverted, m.tets.rows());
+  EXPECT_LT(inv.min_volume_ratio, 0.0);
+  u.setZero();
+  u(centre, 0) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_GT(count_inverted_tets(m, u).inverted, 0);
+  EXPECT_THROW(count_inverted_tets(m, Eigen::MatrixX3d::Zero(3, 3)), Error);
 }
 
 }  // namespace

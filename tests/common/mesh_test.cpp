@@ -736,5 +736,18 @@ TEST(SharedMeshes, DISABLED_SofaMeshes) {
   }
 }
 
+TEST(MeshTest, TetQualityIsOneForTheRegularTetAndZeroForAFlatOne) {
+  TetMesh m;
+  m.nodes.resize(4, 3);
+  m.nodes << 1, 1, 1, 1, -1, -1, -1, 1, -1, -1, -1, 1;  // regular, edge 2 sqrt(2)
+  m.tets.resize(1, 4);
+  m.tets << 0, 1, 2, 3;
+  EXPECT_NEAR(tet_quality(m, 0), 1.0, 1e-12);
+  m.nodes *= 1e-3;  // scale invariant
+  EXPECT_NEAR(tet_quality(m, 0), 1.0, 1e-12);
+  m.nodes.row(3) = (m.nodes.row(0) + m.nodes.row(1) + m.nodes.row(2)) / 3;  // flat
+  EXPECT_NEAR(tet_quality(m, 0), 0.0, 1e-12);
+}
+
 }  // namespace
 }  // namespace surgsim

@@ -135,15 +135,41 @@ TEST_F(LiverContactsTest, NonFiniteInputIsRefusedAndZeroed) {
 }
 
 TEST_F(LiverContactsTest, ShaftPointsAddContactsUpToCapacity) {
+  // A level shaft 5 mm under the top face, pushed in through the side face x = 0: its points drag different
+  // triangles of the top face.
+  spec_.trocar = {-0.1, 0.0977, 0.035};
+  spec_.axis = {1, 0, 0};
   spec_.shaft_points = 4;
-  spec_.shaft_spacing = 0.004;
+  spec_.shaft_spacing = 0.015;
   spec_.contact_capacity = 3;
   LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
-  step(c, pose_at_depth(-0.005));
-  const ContactTick t = step(c, pose_at_depth(0.014));  // tip and shaft points below the surface
+  Pose5 p;
+  p.jaw = 0.5;
+  p.insertion = 0.09;  // tip at x = -0.01
+  step(c, p);
+  p.insertion = 0.153;  // points at x = 0.053, 0.038, 0.023, 0.008
+  const ContactTick t = step(c, p);
+  EXPECT_GE(t.points_in_contact, 1);
   EXPECT_TRUE(t.over_capacity) << "more constrained nodes than the capacity of 3";
   EXPECT_LE(c.solution().count, 3);
   EXPECT_TRUE(t.device_force.allFinite());
+}
+
+// Found by the stability suite (tests/stability): a fast stab carried the tip and the shaft points behind it through
+// the surface in one tick; all of them dragged the same triangle and the merge averaged their displacements, so the
+// tool felt softer at 10 m/s than at 0.1 m/s for the same final pose. The deepest point now holds the triangle.
+TEST_F(LiverContactsTest, FastStabWithShaftPointsFeelsLikeASlowOne) {
+  spec_.shaft_points = 4;
+  spec_.shaft_spacing = 0.004;
+  LiverContacts slow(*mesh_, *surface_, *tensors_, spec_);
+  ContactTick t_slow;
+  for (double depth = -0.005; depth <= 0.01 + 1e-12; depth += 0.0005) t_slow = step(slow, pose_at_depth(depth));
+  LiverContacts fast(*mesh_, *surface_, *tensors_, spec_);
+  step(fast, pose_at_depth(-0.005));
+  const ContactTick t_fast = step(fast, pose_at_depth(0.01));  // 15 mm in one tick: three points cross together
+  ASSERT_GT(t_slow.force.z(), 0.0);
+  EXPECT_EQ(t_fast.points_in_contact, t_slow.points_in_contact);
+  EXPECT_NEAR(t_fast.force.z(), t_slow.force.z(), 1e-9 * t_slow.force.z());
 }
 
 TEST_F(LiverContactsTest, StepAllocatesNothing) {
