@@ -11,7 +11,8 @@
 //   liver/large_disp  a displacement of 0.5..3 element edges at one node: inverted tets detected and counted
 //   liver/tool_speed  the haptic node's continuous collision with the tool at 0.1, 1, 10 m/s: contact found on the
 //                     tick the tip crosses the surface (no tunnelling), force clamped to the scene's limit
-//   intestine/springs springs of 10 .. 1e6 N/m at dt = 1 ms: implicit bounded, explicit diverges where it does
+//   intestine/springs springs of 10 .. 1e6 N/m at dt = 1 ms: implicit never gains energy (with self-collisions:
+//                     ends below its start; the response may add some for a step), explicit diverges where it does
 //   intestine/yank    a probe pulled out of a deep contact at 10 m/s (and plunged in): no explosion, force clamped
 #pragma once
 #include <string>
@@ -39,7 +40,8 @@ struct CaseResult {
   std::string parameter;  // e.g. "nu=0.49", "v=10 m/s"
   Outcome outcome = Outcome::kFailed;
   std::string message;    // the error text when refused; otherwise what was observed
-  double residual = 0;    // relative residual of the solve (liver), or the case's own error measure (see message)
+  double residual = 0;    // liver: relative residual |K_ff u - f| / |f| of the reference solve; intestine: largest
+                          // energy gain over the run / (m g R); see the message
   double condition = 0;   // condition estimate: 1 / rcond of the factor (CHOLMOD for K_ff, or G_CC / the implicit
                           // matrix from their Cholesky diagonals)
   double max_force_n = 0;         // largest |force| that reached an output (N)
