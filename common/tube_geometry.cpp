@@ -38,12 +38,43 @@ void put(std::vector<float>& v, int i, const Eigen::Vector3d& p) {
   v[k + 2] = static_cast<float>(p.z());
 }
 
+// The triangles of an end cap into `out` (no allocation): the cap's ring is `sides` vertices from `ring`, its own
+// vertices follow from `interior` ((cap_rings - 1) rings, then the pole). Counter-clockwise seen from outside: the
+// last ring's cap (`end`) bulges along the tube's direction like the tube's own quads run, the first ring's against
+// it, so its triangles are flipped. Returns the number of indices written.
+int write_cap_indices(std::uint32_t* out, std::uint32_t ring, std::uint32_t interior, int sides, int cap_rings,
+                      bool end) noexcept {
+  int n = 0;
+  auto tri = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+    out[n++] = a;
+    out[n++] = end ? b : c;
+    out[n++] = end ? c : b;
+  };
+  const auto s = static_cast<std::uint32_t>(sides);
+  auto ring_start = [&](int i) { return i == 0 ? ring : interior + static_cast<std::uint32_t>(i - 1) * s; };
+  for (int i = 0; i + 1 < cap_rings; ++i) {
+    const std::uint32_t r0 = ring_start(i), r1 = ring_start(i + 1);
+    for (std::uint32_t k = 0; k < s; ++k) {
+      const std::uint32_t a = r0 + k, b = r0 + (k + 1) % s, c = r1 + k, d = r1 + (k + 1) % s;
+      tri(a, b, c);
+      tri(b, d, c);
+    }
+  }
+  const std::uint32_t last = ring_start(cap_rings - 1), pole = ring_start(cap_rings);
+  for (std::uint32_t k = 0; k < s; ++k) tri(last + k, last + (k + 1) % s, pole);
+  return n;
+}
+
 }  // namespace
 
 TubeLod tube_lod(int lod) {
   lod = std::clamp(lod, 0, kTubeMaxLod);
-  return TubeLod{4 << ((lod + 1) / 2), 1 << (lod / 2)};
+  const int sides = 4 << ((lod + 1) / 2);
+  return TubeLod{sides, 1 << (lod / 2), std::max(1, sides / 4)};
 }
+
+int tube_cap_vertices(const TubeLod& lod) { return (lod.cap_rings - 1) * lod.sides + 1; }
+int tube_cap_triangles(const TubeLod& lod) { return lod.sides * (2 * lod.cap_rings - 1); }
 
 double skin_weight(double t) { return t * t * (3.0 - 2.0 * t); }
 
@@ -127,18 +158,18 @@ TubeBuilder::TubeBuilder(const TubeParams& params, int max_points) : params_(par
   curvature_.assign(np, 0.0);
   const auto ns = static_cast<std::size_t>(max_intervals() + 1);
   samples_.resize(ns);
-  // Primitives: (rings + 1) x sides vertices (cos a, sin a, t, w(t)).
+  // Primitives: one interval, (rings + 1) x sides vertices (cos a, sin a, t, 0), then the two caps' own vertices
+  // (cos(phi) cos a, cos(phi) sin a, 0 or 1, -+sin(phi)) over the interval's first and last rings.
   for (int lod = 0; lod <= kTubeMaxLod; ++lod) {
     TubePrimitive prim;
     prim.lod = tube_lod(lod);
-    const int s = prim.lod.sides, q = prim.lod.rings;
+    const int s = prim.lod.sides, q = prim.lod.rings, m = prim.lod.cap_rings;
+    auto vertex = [&](double x, double y, double t, double z) {
+      prim.vertices.insert(prim.vertices.end(), {static_cast<float>(x), static_cast<float>(y), static_cast<float>(t),
+                                                 static_cast<float>(z)});
+    };
     for (int j = 0; j <= q; ++j) {
-      const double t = static_cast<double>(j) / q;
-      for (int k = 0; k < s; ++k) {
-        const double a = 2 * kPi * k / s;
-        prim.vertices.insert(prim.vertices.end(), {static_cast<float>(std::cos(a)), static_cast<float>(std::sin(a)),
-                                                   static_cast<float>(t), static_cast<float>(skin_weight(t))});
-      }
+      for (int k = 0; k < s; ++k) vertex(std::cos(2 * kPi * k / s), std::sin(2 * kPi * k / s), double(j) / q, 0);
     }
     for (int j = 0; j < q; ++j) {
       for (int k = 0; k < s; ++k) {
@@ -146,6 +177,26 @@ TubeBuilder::TubeBuilder(const TubeParams& params, int max_points) : params_(par
         const auto c = a + static_cast<std::uint32_t>(s), d = b + static_cast<std::uint32_t>(s);
         prim.indices.insert(prim.indices.end(), {a, b, c, b, d, c});
       }
+    }
+    prim.body_vertex_count = (q + 1) * s;
+    prim.body_index_count = static_cast<int>(prim.indices.size());
+    prim.cap_vertex_count = tube_cap_vertices(prim.lod);
+    prim.cap_index_count = 3 * tube_cap_triangles(prim.lod);
+    for (const bool end : {false, true}) {
+      const double t = end ? 1.0 : 0.0, sign = end ? 1.0 : -1.0;
+      for (int i = 1; i < m; ++i) {
+        const double phi = 0.5 * kPi * i / m;
+        for (int k = 0; k < s; ++k) {
+          const double a = 2 * kPi * k / s;
+          vertex(std::cos(phi) * std::cos(a), std::cos(phi) * std::sin(a), t, sign * std::sin(phi));
+        }
+      }
+      vertex(0, 0, t, sign);  // the pole
+      const auto ring = static_cast<std::uint32_t>(end ? q * s : 0);
+      const auto interior = static_cast<std::uint32_t>(prim.body_vertex_count + (end ? prim.cap_vertex_count : 0));
+      const std::size_t at = prim.indices.size();
+      prim.indices.resize(at + static_cast<std::size_t>(prim.cap_index_count));
+      write_cap_indices(prim.indices.data() + at, ring, interior, s, m, end);
     }
     primitives_.push_back(std::move(prim));
   }
@@ -155,12 +206,13 @@ TubeMesh TubeBuilder::make_mesh(int lod) const {
   lod = std::clamp(lod, 0, kTubeMaxLod);
   const TubeLod l = tube_lod(lod);
   const auto rings = static_cast<std::size_t>(max_intervals()) * static_cast<std::size_t>(l.rings) + 1;
-  const auto verts = rings * static_cast<std::size_t>(l.sides);
+  const auto verts = rings * static_cast<std::size_t>(l.sides) + 2 * static_cast<std::size_t>(tube_cap_vertices(l));
   TubeMesh m;
   m.lod = lod;
   m.positions.assign(3 * verts, 0.0f);
   m.normals.assign(3 * verts, 0.0f);
-  m.indices.assign((rings - 1) * static_cast<std::size_t>(l.sides) * 6, 0u);
+  m.indices.assign((rings - 1) * static_cast<std::size_t>(l.sides) * 6 +
+                       6 * static_cast<std::size_t>(tube_cap_triangles(l)), 0u);
   m.skin.assign(static_cast<std::size_t>(max_intervals()) * 24, 0.0f);
   return m;
 }
@@ -419,10 +471,11 @@ void TubeBuilder::guard(const Eigen::Vector3d& r0) noexcept {
   }
 }
 
-void TubeBuilder::skin(int lod, TubeMesh& mesh) const noexcept {
+void TubeBuilder::skin(int lod, TubeSkinning skinning, TubeMesh& mesh) const noexcept {
   const TubeLod l = tube_lod(lod);
   const TubePrimitive& prim = primitives_[static_cast<std::size_t>(lod)];
   const int sides = l.sides, q = l.rings, intervals = sample_count_ - 1;
+  const bool cpu = skinning == TubeSkinning::kCpu;
   int ring = 0;
   for (int k = 0; k < intervals; ++k) {
     const TubeSample &a = samples_[static_cast<std::size_t>(k)], &b = samples_[static_cast<std::size_t>(k + 1)];
@@ -441,6 +494,10 @@ void TubeBuilder::skin(int lod, TubeMesh& mesh) const noexcept {
       m[12 + 4 * row + 3] = static_cast<float>(b.center[row] - len * b.tangent[row]);
     }
     const int last_ring = k + 1 == intervals ? q : q - 1;
+    if (!cpu) {
+      ring += last_ring + 1;
+      continue;
+    }
     for (int j = 0; j <= last_ring; ++j, ++ring) {
       const double t = static_cast<double>(j) / q, w = skin_weight(t);
       const Eigen::Vector3d center =
@@ -459,8 +516,25 @@ void TubeBuilder::skin(int lod, TubeMesh& mesh) const noexcept {
       }
     }
   }
+  const int cap_vertices = tube_cap_vertices(l), cap_indices = 3 * tube_cap_triangles(l);
   mesh.ring_count = ring;
-  mesh.vertex_count = ring * sides;
+  mesh.body_vertex_count = ring * sides;
+  mesh.vertex_count = mesh.body_vertex_count + 2 * cap_vertices;
+  mesh.body_index_count = (ring - 1) * sides * 6;
+  mesh.index_count = mesh.body_index_count + 2 * cap_indices;
+  if (!cpu) return;
+  // End caps: the primitive's cap vertices on the first and the last ring's frame (z along the ring's tangent).
+  for (const bool end : {false, true}) {
+    const TubeSample& r = samples_[static_cast<std::size_t>(end ? intervals : 0)];
+    const int from = prim.body_vertex_count + (end ? cap_vertices : 0);
+    const int to = mesh.body_vertex_count + (end ? cap_vertices : 0);
+    for (int i = 0; i < cap_vertices; ++i) {
+      const float* v = &prim.vertices[static_cast<std::size_t>(4 * (from + i))];
+      const Eigen::Vector3d dir = v[0] * r.normal + v[1] * r.binormal + v[3] * r.tangent;
+      put(mesh.positions, to + i, r.center + r.radius * dir);
+      put(mesh.normals, to + i, dir.normalized());
+    }
+  }
   std::size_t idx = 0;
   for (int i = 0; i + 1 < ring; ++i) {
     for (int j = 0; j < sides; ++j) {
@@ -474,11 +548,16 @@ void TubeBuilder::skin(int lod, TubeMesh& mesh) const noexcept {
       mesh.indices[idx++] = c;
     }
   }
-  mesh.index_count = static_cast<int>(idx);
+  for (const bool end : {false, true}) {
+    const auto cap_ring = static_cast<std::uint32_t>(end ? (ring - 1) * sides : 0);
+    const auto interior = static_cast<std::uint32_t>(mesh.body_vertex_count + (end ? cap_vertices : 0));
+    idx += static_cast<std::size_t>(write_cap_indices(&mesh.indices[idx], cap_ring, interior, sides, l.cap_rings, end));
+  }
 }
 
-bool TubeBuilder::build(const double* points, int count, int lod, TubeMesh& mesh) noexcept {
+bool TubeBuilder::build(const double* points, int count, int lod, TubeMesh& mesh, TubeSkinning skinning) noexcept {
   mesh.intervals = mesh.ring_count = mesh.vertex_count = mesh.index_count = 0;
+  mesh.body_vertex_count = mesh.body_index_count = 0;
   lod = std::clamp(lod, 0, kTubeMaxLod);
   mesh.lod = lod;
   const TubeLod l = tube_lod(lod);
@@ -502,10 +581,12 @@ bool TubeBuilder::build(const double* points, int count, int lod, TubeMesh& mesh
     return false;
   }
   const int intervals = sample_count_ - 1;
-  const auto verts = (static_cast<std::size_t>(intervals) * static_cast<std::size_t>(l.rings) + 1) *
-                     static_cast<std::size_t>(l.sides);
-  if (mesh.positions.size() < 3 * verts || mesh.normals.size() < 3 * verts ||
-      mesh.indices.size() < (verts - static_cast<std::size_t>(l.sides)) * 6 ||
+  const auto body = (static_cast<std::size_t>(intervals) * static_cast<std::size_t>(l.rings) + 1) *
+                    static_cast<std::size_t>(l.sides);
+  const auto verts = body + 2 * static_cast<std::size_t>(tube_cap_vertices(l));
+  const auto indices = (body - static_cast<std::size_t>(l.sides)) * 6 + 6 * static_cast<std::size_t>(tube_cap_triangles(l));
+  const bool cpu = skinning == TubeSkinning::kCpu;
+  if ((cpu && (mesh.positions.size() < 3 * verts || mesh.normals.size() < 3 * verts || mesh.indices.size() < indices)) ||
       mesh.skin.size() < static_cast<std::size_t>(24 * intervals)) {
     return false;
   }
@@ -513,7 +594,7 @@ bool TubeBuilder::build(const double* points, int count, int lod, TubeMesh& mesh
   has_previous_normal_ = true;
   stats_.samples = sample_count_;
   mesh.intervals = intervals;
-  skin(lod, mesh);
+  skin(lod, skinning, mesh);
   return true;
 }
 

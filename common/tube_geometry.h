@@ -17,9 +17,18 @@
 //      w(t) = 3 t^2 - 2 t^3. Because w'(0) = w'(1) = 0 the axis leaves each ring along that ring's tangent, so
 //      the skinned tube is C1 across rings and the axis is a Hermite-like cubic between them.
 //   7. levels of detail: LOD i (0..kTubeMaxLod) has sides x rings = 4 2^i quads per interval (8 2^i triangles),
-//      sides = 4 2^ceil(i/2), rings = 2^floor(i/2).
+//      sides = 4 2^ceil(i/2), rings = 2^floor(i/2);
+//   8. rounded end caps: a hemisphere on the first and the last ring (the ring's own radius and frame), cap_rings =
+//      sides / 4 latitude steps from the ring to the pole, sharing the ring's vertices, so the tube is closed
+//      (watertight: every edge in exactly two triangles) with outward normals.
 // The CPU skinning writes positions, normals and triangle indices (any backend can draw them, tests can check them);
-// the same A_k, B_k per interval (TubeMesh::skin) and TubePrimitive let a vertex shader do step 6 instead.
+// the same A_k, B_k per interval (TubeMesh::skin) and TubePrimitive let a vertex shader do steps 6 and 8 instead
+// (TubeSkinning::kGpu builds the matrices only). A primitive vertex (x, y, t, z) of interval k is skinned to
+//   p = (1 - w(t)) (A_k (x, y, t, 1) + z r_a T_a) + w(t) (B_k (x, y, t, 1) + z r_b T_b),
+//   n = normalize((1 - w(t)) (x N_a + y B_a + z T_a) + w(t) (x N_b + y B_b + z T_b)),
+// with r, N, B, T read back from the matrices' columns: the tube's vertices have z = 0 and (x, y) = (cos a, sin a);
+// a cap vertex at latitude phi has (x, y) = cos(phi) (cos a, sin a), t = 0 and z = -sin(phi) (first ring, drawn with
+// interval 0) or t = 1 and z = sin(phi) (last ring, interval n - 1).
 //
 // Ring guard: two cross-sections (centres c1, c2, radii r1, r2, unit normals n1, n2 at angle theta) do not intersect
 // inside the tube when d.n2 >= (r1 + e) sin(theta) and d.n1 >= (r2 + e) sin(theta), d = c2 - c1, e = ring_clearance:
@@ -47,8 +56,9 @@ constexpr int kTubeMaxLod = 6;
 
 /// Primitive resolution of a level of detail.
 struct TubeLod {
-  int sides = 4;  // vertices around a ring
-  int rings = 1;  // rings per interval (the interval's last ring is the next one's first)
+  int sides = 4;      // vertices around a ring
+  int rings = 1;      // rings per interval (the interval's last ring is the next one's first)
+  int cap_rings = 1;  // latitude steps of an end cap from its ring to the pole (sides / 4)
 };
 TubeLod tube_lod(int lod);  // lod clamped to 0..kTubeMaxLod
 
@@ -78,25 +88,42 @@ struct TubeSample {
   Eigen::Vector3d spline_tangent = Eigen::Vector3d::UnitX();  // unit, before the guard
 };
 
+/// Which part of step 6 build() does on the CPU.
+enum class TubeSkinning {
+  kCpu,  // skinning matrices and the skinned vertices, normals and indices
+  kGpu,  // skinning matrices and the counts only (a vertex shader skins TubePrimitive)
+};
+
+/// Vertices of one end cap besides its ring (the ring belongs to the tube): (cap_rings - 1) rings and the pole.
+int tube_cap_vertices(const TubeLod& lod);
+/// Triangles of one end cap: sides (2 cap_rings - 1).
+int tube_cap_triangles(const TubeLod& lod);
+
 /// The skinned tube. Sized by TubeBuilder::make_mesh; build() fills the first *_count entries.
 struct TubeMesh {
   int lod = 0;
   int sides = 0;
   int intervals = 0;                 // between consecutive samples
   int ring_count = 0;                // intervals * rings per interval + 1
-  int vertex_count = 0;              // ring_count * sides, ring-major
-  int index_count = 0;               // 3 per triangle
-  std::vector<float> positions;      // 3 per vertex, m
-  std::vector<float> normals;        // 3 per vertex, unit
-  std::vector<std::uint32_t> indices;  // triangles, counter-clockwise seen from outside
+  int body_vertex_count = 0;         // ring_count * sides, ring-major, first
+  int vertex_count = 0;              // body, then the first ring's cap, then the last ring's (tube_cap_vertices each)
+  int body_index_count = 0;          // the tube's triangles come first, then the two caps'
+  int index_count = 0;               // 3 per triangle, caps included
+  std::vector<float> positions;      // 3 per vertex, m (TubeSkinning::kCpu only)
+  std::vector<float> normals;        // 3 per vertex, unit, outward (kCpu only)
+  std::vector<std::uint32_t> indices;  // triangles, counter-clockwise seen from outside (kCpu only)
   std::vector<float> skin;           // 24 per interval: A_k then B_k, 3 x 4 row-major (for GPU skinning)
 };
 
-/// The precomputed cylinder primitive of a LOD, for GPU skinning: (rings + 1) x sides vertices.
+/// The precomputed cylinder primitive of a LOD with its two end caps, for GPU skinning.
 struct TubePrimitive {
   TubeLod lod;
-  std::vector<float> vertices;         // 4 per vertex: cos a, sin a, t, w(t)
-  std::vector<std::uint32_t> indices;  // triangles
+  int body_vertex_count = 0;           // (rings + 1) x sides, ring-major: one interval of the tube
+  int cap_vertex_count = 0;            // per cap: the first ring's cap follows the body, then the last ring's
+  int body_index_count = 0;            // the interval's triangles, first in `indices`
+  int cap_index_count = 0;             // per cap: the first ring's cap's triangles, then the last ring's
+  std::vector<float> vertices;         // 4 per vertex: x, y, t, z (see the header comment)
+  std::vector<std::uint32_t> indices;  // triangles, counter-clockwise seen from outside
 };
 
 struct TubeStats {
@@ -141,8 +168,10 @@ class TubeBuilder {
 
   /// Run phase, no allocation: builds the tube through `count` points (3 count doubles, x y z per point) at `lod`
   /// into `mesh` (made by make_mesh with a LOD >= lod). False, with an empty mesh, for fewer than 2 distinct points,
-  /// more than max_points, non-finite input or a mesh too small.
-  bool build(const double* points, int count, int lod, TubeMesh& mesh) noexcept;
+  /// more than max_points, non-finite input or a mesh too small. With TubeSkinning::kGpu only the matrices and the
+  /// counts are written (positions, normals and indices keep whatever they held).
+  bool build(const double* points, int count, int lod, TubeMesh& mesh,
+             TubeSkinning skinning = TubeSkinning::kCpu) noexcept;
 
   /// Results of the last build (samples after the guard, c_i per segment, counters).
   int sample_count() const { return sample_count_; }
@@ -160,7 +189,7 @@ class TubeBuilder {
   int repair(int k, double fit) noexcept;
   void erase(int k) noexcept;
   void guard(const Eigen::Vector3d& r0) noexcept;
-  void skin(int lod, TubeMesh& mesh) const noexcept;
+  void skin(int lod, TubeSkinning skinning, TubeMesh& mesh) const noexcept;
 
   TubeParams params_;
   int max_points_ = 0;

@@ -77,7 +77,7 @@ intestine::FrameRateParams rate_params(const Scene& scene) {
 
 }  // namespace
 
-IntestineView::IntestineView(const Scene& scene, std::uint64_t scene_hash)
+IntestineView::IntestineView(const Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning)
     : rows_(scene.intestine.params.rows),
       cols_(scene.intestine.params.columns),
       scene_hash_(scene_hash),
@@ -87,6 +87,7 @@ IntestineView::IntestineView(const Scene& scene, std::uint64_t scene_hash)
       tube_(builder_.make_mesh(intestine::kTubeMaxLod)),
       mesentery_(intestine::make_mesentery_mesh(rows_, cols_)),
       controller_(rate_params(scene)),
+      skinning_(skinning),
       incoming_(3 * static_cast<std::size_t>(msg::kMaxBodyPoints), 0.0) {
   tube_positions_.resize(static_cast<Eigen::Index>(tube_.positions.size() / 3), 3);
   tube_tris_.resize(static_cast<Eigen::Index>(tube_.indices.size() / 3), 3);
@@ -106,6 +107,11 @@ IntestineView::IntestineView(const Scene& scene, std::uint64_t scene_hash)
 }
 
 IntestineView::~IntestineView() = default;
+
+void IntestineView::set_skinning(intestine::TubeSkinning skinning) noexcept {
+  skinning_ = skinning;
+  built_lod_ = -1;  // rebuild on the next update()
+}
 
 void IntestineView::subscribe(dds::Participant& participant) {
   listener_ = std::make_unique<BodyStateListener>();
@@ -154,14 +160,15 @@ bool IntestineView::set_positions(const double* xyz, int count) noexcept {
 
 void IntestineView::rebuild(int lod) noexcept {
   const std::uint64_t t0 = monotonic_ns();
-  // The tube through the intestine's points (row 0 of the grid), skinned on the CPU.
-  if (builder_.build(points_.data(), cols_, lod, tube_)) {
-    for (int v = 0; v < tube_.vertex_count; ++v) {
+  // The tube through the intestine's points (row 0 of the grid): the skinning matrices, and with kCpu the vertices.
+  const bool cpu = skinning_ == intestine::TubeSkinning::kCpu;
+  if (builder_.build(points_.data(), cols_, lod, tube_, skinning_)) {
+    for (int v = 0; cpu && v < tube_.vertex_count; ++v) {
       tube_positions_.row(v) << tube_.positions[3 * static_cast<std::size_t>(v)],
           tube_.positions[3 * static_cast<std::size_t>(v) + 1], tube_.positions[3 * static_cast<std::size_t>(v) + 2];
     }
     const int tris = tube_.index_count / 3;
-    for (int t = 0; t < tris; ++t) {
+    for (int t = 0; cpu && t < tris; ++t) {
       for (int k = 0; k < 3; ++k) {
         tube_tris_(t, k) = static_cast<int>(tube_.indices[3 * static_cast<std::size_t>(t) + static_cast<std::size_t>(k)]);
       }
@@ -186,7 +193,10 @@ void IntestineView::rebuild(int lod) noexcept {
 void IntestineView::draw(Renderer& renderer) const {
   if (!have_body_) return;
   renderer.draw_surface(mesentery_positions_, mesentery_tris_, kMesenteryRgb);
-  if (tube_.vertex_count > 0) {
+  if (tube_.vertex_count == 0) return;
+  if (skinning_ == intestine::TubeSkinning::kGpu) {
+    renderer.draw_skinned_tube(builder_.primitive(tube_.lod), tube_.skin.data(), tube_.intervals, kIntestineRgb);
+  } else {
     renderer.draw_surface(tube_positions_.topRows(tube_.vertex_count), tube_tris_.topRows(tube_.index_count / 3),
                           kIntestineRgb);
   }
@@ -217,6 +227,7 @@ nlohmann::json IntestineView::stats() const {
   j["lod_mean"] = frames > 0 ? lod_sum / static_cast<double>(frames) : 0.0;
   j["lod_final"] = controller_.lod();
   j["target_fps"] = target_fps_;
+  j["tube_skinning"] = skinning_ == intestine::TubeSkinning::kGpu ? "gpu" : "cpu";
   const Percentiles work = work_ms_.summary();
   j["work_ms"] = to_json(work);
   j["work_fps_mean"] = work.mean > 0 ? 1e3 / work.mean : 0.0;  // the rate the frames' work alone would allow

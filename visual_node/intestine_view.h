@@ -4,11 +4,13 @@
 // the whole grid, with the tube's level of detail chosen by the guaranteed-frame-rate controller (paper eq. 15).
 // A liver scene never builds one, and an intestine scene loads no tetrahedral mesh and no tensors.
 //
-// Skinning runs on the CPU (TubeBuilder::build writes skinned positions): the Renderer interface draws triangle
-// surfaces, and at LOD 6 the tube is about 33k vertices (66k triangles): spline, frames, skinning and the strip take
-// about 0.6 ms (p50) per body state on this machine, small next to OSMesa's ~19 ms to draw them. The per-interval
-// matrices (TubeMesh::skin) and the primitives (TubeBuilder::primitive) are what a vertex-shader path would upload
-// instead.
+// Skinning (TubeSkinning, --tube-skinning in the visual node) runs by default on the GPU: the builder makes only the
+// per-interval matrices (TubeMesh::skin) and Renderer::draw_skinned_tube sends them, the cylinder primitive of each
+// LOD (TubeBuilder::primitive, both end caps included) being uploaded once; the vertex shader does the two-matrix
+// blend. With TubeSkinning::kCpu the builder writes the skinned vertices and the tube is drawn as a triangle surface
+// (draw_surface: normals recomputed from the positions), as before. Spline, RMF, ring guard and caps' frames are
+// the same CPU code in both (the matrices come from the same build). tests/bench/tube_skinning_bench prints the
+// frame time of both per LOD.
 //
 // The controller is fed with each frame's work time (update + draw + end_frame, not the pacing sleep): the LOD is the
 // finest whose work still allows the target rate (visual.target_fps; visual.rate_hz when 0), so the displayed rate
@@ -44,10 +46,15 @@ class IntestineView {
   /// Init (allocates; throws surgsim::Error on bad parameters): the tube builder for scene.intestine's columns, the
   /// meshes at the finest LOD, the mesentery strip as triangles, the frame-rate controller. BodyStates whose scene
   /// hash differs from `scene_hash` are refused.
-  IntestineView(const Scene& scene, std::uint64_t scene_hash);
+  IntestineView(const Scene& scene, std::uint64_t scene_hash,
+                intestine::TubeSkinning skinning = intestine::TubeSkinning::kGpu);
   ~IntestineView();
   IntestineView(const IntestineView&) = delete;
   IntestineView& operator=(const IntestineView&) = delete;
+
+  /// Init: where the tube is skinned from now on (e.g. kCpu when the renderer has no GPU skinning).
+  void set_skinning(intestine::TubeSkinning skinning) noexcept;
+  intestine::TubeSkinning skinning() const { return skinning_; }
 
   /// Init: the BodyState reader (stream profile: best effort, keep last 1; the listener keeps the newest).
   void subscribe(dds::Participant& participant);
@@ -68,9 +75,11 @@ class IntestineView {
   bool has_body() const { return have_body_; }
   std::uint64_t states_received() const { return states_received_; }
   std::uint64_t last_seq() const { return last_seq_; }
-  int tube_vertices() const { return tube_.vertex_count; }
+  int tube_vertices() const { return tube_.vertex_count; }  // caps included; drawn by either path
   int tube_triangles() const { return tube_.index_count / 3; }
-  const Eigen::MatrixX3f& tube_positions() const { return tube_positions_; }  // first tube_vertices() rows
+  const Eigen::MatrixX3f& tube_positions() const { return tube_positions_; }  // first tube_vertices() rows (kCpu only)
+  const intestine::TubeMesh& tube() const { return tube_; }  // counts and matrices; vertices with kCpu only
+  const intestine::TubePrimitive& tube_primitive() const { return builder_.primitive(tube_.lod); }
   const intestine::FrameRateController& controller() const { return controller_; }
 
   /// Shutdown: states, LOD histogram and mean, the controller's target, work and build times, tube sizes.
@@ -95,6 +104,7 @@ class IntestineView {
   Eigen::MatrixX3i mesentery_tris_;  // the strip unrolled once into triangles (degenerate joins skipped)
   int built_lod_ = -1;
   bool have_body_ = false;
+  intestine::TubeSkinning skinning_ = intestine::TubeSkinning::kGpu;
 
   std::unique_ptr<BodyStateListener> listener_;
   std::vector<double> incoming_;  // 3 x kMaxBodyPoints, the listener's newest copied out under its lock

@@ -24,6 +24,11 @@ int main(int argc, char** argv) {
   cli.add_option("--stats", o.stats, "Write a JSON summary here on exit");
   cli.add_option("--rate", o.rate_hz, "Visual frame rate override, Hz");
   cli.add_option("--png-every", o.png_every, "Write every n-th frame as PNG (0 = none; default from the scene)");
+  cli.add_option("--tube-skinning", o.tube_skinning,
+                 "Intestine tube: 'gpu' skins the cylinder primitive in a vertex shader (only the per-interval "
+                 "matrices are sent per frame), 'cpu' skins it on the CPU and uploads the vertices")
+      ->check(CLI::IsMember({"gpu", "cpu"}))
+      ->capture_default_str();
   cli.add_flag("--video", o.video, "Also assemble the PNG frames into out/video.mp4 with ffmpeg (when installed)");
   cli.add_option("--cache", o.cache_dir, "Cache folder for generated meshes and tensors");
   cli.add_option("--domain", o.domain, "DDS domain id (default $SURGSIM_DOMAIN or 0)");

@@ -10,6 +10,7 @@
 #include <GL/osmesa.h>
 
 #include <Eigen/Geometry>
+#include <array>
 #include <cmath>
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -62,7 +63,20 @@ namespace {
   X(PFNGLBUFFERSUBDATAPROC, BufferSubData)                                                                       \
   X(PFNGLENABLEVERTEXATTRIBARRAYPROC, EnableVertexAttribArray)                                                   \
   X(PFNGLVERTEXATTRIBPOINTERPROC, VertexAttribPointer)                                                           \
-  X(PFNGLDRAWELEMENTSPROC, DrawElements)
+  X(PFNGLDRAWELEMENTSPROC, DrawElements)                                                                         \
+  X(PFNGLDELETEBUFFERSPROC, DeleteBuffers)                                                                       \
+  X(PFNGLGENTEXTURESPROC, GenTextures)                                                                           \
+  X(PFNGLBINDTEXTUREPROC, BindTexture)                                                                           \
+  X(PFNGLACTIVETEXTUREPROC, ActiveTexture)                                                                       \
+  X(PFNGLTEXBUFFERPROC, TexBuffer)                                                                               \
+  X(PFNGLUNIFORM1IPROC, Uniform1i)                                                                               \
+  X(PFNGLDRAWELEMENTSINSTANCEDPROC, DrawElementsInstanced)                                                       \
+  X(PFNGLDRAWARRAYSINSTANCEDPROC, DrawArraysInstanced)                                                           \
+  X(PFNGLTRANSFORMFEEDBACKVARYINGSPROC, TransformFeedbackVaryings)                                               \
+  X(PFNGLBINDBUFFERBASEPROC, BindBufferBase)                                                                     \
+  X(PFNGLBEGINTRANSFORMFEEDBACKPROC, BeginTransformFeedback)                                                     \
+  X(PFNGLENDTRANSFORMFEEDBACKPROC, EndTransformFeedback)                                                         \
+  X(PFNGLGETBUFFERSUBDATAPROC, GetBufferSubData)
 
 struct GlApi {
 #define SURGSIM_GL_DECLARE(type, name) type name = nullptr;
@@ -125,6 +139,48 @@ void main() {
 }
 )";
 
+// Two-matrix skinning of the tube primitive (tube_geometry.h, DESIGN.md 4.4): instance k of a draw skins the
+// primitive with interval u_first_interval + k. A vertex (x, y, t, z) becomes
+//   (1 - w(t)) (A (x, y, t, 1) + z r_a T_a) + w(t) (B (x, y, t, 1) + z r_b T_b),  w(t) = 3 t^2 - 2 t^3,
+// the normal the same blend of x N + y B + z T; r, N, B, T are read from the matrices' columns. v_world and
+// v_world_normal are what capture_skinned_tube reads back by transform feedback.
+constexpr const char* kSkinVertexShader = R"(#version 330 core
+layout(location = 0) in vec4 a_prim;  // x, y, t, z
+uniform samplerBuffer u_skin;         // RGBA32F, 6 texels per interval: the rows of A_k, then of B_k
+uniform int u_first_interval;
+uniform mat4 u_mvp;
+uniform mat4 u_model_view;
+uniform mat3 u_normal_matrix;
+out vec3 v_position;      // view space
+out vec3 v_normal;        // view space
+out vec3 v_world;         // m
+out vec3 v_world_normal;  // unit
+// One end's matrix (rows at texel `base`) applied to the vertex: the point and the direction x N + y B + z T.
+void skin_end(int base, out vec3 point, out vec3 direction, out vec3 tangent) {
+  vec4 r0 = texelFetch(u_skin, base), r1 = texelFetch(u_skin, base + 1), r2 = texelFetch(u_skin, base + 2);
+  vec3 n = vec3(r0.x, r1.x, r2.x), b = vec3(r0.y, r1.y, r2.y);
+  tangent = normalize(vec3(r0.z, r1.z, r2.z));
+  float radius = length(n);
+  vec4 v = vec4(a_prim.xyz, 1.0);
+  point = vec3(dot(r0, v), dot(r1, v), dot(r2, v)) + (a_prim.w * radius) * tangent;
+  direction = a_prim.x * (n / radius) + a_prim.y * normalize(b) + a_prim.w * tangent;
+}
+void main() {
+  int base = 6 * (u_first_interval + gl_InstanceID);
+  float t = a_prim.z;
+  float w = t * t * (3.0 - 2.0 * t);
+  vec3 pa, da, ta, pb, db, tb;
+  skin_end(base, pa, da, ta);
+  skin_end(base + 3, pb, db, tb);
+  v_world = mix(pa, pb, w);
+  vec3 n = mix(da, db, w);
+  v_world_normal = dot(n, n) > 1e-24 ? normalize(n) : ta;
+  v_position = (u_model_view * vec4(v_world, 1.0)).xyz;
+  v_normal = u_normal_matrix * v_world_normal;
+  gl_Position = u_mvp * vec4(v_world, 1.0);
+}
+)";
+
 constexpr float kPi = 3.14159265358979323846f;
 constexpr int kCylinderSegments = 24;
 constexpr int kSphereSubdivisions = 2;  // 320 triangles
@@ -149,6 +205,21 @@ struct GpuMesh {
 struct SurfaceSlot {
   GpuMesh mesh;
   std::vector<std::uint32_t> indices;
+};
+
+/// A linked program and the locations of the uniforms draw() sets.
+struct Program {
+  GLuint id = 0;
+  GLint mvp = -1, model_view = -1, normal_matrix = -1, albedo = -1, specular = -1, shininess = -1;
+  GLint skin = -1, first_interval = -1;  // skinning programs only
+};
+
+/// A tube primitive of one LOD on the GPU: static vertices (x, y, t, z) and indices, uploaded once.
+struct PrimitiveMesh {
+  GLuint vao = 0, vbo = 0, ebo = 0;
+  GLsizei vertex_count = 0;      // body and both caps
+  GLsizei body_index_count = 0;  // then the first ring's cap, then the last ring's
+  GLsizei cap_index_count = 0;
 };
 
 struct CpuMesh {
@@ -233,13 +304,8 @@ class OsMesaRenderer final : public Renderer {
     create_context();
     gl_.load();
     info_ = std::string(name()) + ": " + gl_string(GL_VERSION) + ", " + gl_string(GL_RENDERER);
-    program_ = build_program();
-    u_mvp_ = gl_.GetUniformLocation(program_, "u_mvp");
-    u_model_view_ = gl_.GetUniformLocation(program_, "u_model_view");
-    u_normal_matrix_ = gl_.GetUniformLocation(program_, "u_normal_matrix");
-    u_albedo_ = gl_.GetUniformLocation(program_, "u_albedo");
-    u_specular_ = gl_.GetUniformLocation(program_, "u_specular");
-    u_shininess_ = gl_.GetUniformLocation(program_, "u_shininess");
+    program_ = build_program(kVertexShader, false);
+    init_skinning();
     upload_static(make_unit_cylinder(), cylinder_);
     upload_static(make_unit_sphere(kSphereSubdivisions), sphere_);
     readback_.resize(static_cast<std::size_t>(width_) * height_ * 4);
@@ -267,7 +333,7 @@ class OsMesaRenderer final : public Renderer {
     view_ = view_matrix(camera);
     projection_ = projection_matrix(camera, static_cast<float>(width_) / static_cast<float>(height_));
     gl_.Clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-    gl_.UseProgram(program_);
+    gl_.UseProgram(program_.id);
   }
 
   void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
@@ -335,6 +401,71 @@ class OsMesaRenderer final : public Renderer {
       draw(sphere_, model, marker);
     }
     counts_.points += static_cast<std::uint64_t>(points.rows());
+  }
+
+  void draw_skinned_tube(const intestine::TubePrimitive& primitive, const float* skin, int intervals,
+                         const Eigen::Vector3f& rgb) override {
+    const PrimitiveMesh* mesh = rgb.allFinite() ? skinning_input(primitive, skin, intervals) : nullptr;
+    if (mesh == nullptr) {
+      ++counts_.rejected;
+      return;
+    }
+    ++counts_.surfaces;
+    // The tube: one instance per interval; then each cap once, with the first and the last interval's matrices.
+    gl_.UseProgram(skin_program_.id);
+    set_uniforms(skin_program_, Eigen::Matrix4f::Identity(), {rgb, Eigen::Vector3f::Constant(0.22f), 40.0f});
+    gl_.BindVertexArray(mesh->vao);
+    const auto offset = [](GLsizei indices) { return reinterpret_cast<const void*>(indices * sizeof(std::uint32_t)); };
+    gl_.Uniform1i(skin_program_.first_interval, 0);
+    gl_.DrawElementsInstanced(GL_TRIANGLES, mesh->body_index_count, GL_UNSIGNED_INT, nullptr, intervals);
+    gl_.DrawElementsInstanced(GL_TRIANGLES, mesh->cap_index_count, GL_UNSIGNED_INT, offset(mesh->body_index_count), 1);
+    gl_.Uniform1i(skin_program_.first_interval, intervals - 1);
+    gl_.DrawElementsInstanced(GL_TRIANGLES, mesh->cap_index_count, GL_UNSIGNED_INT,
+                              offset(mesh->body_index_count + mesh->cap_index_count), 1);
+    gl_.BindVertexArray(0);
+    gl_.UseProgram(program_.id);
+  }
+
+  bool gpu_skinning() const override { return skin_program_.id != 0; }
+
+  bool capture_skinned_tube(const intestine::TubePrimitive& primitive, const float* skin, int intervals,
+                            std::vector<float>& positions, std::vector<float>& normals) override {
+    make_current();
+    const PrimitiveMesh* mesh = skinning_input(primitive, skin, intervals);
+    if (mesh == nullptr) return false;
+    // Every primitive vertex of every instance as a point, rasterizer off, into a transform feedback buffer.
+    const auto count = static_cast<std::size_t>(mesh->vertex_count) * static_cast<std::size_t>(intervals);
+    std::vector<float> captured(6 * count);
+    const auto bytes = static_cast<GLsizeiptr>(captured.size() * sizeof(float));
+    GLuint buffer = 0;
+    gl_.GenBuffers(1, &buffer);
+    gl_.BindBuffer(GL_TRANSFORM_FEEDBACK_BUFFER, buffer);
+    gl_.BufferData(GL_TRANSFORM_FEEDBACK_BUFFER, bytes, nullptr, GL_STATIC_READ);
+    gl_.UseProgram(capture_program_.id);
+    gl_.Uniform1i(capture_program_.first_interval, 0);
+    gl_.Enable(GL_RASTERIZER_DISCARD);
+    gl_.BindBufferBase(GL_TRANSFORM_FEEDBACK_BUFFER, 0, buffer);
+    gl_.BindVertexArray(mesh->vao);
+    gl_.BeginTransformFeedback(GL_POINTS);
+    gl_.DrawArraysInstanced(GL_POINTS, 0, mesh->vertex_count, intervals);
+    gl_.EndTransformFeedback();
+    gl_.BindVertexArray(0);
+    gl_.Disable(GL_RASTERIZER_DISCARD);
+    gl_.GetBufferSubData(GL_TRANSFORM_FEEDBACK_BUFFER, 0, bytes, captured.data());
+    gl_.BindBufferBase(GL_TRANSFORM_FEEDBACK_BUFFER, 0, 0);
+    gl_.DeleteBuffers(1, &buffer);
+    gl_.UseProgram(program_.id);
+    if (gl_.GetError() != GL_NO_ERROR) return false;
+    // Interleaved (v_world, v_world_normal) per vertex.
+    positions.resize(3 * count);
+    normals.resize(3 * count);
+    for (std::size_t v = 0; v < count; ++v) {
+      for (std::size_t c = 0; c < 3; ++c) {
+        positions[3 * v + c] = captured[6 * v + c];
+        normals[3 * v + c] = captured[6 * v + 3 + c];
+      }
+    }
+    return true;
   }
 
   void end_frame() override {
@@ -417,12 +548,18 @@ class OsMesaRenderer final : public Renderer {
     return shader;
   }
 
-  GLuint build_program() {
-    const GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader);
+  /// Links `vertex_source` with the fragment shader; `capture` records v_world and v_world_normal by transform
+  /// feedback (interleaved).
+  Program build_program(const char* vertex_source, bool capture) {
+    const GLuint vs = compile(GL_VERTEX_SHADER, vertex_source);
     const GLuint fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
     const GLuint program = gl_.CreateProgram();
     gl_.AttachShader(program, vs);
     gl_.AttachShader(program, fs);
+    if (capture) {
+      const char* varyings[] = {"v_world", "v_world_normal"};
+      gl_.TransformFeedbackVaryings(program, 2, varyings, GL_INTERLEAVED_ATTRIBS);
+    }
     gl_.LinkProgram(program);
     gl_.DeleteShader(vs);  // flagged; freed with the program
     gl_.DeleteShader(fs);
@@ -435,7 +572,97 @@ class OsMesaRenderer final : public Renderer {
       gl_.GetProgramInfoLog(program, static_cast<GLsizei>(log.size()), nullptr, &log[0]);
       throw_error("renderer (osmesa): shader program does not link: ", log.c_str());
     }
-    return program;
+    Program p;
+    p.id = program;
+    p.mvp = gl_.GetUniformLocation(program, "u_mvp");
+    p.model_view = gl_.GetUniformLocation(program, "u_model_view");
+    p.normal_matrix = gl_.GetUniformLocation(program, "u_normal_matrix");
+    p.albedo = gl_.GetUniformLocation(program, "u_albedo");
+    p.specular = gl_.GetUniformLocation(program, "u_specular");
+    p.shininess = gl_.GetUniformLocation(program, "u_shininess");
+    p.skin = gl_.GetUniformLocation(program, "u_skin");
+    p.first_interval = gl_.GetUniformLocation(program, "u_first_interval");
+    return p;
+  }
+
+  /// The tube skinning programs (drawing and capture) and the texture buffer of the matrices. A context that cannot
+  /// have them (compatibility fallback without texture buffers) keeps the renderer usable: gpu_skinning() is false
+  /// and info() says why.
+  void init_skinning() {
+    try {
+      skin_program_ = build_program(kSkinVertexShader, false);
+      capture_program_ = build_program(kSkinVertexShader, true);
+    } catch (const Error& e) {
+      skin_program_ = capture_program_ = Program{};
+      info_ += std::string("; no GPU tube skinning (") + e.what() + ")";
+      while (gl_.GetError() != GL_NO_ERROR) {
+      }
+      return;
+    }
+    gl_.GenBuffers(1, &skin_buffer_);
+    gl_.GenTextures(1, &skin_texture_);
+    gl_.BindBuffer(GL_TEXTURE_BUFFER, skin_buffer_);
+    gl_.BufferData(GL_TEXTURE_BUFFER, 24 * sizeof(float), nullptr, GL_DYNAMIC_DRAW);  // grown on use
+    skin_capacity_ = 1;
+    gl_.BindTexture(GL_TEXTURE_BUFFER, skin_texture_);
+    gl_.TexBuffer(GL_TEXTURE_BUFFER, GL_RGBA32F, skin_buffer_);
+    for (const Program* p : {&skin_program_, &capture_program_}) {
+      gl_.UseProgram(p->id);
+      gl_.Uniform1i(p->skin, 0);  // texture unit 0
+    }
+    gl_.UseProgram(0);
+  }
+
+  /// Checks a skinning call's input, uploads the primitive of its LOD on first use and this call's matrices; the
+  /// primitive's buffers, or null (nothing done) when the input cannot be drawn.
+  const PrimitiveMesh* skinning_input(const intestine::TubePrimitive& primitive, const float* skin, int intervals) {
+    if (skin_program_.id == 0 || skin == nullptr || intervals < 1) return nullptr;
+    int lod = -1;
+    for (int l = 0; l <= intestine::kTubeMaxLod && lod < 0; ++l) {
+      const intestine::TubeLod t = intestine::tube_lod(l);
+      if (t.sides == primitive.lod.sides && t.rings == primitive.lod.rings && t.cap_rings == primitive.lod.cap_rings) lod = l;
+    }
+    const int vertices = primitive.body_vertex_count + 2 * primitive.cap_vertex_count;
+    if (lod < 0 || primitive.vertices.size() != 4 * static_cast<std::size_t>(vertices) ||
+        primitive.indices.size() != static_cast<std::size_t>(primitive.body_index_count + 2 * primitive.cap_index_count)) {
+      return nullptr;
+    }
+    for (int i = 0; i < 24 * intervals; ++i) {
+      if (!std::isfinite(skin[i])) return nullptr;
+    }
+    PrimitiveMesh& mesh = primitives_[static_cast<std::size_t>(lod)];
+    if (mesh.vao == 0) upload_primitive(primitive, mesh);
+    // The matrices: 6 RGBA32F texels per interval, the buffer grown (reallocated) only for more intervals.
+    const auto bytes = static_cast<GLsizeiptr>(24 * sizeof(float) * static_cast<std::size_t>(intervals));
+    gl_.BindBuffer(GL_TEXTURE_BUFFER, skin_buffer_);
+    if (intervals > skin_capacity_) {
+      gl_.BufferData(GL_TEXTURE_BUFFER, bytes, skin, GL_DYNAMIC_DRAW);
+      skin_capacity_ = intervals;
+    } else {
+      gl_.BufferSubData(GL_TEXTURE_BUFFER, 0, bytes, skin);
+    }
+    gl_.ActiveTexture(GL_TEXTURE0);
+    gl_.BindTexture(GL_TEXTURE_BUFFER, skin_texture_);
+    return &mesh;
+  }
+
+  void upload_primitive(const intestine::TubePrimitive& primitive, PrimitiveMesh& mesh) {
+    gl_.GenVertexArrays(1, &mesh.vao);
+    gl_.GenBuffers(1, &mesh.vbo);
+    gl_.GenBuffers(1, &mesh.ebo);
+    gl_.BindVertexArray(mesh.vao);
+    gl_.BindBuffer(GL_ARRAY_BUFFER, mesh.vbo);
+    gl_.BufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(primitive.vertices.size() * sizeof(float)),
+                   primitive.vertices.data(), GL_STATIC_DRAW);
+    gl_.EnableVertexAttribArray(0);
+    gl_.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, 4 * sizeof(float), nullptr);
+    gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, mesh.ebo);
+    gl_.BufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(primitive.indices.size() * sizeof(std::uint32_t)),
+                   primitive.indices.data(), GL_STATIC_DRAW);
+    gl_.BindVertexArray(0);
+    mesh.vertex_count = static_cast<GLsizei>(primitive.vertices.size() / 4);
+    mesh.body_index_count = primitive.body_index_count;
+    mesh.cap_index_count = primitive.cap_index_count;
   }
 
   void upload_static(const CpuMesh& cpu, GpuMesh& mesh) {
@@ -491,17 +718,22 @@ class OsMesaRenderer final : public Renderer {
 
   // --- drawing ---
 
-  void draw(const GpuMesh& mesh, const Eigen::Matrix4f& model, const Material& material) {
+  /// Transforms and material of the program in use.
+  void set_uniforms(const Program& program, const Eigen::Matrix4f& model, const Material& material) {
     const Eigen::Matrix4f model_view = view_ * model;
     const Eigen::Matrix4f mvp = projection_ * model_view;
     const Eigen::Matrix3f normal_matrix = model_view.topLeftCorner<3, 3>().inverse().transpose();
-    gl_.UniformMatrix4fv(u_mvp_, 1, GL_FALSE, mvp.data());  // Eigen is column-major, like GL
-    gl_.UniformMatrix4fv(u_model_view_, 1, GL_FALSE, model_view.data());
-    gl_.UniformMatrix3fv(u_normal_matrix_, 1, GL_FALSE, normal_matrix.data());
+    gl_.UniformMatrix4fv(program.mvp, 1, GL_FALSE, mvp.data());  // Eigen is column-major, like GL
+    gl_.UniformMatrix4fv(program.model_view, 1, GL_FALSE, model_view.data());
+    gl_.UniformMatrix3fv(program.normal_matrix, 1, GL_FALSE, normal_matrix.data());
     const Eigen::Vector3f albedo = material.rgb.cwiseProduct(material.rgb);  // display -> linear (gamma 2)
-    gl_.Uniform3fv(u_albedo_, 1, albedo.data());
-    gl_.Uniform3fv(u_specular_, 1, material.specular.data());
-    gl_.Uniform1f(u_shininess_, material.shininess);
+    gl_.Uniform3fv(program.albedo, 1, albedo.data());
+    gl_.Uniform3fv(program.specular, 1, material.specular.data());
+    gl_.Uniform1f(program.shininess, material.shininess);
+  }
+
+  void draw(const GpuMesh& mesh, const Eigen::Matrix4f& model, const Material& material) {
+    set_uniforms(program_, model, material);
     gl_.BindVertexArray(mesh.vao);
     gl_.DrawElements(GL_TRIANGLES, mesh.index_count, GL_UNSIGNED_INT, nullptr);
     gl_.BindVertexArray(0);
@@ -541,8 +773,12 @@ class OsMesaRenderer final : public Renderer {
   GlApi gl_;
   std::string info_;
 
-  GLuint program_ = 0;
-  GLint u_mvp_ = -1, u_model_view_ = -1, u_normal_matrix_ = -1, u_albedo_ = -1, u_specular_ = -1, u_shininess_ = -1;
+  Program program_;          // surfaces, tool, markers
+  Program skin_program_;     // tube skinning (id 0: not available)
+  Program capture_program_;  // the same with transform feedback, for capture_skinned_tube
+  GLuint skin_buffer_ = 0, skin_texture_ = 0;  // the matrices, a texture buffer
+  int skin_capacity_ = 0;                      // intervals
+  std::array<PrimitiveMesh, intestine::kTubeMaxLod + 1> primitives_{};  // uploaded on first use
 
   GpuMesh cylinder_;
   GpuMesh sphere_;

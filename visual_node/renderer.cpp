@@ -34,6 +34,17 @@ class NullRenderer final : public Renderer {
       ++counts_.rejected;
     }
   }
+  void draw_skinned_tube(const intestine::TubePrimitive&, const float* skin, int intervals,
+                         const Eigen::Vector3f&) override {
+    bool ok = skin != nullptr && intervals >= 1;
+    for (int i = 0; ok && i < 24 * intervals; ++i) ok = std::isfinite(skin[i]);
+    ++(ok ? counts_.surfaces : counts_.rejected);
+  }
+  bool gpu_skinning() const override { return true; }  // counted like the OSMesa backend draws it
+  bool capture_skinned_tube(const intestine::TubePrimitive&, const float*, int, std::vector<float>&,
+                            std::vector<float>&) override {
+    return false;
+  }
   void end_frame() override { ++counts_.frames; }
   bool read_image(Image&) override { return false; }
   const char* name() const override { return "null"; }

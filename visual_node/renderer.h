@@ -9,10 +9,12 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "image.h"
 #include "scene.h"
 #include "tool.h"
+#include "tube_geometry.h"
 
 namespace surgsim {
 
@@ -53,6 +55,24 @@ class Renderer {
   /// Small spheres of `radius` (m) at each row of `points` (#P x 3, m), e.g. contact points.
   virtual void draw_points(const Eigen::Ref<const Eigen::MatrixX3f>& points, float radius,
                            const Eigen::Vector3f& rgb) = 0;
+
+  /// A tube skinned on the GPU (DESIGN.md 4.4, tube_geometry.h): `primitive` (one interval of a level of detail and
+  /// the two end caps; uploaded on its first use and kept, one buffer per LOD) deformed in the vertex shader by the
+  /// per-interval matrices `skin` (24 floats per interval: A_k then B_k, 3 x 4 row-major, as TubeMesh::skin), one
+  /// instance per interval, the first ring's cap with interval 0 and the last ring's with interval intervals - 1.
+  /// Only the matrices are sent per call. Lit like draw_surface. Rejected (counts().rejected) when the backend has no
+  /// GPU skinning (gpu_skinning() false), for intervals < 1 or a non-finite matrix.
+  virtual void draw_skinned_tube(const intestine::TubePrimitive& primitive, const float* skin, int intervals,
+                                 const Eigen::Vector3f& rgb) = 0;
+  /// Whether draw_skinned_tube draws (the null backend counts it; OSMesa needs a core context with texture buffers).
+  virtual bool gpu_skinning() const = 0;
+
+  /// Debug path for tests: runs the skinning vertex shader of draw_skinned_tube over every primitive vertex of every
+  /// interval (instance k writes primitive vertex i at k * #vertices + i) and reads the results back by transform
+  /// feedback: world positions (m) and unit normals, 3 floats each per vertex (resized). Allocates; not for frames.
+  /// False when the backend has no GPU skinning.
+  virtual bool capture_skinned_tube(const intestine::TubePrimitive& primitive, const float* skin, int intervals,
+                                    std::vector<float>& positions, std::vector<float>& normals) = 0;
 
   /// Finishes the frame (waits for the rasterizer, so the time of begin..end is the render time).
   virtual void end_frame() = 0;

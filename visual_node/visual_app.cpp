@@ -174,9 +174,14 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
                                   nullptr, scene_.file);
     tensor_hash_ = setup.key.combined();
   }
+  if (options_.tube_skinning != "gpu" && options_.tube_skinning != "cpu") {
+    throw_error("--tube-skinning '", options_.tube_skinning, "' is not a skinning path (use gpu or cpu)");
+  }
   if (scene_.model == "intestine") {
     // The intestine: a skinned tube and the mesentery from BodyStates (intestine_view.h); no deformer, no tensors.
-    intestine_ = std::make_unique<IntestineView>(scene_, scene_hash_);
+    intestine_ = std::make_unique<IntestineView>(
+        scene_, scene_hash_,
+        options_.tube_skinning == "cpu" ? intestine::TubeSkinning::kCpu : intestine::TubeSkinning::kGpu);
   } else {
     law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene_.nonlinear, scene_.material));
     deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, scene_.model == "liver" ? &tensors_ : nullptr,
@@ -195,6 +200,11 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
 
   // --- init: renderer (no GL context at all when headless) ---
   renderer_ = make_renderer(options_.headless ? "null" : "osmesa", scene_.visual.width, scene_.visual.height);
+  if (intestine_ != nullptr && intestine_->skinning() == intestine::TubeSkinning::kGpu && !renderer_->gpu_skinning()) {
+    std::cerr << "visual_node: " << renderer_->info() << ": skinning the intestine tube on the CPU instead "
+              << "(--tube-skinning cpu)\n";
+    intestine_->set_skinning(intestine::TubeSkinning::kCpu);
+  }
   if (!options_.headless && png_every_ > 0) {
     std::error_code ec;
     std::filesystem::create_directories(options_.out, ec);
@@ -230,7 +240,9 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
               << rate_hz_ << " Hz\n";
   }
   if (!options_.quiet && intestine_ != nullptr) {
-    std::cerr << "visual_node: intestine: tube skinned on the CPU + mesentery strip, LOD by the frame-rate "
+    std::cerr << "visual_node: intestine: tube skinned on the "
+              << (intestine_->skinning() == intestine::TubeSkinning::kGpu ? "GPU (vertex shader)" : "CPU")
+              << " + mesentery strip, LOD by the frame-rate "
               << "controller (target " << intestine_->controller().params().target_hz << " Hz)\n";
   }
 }

@@ -36,6 +36,7 @@ struct VisualOptions {
   double rate_hz = 0;            // > 0 overrides the scene's visual rate
   int png_every = -1;            // >= 0 overrides the scene's png_every
   bool video = false;            // assemble out/video.mp4 with ffmpeg at exit (also when the scene asks)
+  std::string tube_skinning = "gpu";  // intestine tube: "gpu" (vertex shader) or "cpu" (skinned vertices uploaded)
   bool quiet = false;
 };
 

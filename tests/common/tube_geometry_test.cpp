@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <map>
 #include <random>
 #include <string>
 #include <vector>
@@ -178,18 +179,27 @@ TEST(TubeGeometryTest, LevelsOfDetailHaveTwoToTheIPolygonsPerInterval) {
     ASSERT_TRUE(builder.build(pts.data(), model.columns(), lod, mesh));
     const TubeLod l = tube_lod(lod);
     EXPECT_EQ(l.sides * l.rings, 4 << lod);
-    const int triangles = mesh.index_count / 3;
+    const int triangles = mesh.body_index_count / 3;
     EXPECT_EQ(triangles, mesh.intervals * 8 * (1 << lod));
     EXPECT_EQ(mesh.ring_count, mesh.intervals * l.rings + 1);
-    EXPECT_EQ(mesh.vertex_count, mesh.ring_count * l.sides);
+    EXPECT_EQ(mesh.body_vertex_count, mesh.ring_count * l.sides);
+    // Plus two rounded caps of sides / 4 latitude steps (a pyramid at LOD 0).
+    EXPECT_EQ(l.cap_rings, std::max(1, l.sides / 4));
+    EXPECT_EQ(mesh.vertex_count, mesh.body_vertex_count + 2 * ((l.cap_rings - 1) * l.sides + 1));
+    EXPECT_EQ(mesh.index_count, mesh.body_index_count + 2 * 3 * l.sides * (2 * l.cap_rings - 1));
     for (int i = 0; i < mesh.index_count; ++i) ASSERT_LT(mesh.indices[static_cast<std::size_t>(i)], static_cast<unsigned>(mesh.vertex_count));
     if (lod > 0) {
       EXPECT_EQ(triangles, 2 * previous_triangles);
     }
     previous_triangles = triangles;
-    // The primitive of the LOD (GPU path) has (rings + 1) x sides vertices and 8 2^lod triangles.
-    EXPECT_EQ(builder.primitive(lod).vertices.size(), static_cast<std::size_t>(4 * (l.rings + 1) * l.sides));
-    EXPECT_EQ(builder.primitive(lod).indices.size(), static_cast<std::size_t>(3 * 8 * (1 << lod)));
+    // The primitive of the LOD (GPU path) has (rings + 1) x sides vertices and 8 2^lod triangles, then the caps.
+    const TubePrimitive& prim = builder.primitive(lod);
+    EXPECT_EQ(prim.body_vertex_count, (l.rings + 1) * l.sides);
+    EXPECT_EQ(prim.body_index_count, 3 * 8 * (1 << lod));
+    EXPECT_EQ(prim.cap_vertex_count, tube_cap_vertices(l));
+    EXPECT_EQ(prim.cap_index_count, 3 * tube_cap_triangles(l));
+    EXPECT_EQ(prim.vertices.size(), static_cast<std::size_t>(4 * (prim.body_vertex_count + 2 * prim.cap_vertex_count)));
+    EXPECT_EQ(prim.indices.size(), static_cast<std::size_t>(prim.body_index_count + 2 * prim.cap_index_count));
   }
 }
 
@@ -213,15 +223,110 @@ TEST(TubeGeometryTest, SkinningMatricesReproduceTheCpuTube) {
           b[row] = m[12 + 4 * row] * local[0] + m[12 + 4 * row + 1] * local[1] + m[12 + 4 * row + 2] * local[2] +
                    m[12 + 4 * row + 3];
         }
-        const Eigen::Vector3d gpu = (1 - v[3]) * a + v[3] * b;  // the vertex shader's blend
+        const double w = skin_weight(v[2]);
+        const Eigen::Vector3d gpu = (1 - w) * a + w * b;  // the vertex shader's blend (z = 0 on the tube)
         worst = std::max(worst, (gpu - vertex(mesh, (k * q + j) * sides + i)).norm());
       }
     }
   }
   EXPECT_LT(worst, 1e-6);
+  // Every vertex, caps included, by the full formula of the header (what the vertex shader computes): positions
+  // and normals.
+  double worst_position = 0, worst_normal = 0;
+  const int nv = prim.body_vertex_count + 2 * prim.cap_vertex_count;
+  for (int k = 0; k < mesh.intervals; ++k) {
+    const Eigen::Map<const Eigen::Matrix<float, 3, 4, Eigen::RowMajor>> a(&mesh.skin[static_cast<std::size_t>(24 * k)]);
+    const Eigen::Map<const Eigen::Matrix<float, 3, 4, Eigen::RowMajor>> b(&mesh.skin[static_cast<std::size_t>(24 * k + 12)]);
+    for (int i = 0; i < nv; ++i) {
+      const float* v = &prim.vertices[static_cast<std::size_t>(4 * i)];
+      const bool start_cap = i >= prim.body_vertex_count && i < prim.body_vertex_count + prim.cap_vertex_count;
+      const bool end_cap = i >= prim.body_vertex_count + prim.cap_vertex_count;
+      if ((start_cap && k != 0) || (end_cap && k != mesh.intervals - 1)) continue;  // caps: first / last interval
+      int target = 0;  // the CPU mesh's vertex
+      if (start_cap || end_cap) {
+        target = mesh.body_vertex_count + i - prim.body_vertex_count;
+      } else {
+        const int j = i / sides;
+        if (j == q && k + 1 < mesh.intervals) continue;  // the next interval's first ring
+        target = (k * q + j) * sides + i % sides;
+      }
+      const Eigen::Vector4d local(v[0], v[1], v[2], 1);
+      const double w = skin_weight(v[2]);
+      const Eigen::Matrix<double, 3, 4> ad = a.cast<double>(), bd = b.cast<double>();
+      const Eigen::Vector3d ta = ad.col(2).normalized(), tb = bd.col(2).normalized();
+      const Eigen::Vector3d p = (1 - w) * (ad * local + v[3] * ad.col(0).norm() * ta) +
+                                w * (bd * local + v[3] * bd.col(0).norm() * tb);
+      const Eigen::Vector3d n = ((1 - w) * (v[0] * ad.col(0).normalized() + v[1] * ad.col(1).normalized() + v[3] * ta) +
+                                 w * (v[0] * bd.col(0).normalized() + v[1] * bd.col(1).normalized() + v[3] * tb))
+                                    .normalized();
+      const auto t3 = static_cast<std::size_t>(3 * target);
+      worst_position = std::max(worst_position, (p - vertex(mesh, target)).norm());
+      worst_normal = std::max(
+          worst_normal, (n - Eigen::Vector3d(mesh.normals[t3], mesh.normals[t3 + 1], mesh.normals[t3 + 2])).norm());
+    }
+  }
+  EXPECT_LT(worst_position, 1e-6);
+  EXPECT_LT(worst_normal, 1e-5);
   EXPECT_DOUBLE_EQ(skin_weight(0), 0);
   EXPECT_DOUBLE_EQ(skin_weight(1), 1);
   EXPECT_DOUBLE_EQ(skin_weight(0.5), 0.5);
+}
+
+// The end caps close the tube at every LOD: every edge of the CPU mesh is shared by exactly two triangles, each
+// directed edge appears once (one consistent winding), the winding agrees with the vertex normals, the enclosed
+// volume is positive (normals outward) and close to a tube of the curve's length with two half-spheres.
+TEST(TubeGeometryTest, EndCapsMakeTheTubeWatertightWithOutwardNormals) {
+  const TubeParams tp;
+  TubeBuilder builder(tp, 100);
+  TubeMesh mesh = builder.make_mesh(kTubeMaxLod);
+  const IntestineModel model(IntestineParams{});
+  std::vector<Eigen::Vector3d> straight;
+  for (int i = 0; i < 6; ++i) straight.emplace_back(0.05 * i, 0.0, 0.0);
+  const std::vector<std::pair<std::string, std::vector<double>>> curves = {
+      {"straight", flat(straight)},
+      {"folded rest intestine", std::vector<double>(model.rest().data(), model.rest().data() + 3 * model.columns())}};
+  for (const auto& [name, pts] : curves) {
+    for (int lod = 0; lod <= kTubeMaxLod; ++lod) {
+      builder.reset_frames();
+      ASSERT_TRUE(builder.build(pts.data(), static_cast<int>(pts.size() / 3), lod, mesh)) << name;
+      std::map<std::pair<std::uint32_t, std::uint32_t>, int> directed;
+      double volume = 0;
+      int disagreeing = 0;
+      for (int f = 0; f < mesh.index_count / 3; ++f) {
+        const std::uint32_t* t = &mesh.indices[static_cast<std::size_t>(3 * f)];
+        for (int e = 0; e < 3; ++e) ++directed[{t[e], t[(e + 1) % 3]}];
+        const Eigen::Vector3d a = vertex(mesh, static_cast<int>(t[0])), b = vertex(mesh, static_cast<int>(t[1])),
+                              c = vertex(mesh, static_cast<int>(t[2]));
+        volume += a.dot(b.cross(c)) / 6;
+        Eigen::Vector3d n = Eigen::Vector3d::Zero();
+        for (int e = 0; e < 3; ++e) {
+          const auto k = static_cast<std::size_t>(3 * t[e]);
+          n += Eigen::Vector3d(mesh.normals[k], mesh.normals[k + 1], mesh.normals[k + 2]);
+        }
+        if ((b - a).cross(c - a).dot(n) <= 0) ++disagreeing;
+      }
+      int open = 0, bad_winding = 0;
+      for (const auto& [edge, count] : directed) {
+        if (count != 1) ++bad_winding;
+        if (directed.count({edge.second, edge.first}) == 0) ++open;
+      }
+      EXPECT_EQ(open, 0) << name << " lod " << lod << ": edges in one triangle only";
+      EXPECT_EQ(bad_winding, 0) << name << " lod " << lod << ": directed edges in more than one triangle";
+      EXPECT_EQ(disagreeing, 0) << name << " lod " << lod << ": triangles wound against their normals";
+      EXPECT_EQ(directed.size(), static_cast<std::size_t>(mesh.index_count)) << name;  // 3 per triangle, all distinct
+      EXPECT_GT(volume, 0) << name << " lod " << lod;
+      if (name == "straight" && lod == kTubeMaxLod) {
+        const double r = tp.radius, expected = kPi * r * r * 0.25 + 4.0 / 3.0 * kPi * r * r * r;
+        EXPECT_NEAR(volume, expected, 0.03 * expected);  // the polygons' shortfall at 32 sides is ~0.6 %
+      }
+    }
+  }
+  // The poles sit one radius beyond the end rings, along the tube's ends' tangents.
+  const TubeSample &first = builder.sample(0), &last = builder.sample(builder.sample_count() - 1);
+  const TubeLod l = tube_lod(kTubeMaxLod);
+  const int cap = tube_cap_vertices(l);
+  EXPECT_LT((vertex(mesh, mesh.body_vertex_count + cap - 1) - (first.center - first.radius * first.tangent)).norm(), 1e-6);
+  EXPECT_LT((vertex(mesh, mesh.body_vertex_count + 2 * cap - 1) - (last.center + last.radius * last.tangent)).norm(), 1e-6);
 }
 
 // The test the issue names: at sharp folds the skinned tube has no self-intersecting cross-sections.
@@ -329,7 +434,10 @@ TEST(TubeGeometryTest, BuildAndStripAllocateNothingAndRefuseBadInput) {
   MesenteryMesh strip = make_mesentery_mesh(model.rows(), model.columns());
   {
     surgsim::test::AllocationCounter counter;
-    for (int lod = 0; lod <= kTubeMaxLod; ++lod) ASSERT_TRUE(builder.build(model.rest().data(), 100, lod, mesh));
+    for (int lod = 0; lod <= kTubeMaxLod; ++lod) {
+      ASSERT_TRUE(builder.build(model.rest().data(), 100, lod, mesh));
+      ASSERT_TRUE(builder.build(model.rest().data(), 100, lod, mesh, TubeSkinning::kGpu));  // matrices only
+    }
     ASSERT_TRUE(mesentery_strip(model.rest().data(), strip));
     EXPECT_EQ(counter.count(), 0);
   }

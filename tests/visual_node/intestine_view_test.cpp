@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -23,7 +24,7 @@ std::vector<double> rest_positions(const Scene& scene) {
 
 TEST(IntestineView, DrawsTubeAndMesenteryOfABodyState) {
   const Scene scene = shipped_intestine();
-  IntestineView view(scene, scene.hash());
+  IntestineView view(scene, scene.hash(), intestine::TubeSkinning::kCpu);  // skinned vertices to check
   auto renderer = make_renderer("null", 64, 48);
 
   // Nothing to draw before the first body state.
@@ -53,6 +54,45 @@ TEST(IntestineView, DrawsTubeAndMesenteryOfABodyState) {
   renderer->end_frame();
   EXPECT_EQ(renderer->counts().surfaces, 2u);  // mesentery and tube
   EXPECT_EQ(renderer->counts().rejected, 0u);
+}
+
+// The default path skins on the GPU: the view builds only the per-interval matrices (the CPU mesh's vertices are
+// not written) and draws the tube with draw_skinned_tube; the same body gives the same matrices and counts as the
+// CPU path, and set_skinning switches paths.
+TEST(IntestineView, GpuSkinningIsTheDefaultAndSendsOnlyMatrices) {
+  const Scene scene = shipped_intestine();
+  IntestineView gpu(scene, scene.hash());
+  IntestineView cpu(scene, scene.hash(), intestine::TubeSkinning::kCpu);
+  EXPECT_EQ(gpu.skinning(), intestine::TubeSkinning::kGpu);
+  const std::vector<double> x = rest_positions(scene);
+  ASSERT_TRUE(gpu.set_positions(x.data(), static_cast<int>(x.size() / 3)));
+  ASSERT_TRUE(cpu.set_positions(x.data(), static_cast<int>(x.size() / 3)));
+  ASSERT_GT(gpu.tube().intervals, 0);
+  EXPECT_EQ(gpu.tube().intervals, cpu.tube().intervals);
+  EXPECT_EQ(gpu.tube_vertices(), cpu.tube_vertices());    // caps included
+  EXPECT_EQ(gpu.tube_triangles(), cpu.tube_triangles());
+  const auto n = static_cast<std::ptrdiff_t>(24 * gpu.tube().intervals);
+  EXPECT_TRUE(std::equal(gpu.tube().skin.begin(), gpu.tube().skin.begin() + n, cpu.tube().skin.begin()));
+  // The primitive drawn is the LOD's: its instance count times its body triangles is the tube's.
+  const intestine::TubePrimitive& prim = gpu.tube_primitive();
+  EXPECT_EQ(gpu.tube().intervals * prim.body_index_count + 2 * prim.cap_index_count, 3 * gpu.tube_triangles());
+  EXPECT_EQ(gpu.stats()["tube_skinning"], "gpu");
+  EXPECT_EQ(cpu.stats()["tube_skinning"], "cpu");
+
+  auto renderer = make_renderer("null", 64, 48);
+  renderer->begin_frame(scene.visual.camera);
+  gpu.draw(*renderer);
+  renderer->end_frame();
+  EXPECT_EQ(renderer->counts().surfaces, 2u);  // mesentery and the skinned tube
+  EXPECT_EQ(renderer->counts().rejected, 0u);
+
+  // Switching to the CPU path rebuilds with vertices on the next update.
+  gpu.set_skinning(intestine::TubeSkinning::kCpu);
+  gpu.update();
+  EXPECT_EQ(gpu.stats()["tube_skinning"], "cpu");
+  for (int v = 0; v < gpu.tube_vertices(); ++v) {
+    ASSERT_EQ(gpu.tube_positions().row(v), cpu.tube_positions().row(v)) << v;
+  }
 }
 
 TEST(IntestineView, RefusesWrongCountsAndNonFiniteValues) {
