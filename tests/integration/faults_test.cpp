@@ -8,19 +8,16 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "force_log.h"
 #include "process.h"
 
 namespace surgsim {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::now_ns;
 using testing::Process;
-
-std::uint64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
-}
+using testing::wait_for_text;
 
 class Faults : public ::testing::Test {
  protected:
@@ -36,15 +33,6 @@ class Faults : public ::testing::Test {
   }
   std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  /// Waits until `file` contains `text` (true) or `timeout_s` passes (false).
-  static bool wait_for_text(const std::string& file, const std::string& text, double timeout_s) {
-    const std::uint64_t until = now_ns() + static_cast<std::uint64_t>(timeout_s * 1e9);
-    while (now_ns() < until) {
-      if (testing::read_file(file).find(text) != std::string::npos) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return false;
-  }
   static nlohmann::json json(const std::string& file) { return nlohmann::json::parse(testing::read_file(file)); }
   static void sleep_s(double s) { std::this_thread::sleep_for(std::chrono::duration<double>(s)); }
   fs::path dir_;
@@ -166,29 +154,15 @@ TEST_F(Faults, DeviceKilledMidPressZeroesTheForce) {
   const double kill_t = static_cast<double>(kill_ns - h["loop_start_ns"].get<std::uint64_t>()) * 1e-9;
   ASSERT_GT(kill_t, 0.5);
   ASSERT_LT(kill_t, 3.7);
-  // Per-tick force from the --log: tick,t,fx,fy,fz,contacts.
-  std::istringstream log(testing::read_file(path("haptic_log.csv")));
-  std::string line;
-  std::getline(log, line);
-  double pressed_before = 0, first_zero_after = -1;
-  long nonzero_late = 0, zero_late = 0;
-  while (std::getline(log, line)) {
-    std::stringstream ss(line);
-    std::string f[6];
-    for (auto& x : f) std::getline(ss, x, ',');
-    const double t = std::stod(f[1]);
-    const double force = std::hypot(std::stod(f[2]), std::stod(f[3]), std::stod(f[4]));
-    if (t > kill_t - 0.3 && t < kill_t) pressed_before = std::max(pressed_before, force);
-    if (t >= kill_t && force == 0.0 && first_zero_after < 0) first_zero_after = t;
-    // The kill is stamped on the wall clock and t is simulated time: allow 0.5 s of loop lag on a loaded machine.
-    if (t > kill_t + timeout_s + 0.5) (force == 0.0 ? zero_late : nonzero_late)++;
-  }
-  EXPECT_GT(pressed_before, 0.1) << "the tool pressed the organ when the device died";
-  ASSERT_GE(first_zero_after, 0.0) << "the force never went to zero after the device died";
-  EXPECT_LE(first_zero_after - kill_t, timeout_s + 0.5) << "zero force within --input-timeout of the loss";
-  EXPECT_EQ(nonzero_late, 0) << "no stale force after the loss";
-  EXPECT_GT(zero_late, static_cast<long>(0.5 * rate));
-  EXPECT_GE(h["input_lost_ticks"].get<double>(), static_cast<double>(zero_late)) << h.dump(2);
+  // Per-tick force from the --log. The kill is stamped on the wall clock and t is simulated time: allow 0.5 s of
+  // loop lag on a loaded machine.
+  const testing::ForceAroundLoss f = testing::force_around_loss(path("haptic_log.csv"), kill_t, 0.3, timeout_s + 0.5);
+  EXPECT_GT(f.before_max, 0.1) << "the tool pressed the organ when the device died";
+  ASSERT_GE(f.first_zero_after, 0.0) << "the force never went to zero after the device died";
+  EXPECT_LE(f.first_zero_after - kill_t, timeout_s + 0.5) << "zero force within --input-timeout of the loss";
+  EXPECT_EQ(f.nonzero_late, 0) << "no stale force after the loss";
+  EXPECT_GT(f.zero_late, static_cast<long>(0.5 * rate));
+  EXPECT_GE(h["input_lost_ticks"].get<double>(), static_cast<double>(f.zero_late)) << h.dump(2);
 }
 
 }  // namespace

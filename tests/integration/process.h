@@ -84,6 +84,24 @@ inline std::string read_file(const std::string& path) {
   return ss.str();
 }
 
+/// CLOCK_MONOTONIC in ns: the clock the nodes stamp with (their stats' loop_start_ns), to place events seen from
+/// outside on a node's timeline.
+inline std::uint64_t now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
+}
+
+/// Waits until `file` contains `text` (true) or `timeout_s` passes (false), polling every 10 ms.
+inline bool wait_for_text(const std::string& file, const std::string& text, double timeout_s) {
+  const std::uint64_t until = now_ns() + static_cast<std::uint64_t>(timeout_s * 1e9);
+  while (now_ns() < until) {
+    if (read_file(file).find(text) != std::string::npos) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return false;
+}
+
 /// A DDS domain id private to this test process, so parallel ctest runs never see each other.
 inline int private_domain(int salt = 0) { return 1 + static_cast<int>((getpid() * 7 + salt) % 200); }
 
