@@ -7,7 +7,6 @@
 //   4. tube build time and size per LOD; mesentery strip;
 //   5. the frame-rate controller (paper eq. 15) under a synthetic load: LOD chosen and mean rate against the target.
 #include <CLI/CLI.hpp>
-#include <time.h>
 
 #include <algorithm>
 #include <chrono>
@@ -20,84 +19,19 @@
 
 #include "frame_rate_controller.h"
 #include "intestine_model.h"
+#include "intestine_run.h"
 #include "intestine_test_util.h"
 #include "tube_geometry.h"
 
 namespace {
 
 using namespace surgsim::intestine;
-using Clock = std::chrono::steady_clock;
-
-double us_since(Clock::time_point t0) { return std::chrono::duration<double, std::micro>(Clock::now() - t0).count(); }
-
-// CPU time of this thread (us): unlike the wall clock it does not count the time the scheduler gave to other
-// processes (the build machine is shared), so its percentiles show the step's own cost.
-double thread_cpu_us() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return 1e6 * static_cast<double>(ts.tv_sec) + 1e-3 * static_cast<double>(ts.tv_nsec);
-}
-
-double pct(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))];
-}
-
-struct RunResult {
-  std::vector<double> total, dynamics, detection, response, cpu;
-  RecallStats recall;
-  double residual = 0;  // m, largest brute-force penetration after the response
-  double contacts_mean = 0;
-  int contacts_max = 0;
-  int faults = 0;
-};
-
-// The scripted run (gravity folds the intestine onto itself, the probe pushes and lifts the folds): times each phase
-// and, every `every` steps, compares the stochastic contacts with the brute force on the same positions.
-RunResult scripted_run(const IntestineParams& params, int steps, int every) {
-  const IntestineModel model(params);
-  IntestineState state(model, 1);
-  StepReport report;
-  ContactList truth(100000);
-  RunResult r;
-  long contacts = 0;
-  for (int s = 0; s < steps; ++s) {
-    const Probe probe = test::scripted_probe(s * 1e-3);
-    const double c0 = thread_cpu_us();
-    const auto t0 = Clock::now();
-    step_dynamics(model, state, probe, 1e-3, report);
-    const double d0 = us_since(t0);
-    const auto t1 = Clock::now();
-    step_detection(model, state, report);
-    const double d1 = us_since(t1);
-    const double c1 = thread_cpu_us();
-    if (every > 0 && s % every == 0) {
-      truth.clear();
-      detect_brute_force(model.topology(), state.x, truth);
-      r.recall += compare_with_reference(model.topology(), state.contacts(), truth);
-    }
-    const auto t2 = Clock::now();
-    const double c2 = thread_cpu_us();
-    step_response(model, state, report);
-    const double d2 = us_since(t2);
-    r.cpu.push_back((c1 - c0) + (thread_cpu_us() - c2));
-    r.faults += report.status != StepStatus::kOk;
-    if (every > 0 && s % every == 0) {
-      truth.clear();
-      detect_brute_force(model.topology(), state.x, truth);
-      for (const auto& c : truth) r.residual = std::max(r.residual, c.radius_sum - c.distance);
-    }
-    r.dynamics.push_back(d0);
-    r.detection.push_back(d1);
-    r.response.push_back(d2);
-    r.total.push_back(d0 + d1 + d2);
-    contacts += report.contacts;
-    r.contacts_max = std::max(r.contacts_max, report.contacts);
-  }
-  r.contacts_mean = static_cast<double>(contacts) / steps;
-  return r;
-}
+using surgsim::bench::percentile;
+using surgsim::bench::thread_cpu_us;
+using surgsim::bench::us_since;
+using Clock = surgsim::bench::WallClock;
+using surgsim::intestine::bench::RunResult;
+using surgsim::intestine::bench::scripted_run;
 
 void step_table(int steps) {
   std::printf("\n1. Step time at dt = 1 ms, default model (4 x 100 masses, implicit Euler, n = 10), scripted run of "
@@ -105,7 +39,7 @@ void step_table(int steps) {
   const RunResult r = scripted_run(IntestineParams{}, steps, 0);
   std::printf("%-34s %9s %9s %9s\n", "phase", "p50 us", "p99 us", "max us");
   auto row = [](const char* name, const std::vector<double>& v) {
-    std::printf("%-34s %9.1f %9.1f %9.1f\n", name, pct(v, 0.5), pct(v, 0.99), pct(v, 1.0));
+    std::printf("%-34s %9.1f %9.1f %9.1f\n", name, percentile(v, 0.5), percentile(v, 0.99), percentile(v, 1.0));
   };
   row("mass-spring (probe, implicit)", r.dynamics);
   row("stochastic detection", r.detection);
@@ -114,7 +48,7 @@ void step_table(int steps) {
   row("step, thread CPU time", r.cpu);
   std::printf("contacts per step: mean %.1f, max %d; faults %d; capable of %.0f Hz at the CPU-time p99 (%.0f Hz at the "
               "wall-clock p99, which includes preemption on this shared machine)\n", r.contacts_mean, r.contacts_max,
-              r.faults, 1e6 / pct(r.cpu, 0.99), 1e6 / pct(r.total, 0.99));
+              r.faults, 1e6 / percentile(r.cpu, 0.99), 1e6 / percentile(r.total, 0.99));
 }
 
 void stability_table() {
@@ -167,7 +101,8 @@ void recall_table(int steps) {
     const RunResult r = scripted_run(p, steps, 10);
     std::printf("%-22s %8.3f %8.3f %8.3f %10.2f %10.2f %9.1f %9.1f %9.1f %9.1f\n", label, r.recall.pair_recall(),
                 r.recall.region_recall(), r.recall.depth_recall(), 1e3 * r.recall.max_missed, 1e3 * r.residual,
-                pct(r.detection, 0.5), pct(r.detection, 0.99), pct(r.total, 0.5), pct(r.cpu, 0.99));
+                percentile(r.detection, 0.5), percentile(r.detection, 0.99), percentile(r.total, 0.5),
+                percentile(r.cpu, 0.99));
   };
   for (int n : {0, 5, 10, 20, 50, 100}) {
     IntestineParams p;
@@ -204,7 +139,7 @@ void tube_table() {
     }
     const TubeLod l = tube_lod(lod);
     std::printf("%-4d %2d x %-9d %9d %9d %9d %11.1f %11.1f\n", lod, l.sides, l.rings, mesh.intervals,
-                mesh.vertex_count, mesh.index_count / 3, pct(t, 0.5), pct(c, 0.99));
+                mesh.vertex_count, mesh.index_count / 3, percentile(t, 0.5), percentile(c, 0.99));
   }
   const TubeStats& st = builder.stats();
   std::printf("samples %d (flagged segments %d, extra %d, removed %d), rings turned %d, narrowed %d (narrowest %.1f "
@@ -218,7 +153,7 @@ void tube_table() {
     t.push_back(us_since(t0));
   }
   std::printf("mesentery strip: %d vertices, %d strip indices, %.1f us\n", strip.vertex_count, strip.index_count,
-              pct(t, 0.5));
+              percentile(t, 0.5));
 }
 
 void controller_table() {
