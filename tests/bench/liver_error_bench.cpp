@@ -30,7 +30,8 @@
 //
 // Errors: disp = |u - u_ref|_2 / |u_ref|_2 over the visible (boundary) nodes (stacked x, y, z); force =
 // |F - F_ref| / |F_ref| of the total contact force (vectors). In the summary a method's error is its worst frame.
-// Time per frame: wall clock, microseconds, median (p50) and 99th percentile (nearest rank) over all frames x repeats.
+// Time per frame: wall clock, microseconds, median (p50) and 99th percentile (bench_util.h: nearest rank below) over
+// all frames x repeats.
 // Far-field note: the visual rows include the clamped boundary nodes, whose blocks are exactly zero; any threshold
 // drops those first.
 //
@@ -67,7 +68,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -75,6 +75,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.h"
 #include "box_mesh.h"
 #include "csv_out.h"
 #include "error.h"
@@ -121,17 +122,8 @@ struct Settings {
 
 void progress(const std::string& what) { std::cerr << "liver_error_bench: " << what << std::endl; }
 
-using Clock = std::chrono::steady_clock;
-double us_since(Clock::time_point t0) { return std::chrono::duration<double, std::micro>(Clock::now() - t0).count(); }
-
-// Nearest-rank quantile q (0..1) of the samples; 0 when there are none.
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  const auto k = static_cast<std::ptrdiff_t>(std::ceil(q * static_cast<double>(v.size())) - 1);
-  const auto it = v.begin() + std::clamp<std::ptrdiff_t>(k, 0, static_cast<std::ptrdiff_t>(v.size()) - 1);
-  std::nth_element(v.begin(), it, v.end());
-  return *it;
-}
+using Clock = bench::WallClock;
+using bench::us_since;
 
 // ---- organs ------------------------------------------------------------------------------------------------------
 
@@ -467,7 +459,7 @@ FrameResults run_frames(const Organ& o, const Tensors& td, const Tensors& tf, co
     d.sparse_mib = sparse_mib;
     d.disp = md.worst(md.disp_error);
     d.force = md.worst(md.force_error);
-    d.p50 = quantile(md.all_times(), 0.5);
+    d.p50 = bench::percentile(md.all_times(), 0.5);
     res.dropped.push_back(d);
     res.measures.push_back(std::move(md));
   }
@@ -585,8 +577,8 @@ std::vector<MeshRow> run_meshes(const Scene& scene, const Settings& s) {
         if (!eval(contacts.data(), static_cast<int>(contacts.size()), u, f)) throw Error("mesh: tensor evaluation failed");
         times.push_back(us_since(tt));
       }
-      row.p50 = quantile(times, 0.5);
-      row.p99 = quantile(times, 0.99);
+      row.p50 = bench::percentile(times, 0.5);
+      row.p99 = bench::percentile(times, 0.99);
       row.precomputed = true;
     } else {
       row.tensor_mib = static_cast<double>(
@@ -680,10 +672,10 @@ std::vector<NonlinearRow> run_nonlinear(const Organ& o, const Tensors& td, const
     row.quasi_force_err = rel((f_quasi - f_ref).norm(), f_ref.norm());
     row.linear_disp_err = rel((u_lin - u_ref).norm(), u_ref.norm());
     row.quasi_disp_err = rel((u_quasi - u_ref).norm(), u_ref.norm());
-    row.linear_p50 = quantile(t_lin, 0.5);
-    row.linear_p99 = quantile(t_lin, 0.99);
-    row.quasi_p50 = quantile(t_quasi, 0.5);
-    row.quasi_p99 = quantile(t_quasi, 0.99);
+    row.linear_p50 = bench::percentile(t_lin, 0.5);
+    row.linear_p99 = bench::percentile(t_lin, 0.99);
+    row.quasi_p50 = bench::percentile(t_quasi, 0.5);
+    row.quasi_p99 = bench::percentile(t_quasi, 0.99);
     rows.push_back(row);
   }
   return rows;
@@ -748,7 +740,7 @@ int main(int argc, char** argv) {
 #ifdef SURGSIM_HAVE_MESHER
     if (s.cache.empty() && !s.smoke) s.cache = default_cache_dir();
 #endif
-    if (!s.out.empty()) std::filesystem::create_directories(s.out);
+    if (!s.out.empty()) bench::make_dirs(s.out);
     const NonlinearLaw law = load_nonlinear_law(scene.nonlinear, scene.material);
 
     progress("main organ: ~" + std::to_string(s.nodes) + " nodes");
@@ -783,13 +775,13 @@ int main(int argc, char** argv) {
         const int iters = it == m.cg_iterations_max.end() ? 0 : it->second;
         const double dmax = *std::max_element(de.begin(), de.end()), fmax = *std::max_element(fe.begin(), fe.end());
         std::printf("%-16s %-18s %8d | %12.2f %12.2f | %10.2e %10.2e | %9d\n", m.family.c_str(), m.variant.c_str(),
-                    count, quantile(times, 0.5), quantile(times, 0.99), dmax, fmax, iters);
+                    count, bench::percentile(times, 0.5), bench::percentile(times, 0.99), dmax, fmax, iters);
         frames_csv.row("%s,%s,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%d", m.family.c_str(), m.variant.c_str(), count,
-                       static_cast<int>(de.size()), quantile(times, 0.5), quantile(times, 0.99), dmax,
-                       quantile(de, 0.5), fmax, iters);
+                       static_cast<int>(de.size()), bench::percentile(times, 0.5), bench::percentile(times, 0.99), dmax,
+                       bench::percentile(de, 0.5), fmax, iters);
       }
       const auto all = m.all_times();
-      summary.push_back({m.family, m.variant, quantile(all, 0.5), quantile(all, 0.99),
+      summary.push_back({m.family, m.variant, bench::percentile(all, 0.5), bench::percentile(all, 0.99),
                          m.worst(m.disp_error), m.worst(m.force_error), m.memory_mib});
     }
     CsvOut dropped_csv(s.out, "liver_error_dropped",
