@@ -87,6 +87,13 @@ FixedSet bottom_fixed(const TetMesh& mesh) {
   return fixed_set_from_region(mesh, region);
 }
 
+// The box with its boundary and clamped bottom (the mesh lives here: models and tensors point at it).
+struct LiverBox {
+  TetMesh mesh = liver_box();
+  SurfaceMesh surface = boundary_surface(mesh);
+  FixedSet fixed = bottom_fixed(mesh);
+};
+
 Material liver_material(double young = 3000.0, double poisson = 0.45) {
   Material m;
   m.young_modulus = young;
@@ -248,13 +255,12 @@ const char* to_string(Outcome outcome) {
 
 std::vector<CaseResult> liver_poisson_cases() {
   std::vector<CaseResult> out;
-  const TetMesh mesh = liver_box();
-  const FixedSet fixed = bottom_fixed(mesh);
+  const LiverBox box;
   for (double nu : {0.0, 0.3, 0.45, 0.49, 0.499, 0.4999, 0.5, 0.6}) {
     out.push_back(guarded(make("liver", "poisson", "nu=" + g(nu)), [&](CaseResult& r) {
       std::unique_ptr<LiverSetup> setup;
       try {
-        setup = std::make_unique<LiverSetup>(mesh, liver_material(3000.0, nu), fixed);
+        setup = std::make_unique<LiverSetup>(box.mesh, liver_material(3000.0, nu), box.fixed);
       } catch (const Error& e) {
         r.outcome = Outcome::kRefused;
         r.message = e.what();
@@ -272,16 +278,15 @@ std::vector<CaseResult> liver_poisson_cases() {
 
 std::vector<CaseResult> liver_young_cases() {
   std::vector<CaseResult> out;
-  const TetMesh mesh = liver_box();
-  const FixedSet fixed = bottom_fixed(mesh);
+  const LiverBox box;
   const double e_ref = 3000.0;
-  LiverSetup ref_setup(mesh, liver_material(e_ref), fixed);
+  LiverSetup ref_setup(box.mesh, liver_material(e_ref), box.fixed);
   const LiverRun ref = run_contacts(ref_setup, standard_contacts());
   for (double e : {1.0, 1e3, 1e6, 1e9, 0.0, -1.0, std::numeric_limits<double>::infinity(), kNaN}) {
     out.push_back(guarded(make("liver", "young", "E=" + g(e) + " Pa"), [&](CaseResult& r) {
       std::unique_ptr<LiverSetup> setup;
       try {
-        setup = std::make_unique<LiverSetup>(mesh, liver_material(e), fixed);
+        setup = std::make_unique<LiverSetup>(box.mesh, liver_material(e), box.fixed);
       } catch (const Error& error) {
         r.outcome = Outcome::kRefused;
         r.message = error.what();
@@ -370,10 +375,8 @@ std::vector<CaseResult> liver_sliver_cases() {
 
 std::vector<CaseResult> liver_contact_cases() {
   std::vector<CaseResult> out;
-  const TetMesh mesh = liver_box();
-  const SurfaceMesh surface = boundary_surface(mesh);
-  const FixedSet fixed = bottom_fixed(mesh);
-  LiverSetup setup(mesh, liver_material(), fixed);
+  const LiverBox box;
+  LiverSetup setup(box.mesh, liver_material(), box.fixed);
   const Eigen::Vector3d down(0, 0, -0.004);
 
   // Solved contact sets (adjacent nodes share an edge of the top face).
@@ -483,7 +486,7 @@ std::vector<CaseResult> liver_contact_cases() {
       spec.trocar = t.trocar;
       spec.axis = t.axis;
       spec.shaft_points = 1;
-      LiverContacts contacts(mesh, surface, setup.tensors, spec);
+      LiverContacts contacts(box.mesh, box.surface, setup.tensors, spec);
       ContactTick tick;
       int constrained = 0, fixed_corners = 0;
       bool touched = false;
@@ -498,7 +501,7 @@ std::vector<CaseResult> liver_contact_cases() {
         if (pc.active) {
           touched = true;
           fixed_corners = 0;
-          for (int node : pc.nodes) fixed_corners += fixed.node_touched(node) ? 1 : 0;
+          for (int node : pc.nodes) fixed_corners += box.fixed.node_touched(node) ? 1 : 0;
           constrained = contacts.solution().count;
         }
         for (int l = 0; l < contacts.solution().count; ++l)
@@ -519,9 +522,8 @@ std::vector<CaseResult> liver_contact_cases() {
 
 std::vector<CaseResult> liver_large_displacement_cases() {
   std::vector<CaseResult> out;
-  const TetMesh mesh = liver_box();
-  const FixedSet fixed = bottom_fixed(mesh);
-  LiverSetup setup(mesh, liver_material(), fixed);
+  const LiverBox box;
+  LiverSetup setup(box.mesh, liver_material(), box.fixed);
   struct Push {
     double edges;
     Eigen::Vector3d direction;
@@ -536,10 +538,10 @@ std::vector<CaseResult> liver_large_displacement_cases() {
     out.push_back(guarded(make("liver", "large_displacement", g(p.edges) + " edges " + p.what), [&](CaseResult& r) {
       const LiverRun run = run_contacts(setup, {{top_node(4, 3), p.edges * kEdge * p.direction}});
       fill_from(r, run, setup.k_condition);
-      const TetInversion inv = count_inverted_tets(mesh, run.reference.displacement);
+      const TetInversion inv = count_inverted_tets(box.mesh, run.reference.displacement);
       const bool solved = run.status == ContactStatus::kOk && run.finite && run.tensor_error < 1e-6;
       r.outcome = !solved ? Outcome::kFailed : inv.inverted > 0 ? Outcome::kDetected : Outcome::kConverged;
-      r.message = text(inv.inverted, " of ", mesh.tets.rows(), " tets inverted (worst tet ", inv.worst_tet,
+      r.message = text(inv.inverted, " of ", box.mesh.tets.rows(), " tets inverted (worst tet ", inv.worst_tet,
                        ", deformed/rest volume ", inv.min_volume_ratio, ")");
     }));
   }
@@ -550,18 +552,16 @@ std::vector<CaseResult> liver_large_displacement_cases() {
 
 std::vector<CaseResult> liver_tool_speed_cases() {
   std::vector<CaseResult> out;
-  const TetMesh mesh = liver_box();
-  const SurfaceMesh surface = boundary_surface(mesh);
-  const FixedSet fixed = bottom_fixed(mesh);
+  const LiverBox box;
   // The shipped liver scene's tool (4 shaft points, capacity, 8 N device limit) and non-linear law, over the box;
   // and the same box ten times stiffer (linear: the scene's curves are for its own material), where the force at
   // 3 cm exceeds the device limit.
   const Scene liver = load_scene(resolve_scene_path("liver"));
-  LiverSetup setup(mesh, liver.material, fixed);
+  LiverSetup setup(box.mesh, liver.material, box.fixed);
   const NonlinearLaw law = load_nonlinear_law(liver.nonlinear, liver.material);
   Material stiff_material = liver.material;
   stiff_material.young_modulus *= 10;
-  LiverSetup stiff_setup(mesh, stiff_material, fixed);
+  LiverSetup stiff_setup(box.mesh, stiff_material, box.fixed);
   const NonlinearLaw linear;
   ToolSpec spec = liver.tool;
   spec.trocar = Eigen::Vector3d(0.0831, 0.0577, 0.3);  // off the grid lines: the tip lands inside a triangle
@@ -581,7 +581,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
                                  {10.0, 0.10, false, ", through"}};
   for (const Run& run : runs) {
     out.push_back(guarded(make("liver", "tool_speed", "v=" + g(run.speed) + " m/s" + run.what), [&](CaseResult& r) {
-      LiverContacts contacts(mesh, surface, (run.stiff ? stiff_setup : setup).tensors, spec,
+      LiverContacts contacts(box.mesh, box.surface, (run.stiff ? stiff_setup : setup).tensors, spec,
                              run.stiff ? &linear : &law);
       const double start = 0.0237;  // m above the top face
       const double step = run.speed * kHapticDt;
@@ -605,7 +605,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
         for (int l = 0; l < s.count; ++l) {
           const int node = s.nodes[static_cast<std::size_t>(l)];
           finite = finite && contacts.deformed(node).allFinite();
-          r.max_displacement_m = std::max(r.max_displacement_m, (contacts.deformed(node) - mesh.nodes.row(node).transpose()).norm());
+          r.max_displacement_m = std::max(r.max_displacement_m, (contacts.deformed(node) - box.mesh.nodes.row(node).transpose()).norm());
         }
         r.all_finite = r.all_finite && finite;
         r.max_force_n = std::max(r.max_force_n, tick.force.norm());
@@ -702,111 +702,100 @@ std::vector<CaseResult> intestine_spring_cases() {
 
 // --- intestine: probe yanked away -------------------------------------------------------------------------------
 
+namespace {
+
+// The intestine with a probe driven along y at the height of the folds, recording what reaches the outputs.
+struct ProbeRun {
+  static constexpr double kZ = -0.12;  // m: the scene's trocar height (tool from y = 0.40 pointing -y)
+  intestine::IntestineModel model;
+  intestine::IntestineState state;
+  intestine::StepReport report;
+  intestine::Probe probe;
+  CaseResult& r;
+  double scale;
+  double max_raw = 0;  // N, largest probe force before the clamp
+  int faults = 0, saturated = 0;
+
+  ProbeRun(const intestine::IntestineParams& p, double radius, CaseResult& result)
+      : model(p), state(model), r(result), scale(energy_scale(model)) {
+    probe.radius = radius;
+  }
+  // One 1 ms step with the probe at y (or without it).
+  void tick(bool active, double y) {
+    probe.active = active;
+    probe.center = Eigen::Vector3d(0, y, kZ);
+    intestine::step(model, state, probe, kHapticDt, report);
+    r.all_finite = r.all_finite && state.x.allFinite() && state.v.allFinite() && report.probe_force.allFinite();
+    faults += report.status != intestine::StepStatus::kOk ? 1 : 0;
+    saturated += report.probe_saturated ? 1 : 0;
+    max_raw = std::max(max_raw, report.probe_force_raw);
+    r.max_force_n = std::max(r.max_force_n, report.probe_force.norm());
+    r.max_displacement_m = std::max(r.max_displacement_m, max_offset(state.x, model.rest()));
+  }
+  // 0.5 s with nothing touching the body (the probe parked at y = 0.5): the energy it holds only drains away (a step
+  // may gain some where the self-collision response corrects a fold that springs back into another one, but the run
+  // must end below). Sets the residual column to max (E - E_start) / (m g R); returns (E_end - E_start) / (m g R).
+  double drain() {
+    const double e_start = intestine::energy(model, state);
+    double e_max = e_start, e = e_start;
+    for (int s = 0; s < 500; ++s) {
+      tick(true, 0.5);
+      e = intestine::energy(model, state);
+      e_max = std::max(e_max, e);
+    }
+    r.residual = (e_max - e_start) / scale;
+    return (e - e_start) / scale;
+  }
+  // Clamped when some tick saturated, converged otherwise; failed unless `ok`, every output finite, no fault and
+  // the clamp held.
+  void judge(bool ok) {
+    ok = ok && r.all_finite && faults == 0 && r.max_force_n <= model.params().probe_force_limit * (1 + 1e-12);
+    r.outcome = !ok ? Outcome::kFailed : saturated > 0 ? Outcome::kClamped : Outcome::kConverged;
+  }
+};
+
+}  // namespace
+
 std::vector<CaseResult> intestine_yank_cases() {
   std::vector<CaseResult> out;
   double probe_radius = 0.01;
   const intestine::IntestineParams scene = scene_intestine(&probe_radius);
-  // The probe comes from the tool's side (scene trocar at y = 0.40, z = -0.12, pointing -y) into the hanging folds.
-  const double z = -0.12;
   for (double probe_k : {300.0, 1e4, 1e6}) {
     out.push_back(guarded(make("intestine", "probe_yank", "k_probe=" + g(probe_k) + " N/m, 10 m/s"), [&](CaseResult& r) {
       intestine::IntestineParams p = scene;
       p.probe_stiffness = probe_k;
-      const intestine::IntestineModel model(p);
-      intestine::IntestineState state(model);
-      intestine::StepReport report;
-      intestine::Probe probe;
-      probe.radius = probe_radius;
-      const double scale = energy_scale(model);
-      double max_raw = 0, y = 0.25;
-      int faults = 0, saturated = 0;
-      auto tick = [&](bool active) {
-        probe.active = active;
-        probe.center = Eigen::Vector3d(0, y, z);
-        intestine::step(model, state, probe, kHapticDt, report);
-        r.all_finite = r.all_finite && state.x.allFinite() && state.v.allFinite() && report.probe_force.allFinite();
-        faults += report.status != intestine::StepStatus::kOk ? 1 : 0;
-        saturated += report.probe_saturated ? 1 : 0;
-        max_raw = std::max(max_raw, report.probe_force_raw);
-        r.max_force_n = std::max(r.max_force_n, report.probe_force.norm());
-        r.max_displacement_m = std::max(r.max_displacement_m, max_offset(state.x, model.rest()));
-      };
-      for (int s = 0; s < 300; ++s) tick(false);  // settle 0.3 s
+      ProbeRun run(p, probe_radius, r);
+      for (int s = 0; s < 300; ++s) run.tick(false, 0.25);  // settle 0.3 s
       // Press into the folds at 0.2 m/s for 1 s (y from 0.25 to 0.05), then hold 0.1 s: a deep contact.
-      for (int s = 0; s < 1000; ++s) {
-        y -= 0.2 * kHapticDt;
-        tick(true);
-      }
-      for (int s = 0; s < 100; ++s) tick(true);
-      const int contacts_held = report.probe_contacts;
-      const double force_held = report.probe_force_raw;
-      const double e_yank = intestine::energy(model, state);
-      // Yank: 1 cm per tick back out to y = 0.5, then 0.5 s without the probe.
-      while (y < 0.5) {
-        y += 10.0 * kHapticDt;
-        tick(true);
-      }
-      // From there on nothing touches the body: the energy left by the push and the yank (the probe may hit folds
-      // that closed behind it on its way out) only drains away; a step may gain some where the self-collision
-      // response corrects a fold that springs back into another one, but the run must end below.
-      const double e_exit = intestine::energy(model, state);
-      double e_max = e_exit, e = e_exit;
-      for (int s = 0; s < 500; ++s) {
-        tick(true);
-        e = intestine::energy(model, state);
-        e_max = std::max(e_max, e);
-      }
-      const double growth = (e_max - e_exit) / scale, end = (e - e_exit) / scale;
-      r.residual = growth;
-      const bool ok = r.all_finite && faults == 0 && contacts_held > 0 && report.probe_contacts == 0 &&
-                      report.probe_force.isZero(0) && end <= 1e-3 &&
-                      r.max_force_n <= p.probe_force_limit * (1 + 1e-12);
-      r.outcome = !ok ? Outcome::kFailed : saturated > 0 ? Outcome::kClamped : Outcome::kConverged;
-      r.message = text("held ", contacts_held, " probe contacts, raw force ", force_held, " N (max ", max_raw,
-                       " N, limit ", p.probe_force_limit, " N, ", saturated, " saturated ticks); the yank changed E by ",
-                       (e_exit - e_yank) / scale, " m g R; after it ", report.probe_contacts,
-                       " contacts; residual column: max (E - E_exit) / (m g R) = ", growth, ", at the end ", end, "; ",
-                       faults, " faults");
+      double y = 0.25;
+      for (int s = 0; s < 1000; ++s) run.tick(true, y -= 0.2 * kHapticDt);
+      for (int s = 0; s < 100; ++s) run.tick(true, y);
+      const int contacts_held = run.report.probe_contacts;
+      const double force_held = run.report.probe_force_raw;
+      const double e_yank = intestine::energy(run.model, run.state);
+      // Yank: 1 cm per tick back out to y = 0.5 (the probe may hit folds that closed behind it on its way out).
+      while (y < 0.5) run.tick(true, y += 10.0 * kHapticDt);
+      const double yank_work = (intestine::energy(run.model, run.state) - e_yank) / run.scale;
+      const double end = run.drain();
+      run.judge(contacts_held > 0 && run.report.probe_contacts == 0 && run.report.probe_force.isZero(0) && end <= 1e-3);
+      r.message = text("held ", contacts_held, " probe contacts, raw force ", force_held, " N (max ", run.max_raw,
+                       " N, limit ", p.probe_force_limit, " N, ", run.saturated, " saturated ticks); the yank changed E by ",
+                       yank_work, " m g R; then ", run.report.probe_contacts,
+                       " contacts; residual column: max (E - E_exit) / (m g R) = ", r.residual, ", at the end ", end,
+                       "; ", run.faults, " faults");
     }));
   }
-  // Plunge: the probe enters the folds at 10 m/s (1 cm per tick), 12 cm deep, then leaves as fast.
+  // Plunge: the probe enters the folds at 10 m/s (1 cm per tick), 20 cm deep, then leaves as fast.
   out.push_back(guarded(make("intestine", "probe_plunge", "k_probe=300 N/m, 10 m/s"), [&](CaseResult& r) {
-    const intestine::IntestineModel model(scene);
-    intestine::IntestineState state(model);
-    intestine::StepReport report;
-    intestine::Probe probe;
-    probe.radius = probe_radius;
-    int faults = 0, saturated = 0;
-    double max_raw = 0;
-    auto tick = [&](bool active, double y) {
-      probe.active = active;
-      probe.center = Eigen::Vector3d(0, y, z);
-      intestine::step(model, state, probe, kHapticDt, report);
-      r.all_finite = r.all_finite && state.x.allFinite() && state.v.allFinite() && report.probe_force.allFinite();
-      faults += report.status != intestine::StepStatus::kOk ? 1 : 0;
-      saturated += report.probe_saturated ? 1 : 0;
-      max_raw = std::max(max_raw, report.probe_force_raw);
-      r.max_force_n = std::max(r.max_force_n, report.probe_force.norm());
-      r.max_displacement_m = std::max(r.max_displacement_m, max_offset(state.x, model.rest()));
-    };
-    for (int s = 0; s < 300; ++s) tick(false, 0.3);
-    for (int s = 0; s <= 20; ++s) tick(true, 0.14 - 0.01 * s);   // in: y 0.14 .. -0.06
-    for (int s = 0; s <= 20; ++s) tick(true, -0.06 + 0.01 * s);  // out
-    const double e_out = intestine::energy(model, state);
-    double e_max = e_out, e = e_out;
-    for (int s = 0; s < 500; ++s) {
-      tick(false, 0.3);
-      e = intestine::energy(model, state);
-      e_max = std::max(e_max, e);
-    }
-    r.residual = (e_max - e_out) / energy_scale(model);
-    const double end = (e - e_out) / energy_scale(model);
-    const bool ok = r.all_finite && faults == 0 && max_raw > 0 && end <= 1e-3 &&
-                    r.max_force_n <= scene.probe_force_limit * (1 + 1e-12);
-    r.outcome = !ok ? Outcome::kFailed : saturated > 0 ? Outcome::kClamped : Outcome::kConverged;
-    r.message = text("raw force max ", max_raw, " N (limit ", scene.probe_force_limit, " N, ", saturated,
+    ProbeRun run(scene, probe_radius, r);
+    for (int s = 0; s < 300; ++s) run.tick(false, 0.3);
+    for (int s = 0; s <= 20; ++s) run.tick(true, 0.14 - 0.01 * s);   // in: y 0.14 .. -0.06
+    for (int s = 0; s <= 20; ++s) run.tick(true, -0.06 + 0.01 * s);  // out
+    const double end = run.drain();
+    run.judge(run.max_raw > 0 && end <= 1e-3);
+    r.message = text("raw force max ", run.max_raw, " N (limit ", scene.probe_force_limit, " N, ", run.saturated,
                      " saturated ticks); residual column: max (E - E_out) / (m g R) after leaving = ", r.residual,
-                     ", at the end ", end, "; ", faults, " faults");
+                     ", at the end ", end, "; ", run.faults, " faults");
   }));
   return out;
 }
