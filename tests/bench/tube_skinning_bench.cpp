@@ -70,10 +70,10 @@ int main(int argc, char** argv) {
     std::printf("tube_skinning_bench: %s, %dx%d, %d points, %d frames per LOD and path (wall ms; p50 / p90)\n",
                 renderer->info().c_str(), scene.visual.width, scene.visual.height, n, frames);
     std::printf("| LOD | triangles | CPU build | CPU frame p50 | CPU frame p90 | GPU build | GPU frame p50 | GPU frame p90 "
-                "| CPU/GPU (p50) |\n|---|---|---|---|---|---|---|---|---|\n");
+                "| CPU/GPU (p50) | sent per frame CPU / GPU (KiB) |\n|---|---|---|---|---|---|---|---|---|---|\n");
     for (int lod = 0; lod <= kTubeMaxLod; ++lod) {
       Timing timing[2];  // 0: CPU, 1: GPU
-      int triangles = 0;
+      int triangles = 0, vertices = 0, intervals = 0;
       // Alternate the paths frame by frame so that both see the same machine load.
       for (int f = 0; f < 2 * frames + 4; ++f) {
         const bool gpu = f % 2 == 1;
@@ -105,15 +105,21 @@ int main(int argc, char** argv) {
         renderer->end_frame();
         const double frame = ms_since(t0);
         triangles = mesh.index_count / 3;
+        vertices = mesh.vertex_count;
+        intervals = mesh.intervals;
         if (f >= 4) {  // the first frames upload the primitives and grow the buffers
           timing[gpu].build_ms.push_back(build);
           timing[gpu].frame_ms.push_back(frame);
         }
       }
       const double cpu50 = pct(timing[0].frame_ms, 0.5), gpu50 = pct(timing[1].frame_ms, 0.5);
-      std::printf("| %d | %d | %.3f | %.2f | %.2f | %.3f | %.2f | %.2f | %.2f |\n", lod, triangles,
+      // Sent per frame: the CPU path's interleaved positions and normals (indices only when they change), the GPU
+      // path's two 3 x 4 matrices per interval.
+      std::printf("| %d | %d | %.3f | %.2f | %.2f | %.3f | %.2f | %.2f | %.2f | %.1f / %.1f |\n", lod, triangles,
                   pct(timing[0].build_ms, 0.5), cpu50, pct(timing[0].frame_ms, 0.9), pct(timing[1].build_ms, 0.5),
-                  gpu50, pct(timing[1].frame_ms, 0.9), gpu50 > 0 ? cpu50 / gpu50 : 0.0);
+                  gpu50, pct(timing[1].frame_ms, 0.9), gpu50 > 0 ? cpu50 / gpu50 : 0.0,
+                  static_cast<double>(vertices) * 6 * sizeof(float) / 1024.0,
+                  static_cast<double>(intervals) * 24 * sizeof(float) / 1024.0);
     }
     if (renderer->counts().rejected != 0 || renderer->counts().gl_errors != 0) {
       std::fprintf(stderr, "tube_skinning_bench: %llu draws rejected, %llu frames with GL errors\n",
