@@ -378,7 +378,7 @@ def intestine_section(rep):
                 pts = [r for r in rows if col in r and number(r[col]) and r[col] > 0]
                 if pts:
                     ax[0].loglog([r["dt_ms"] for r in pts], [r[col] for r in pts], style, label="%s, %s" % (label, col))
-                    if "cpu_s_per_sim_s" in r:
+                    if "cpu_s_per_sim_s" in pts[0]:
                         ax[1].loglog([r["cpu_s_per_sim_s"] for r in pts], [r[col] for r in pts], style,
                                      label="%s, %s" % (label, col))
         ax[0].set_xlabel("time step, ms")

@@ -50,6 +50,11 @@ class ReportTest(unittest.TestCase):
               "full_solve,factor+solve,50000,60000,0,0,10\n"
               "tensors_double,double,5,7,1e-15,2e-15,50\n"
               "tensors_float,float,4,6,3e-7,2e-7,25\n")
+        # The other sections' inputs, a few rows each in the bench programs' formats.
+        for name in ("intestine_timestep", "intestine_pairs", "intestine_lod", "stability", "liver_nonlinear",
+                     "liver_mesh_convergence", "node_tick", "liver_precompute"):
+            shutil.copy(os.path.join(os.path.dirname(os.path.abspath(__file__)), "fixtures", name + ".csv"),
+                        os.path.join(self.dir, "csv", name + ".csv"))
         rates = os.path.join(self.dir, "raw", "rates")
         for rate in (100, 10000):
             haptic_log(os.path.join(rates, "ramp_%d.csv" % rate), rate, 1.0)
@@ -70,7 +75,12 @@ class ReportTest(unittest.TestCase):
         self.assertIn("## Headline", text)
         self.assertIn("| tensors_float | float |", text)
         self.assertIn("Test CPU", text)
-        for plot in ("liver_error_vs_time", "liver_haptic_rate"):
+        self.assertNotIn("failed**", text)
+        self.assertIn("| intestine step (400 masses + collisions), dt 1 ms | p99 699 us", text)
+        self.assertIn("| stability: cases with only finite outputs | 2 of 3 | all | **over** |", text)
+        self.assertIn("| precompute, 1382-node liver (direct, double) | 1.20 s | <= 2 s | within |", text)
+        for plot in ("liver_error_vs_time", "liver_haptic_rate", "intestine_timestep", "intestine_pairs",
+                     "intestine_lod", "liver_nonlinear", "liver_mesh_convergence"):
             self.assertGreater(os.path.getsize(os.path.join(self.dir, "plots", plot + ".png")), 1000)
         with open(os.path.join(self.dir, "csv", "liver_error_time.csv")) as f:
             first = f.readline()
@@ -102,9 +112,9 @@ class ReportTest(unittest.TestCase):
         self.assertEqual(self.run_report().returncode, 0)
         with open(os.path.join(self.dir, "README.md")) as f:
             text = f.read()
-        self.assertIn("**Missing**: `csv/stability.csv` was not written", text)
+        self.assertIn("**Missing**: `csv/intestine_frame_rate.csv` was not written", text)
         self.assertIn("Missing inputs:", text)
-        self.assertNotIn("stability: cases with only finite outputs", text)
+        self.assertIn("`raw/live_liver/haptic_stats.json`", text)
 
     def test_refuses_a_folder_without_meta(self):
         os.remove(os.path.join(self.dir, "meta.json"))
