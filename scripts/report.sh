@@ -13,6 +13,7 @@
 # then exits non-zero. The whole default run takes about 20 minutes on the 2-core CI machine (build included).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
+args="$*"
 quick=0
 out=$root/report
 build_first=1
@@ -26,8 +27,7 @@ while [ $# -gt 0 ]; do
   esac
   shift
 done
-command_line="scripts/report.sh $*"
-[ $quick = 1 ] && command_line="scripts/report.sh --quick"
+command_line="scripts/report.sh${args:+ $args}"
 
 build=${SURGSIM_BUILD_DIR:-$root/build}
 start_all=$(date +%s)

@@ -107,7 +107,10 @@ TEST_F(HapticProcess, LiveDevicePathMatchesReplay) {
   EXPECT_EQ(live["contacts_max"], replay["contacts_max"]);
   const double t_replay = replay["contact_ticks"].get<double>();
   const double t_live = live["contact_ticks"].get<double>();
-  EXPECT_NEAR(t_live, t_replay, 0.05 * t_replay);
+  // A loaded machine skips ticks (each counted as a missed deadline): those cannot be in contact, so they widen the
+  // tolerance (found failing under ctest -j2 next to compiles: 474 against 515 ticks in contact).
+  const double skipped = live["deadline_misses"].get<double>();
+  EXPECT_NEAR(t_live, t_replay, 0.05 * t_replay + skipped) << skipped << " missed deadlines";
   EXPECT_NEAR(live["force_max_n"].get<double>(), replay["force_max_n"].get<double>(),
               0.05 * replay["force_max_n"].get<double>());
   // The device got the forces back, all finite.
