@@ -469,6 +469,13 @@ def bench_section(rep):
             rows.append(("haptic tick, %d nodes, 10 contacts (bench)" % r["nodes"],
                          "p50 %.1f / p99 %.1f us" % (r["tick_us_p50"], r["tick_us_p99"]), budget,
                          verdict(r["tick_us_p99"] <= BUDGETS["tick_p99_us"]) if budget else ""))
+    floor = (rep.csv_rows("rt_floor") or [None])[0]
+    if floor:
+        rows.append(("machine floor: the same timer, a fixed %g us busy tick, nothing else (rt_bench, %d ticks)" % (
+            floor["work_us"], floor["ticks"]),
+            "%d missed (%.3f %%), wake-up late p99 %.0f / max %.0f us" % (
+                floor["missed"], floor["missed_pct"], floor["late_us_p99"], floor["late_us_max"]),
+            "< 0.1 % missed", verdict(floor["missed_pct"] < 100 * BUDGETS["missed_fraction"])))
     h = rep.load_json("raw/live_liver/haptic_stats.json")
     v = rep.load_json("raw/live_liver/visual_stats.json")
     if h:

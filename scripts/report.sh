@@ -150,6 +150,9 @@ live_intestine() {
   SURGSIM_OUT=$out/raw/live_intestine HAPTIC_ARGS="--duration $intestine_s" VISUAL_ARGS="--png-every 50" \
     "$root/scripts/run_local.sh" intestine "$root/config/trajectories/intestine_push.csv"
 }
+# The machine's own floor for the same loop: the haptic node's timer with a fixed 50 us busy tick and nothing else,
+# for as long as the live run, just before it (misses on a shared VM come and go within minutes).
+step rt_floor "$bench/rt_bench" --seconds "$live_s" --label alone --out "$csv"
 step live_liver live_liver
 step live_intestine live_intestine
 # Issue 7's round trips: one host (shared memory, UDP), two hosts over veth and through the user-space impairment.
