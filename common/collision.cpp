@@ -275,7 +275,7 @@ SurfaceHit BucketGrid::segment_query_brute(const Eigen::Vector3d& p0, const Eige
   return best;
 }
 
-SurfaceProjection BucketGrid::project_rest(const Eigen::Vector3d& p, int radius) const {
+SurfaceProjection BucketGrid::project_rest(const Eigen::Vector3d& p, int radius, const Eigen::Vector3d* facing) const {
   SurfaceProjection best;
   int nodes[kMaxCandidates];
   int tris[kMaxTriangles];
@@ -292,6 +292,10 @@ SurfaceProjection BucketGrid::project_rest(const Eigen::Vector3d& p, int radius)
     const Eigen::Vector3d A = rest_->row(surface_->tris(f, 0)).transpose();
     const Eigen::Vector3d B = rest_->row(surface_->tris(f, 1)).transpose();
     const Eigen::Vector3d C = rest_->row(surface_->tris(f, 2)).transpose();
+    if (facing != nullptr) {
+      const Eigen::Vector3d n = (B - A).cross(C - A);
+      if (n.dot(*facing) <= kFacingCos * n.norm() * facing->norm()) continue;  // faces away: the other side
+    }
     Eigen::Vector3d bary;
     const Eigen::Vector3d q = closest_point_triangle(p, A, B, C, bary);
     const double d2 = (q - p).squaredNorm();

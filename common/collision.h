@@ -39,6 +39,7 @@ struct SurfaceProjection {
 class BucketGrid {
  public:
   static constexpr int kMaxCandidates = 512;   // surface nodes examined per query
+  static constexpr double kFacingCos = -0.5;    // project_rest(facing): cos 120 degrees
   static constexpr int kMaxTriangles = 2048;   // triangles examined per query
 
   /// Builds the grid over the surface nodes at rest. `cell_size` <= 0 chooses about 2x the mean surface edge.
@@ -54,8 +55,10 @@ class BucketGrid {
                            const void* context = nullptr) const;
 
   /// Closest point of the REST surface to p among the triangles around the surface nodes within `radius` cells
-  /// (1 = the 27 cells around p). Allocates nothing.
-  SurfaceProjection project_rest(const Eigen::Vector3d& p, int radius = 1) const;
+  /// (1 = the 27 cells around p). With `facing`, only triangles whose outward normal is within 120 degrees of it
+  /// count (cosine above kFacingCos): a contact may slide round an edge onto a side face, but does not jump to the
+  /// opposite face when the tool goes deeper than half the organ's thickness. Allocates nothing.
+  SurfaceProjection project_rest(const Eigen::Vector3d& p, int radius = 1, const Eigen::Vector3d* facing = nullptr) const;
 
   /// Surface nodes in the cell of p and its 26 neighbours (for tests and the nearest-node step).
   int candidates_near(const Eigen::Vector3d& p, int* out, int capacity) const;

@@ -78,6 +78,19 @@ TEST_F(CollisionTest, ProjectionOntoRestSurface) {
   EXPECT_NEAR(p.normal.z(), 1.0, 1e-12);
 }
 
+TEST_F(CollisionTest, ProjectionKeepsToTheFacingSide) {
+  BucketGrid grid(mesh_, surface_);
+  const Eigen::Vector3d deep(0.0, 0.0, 0.015);  // 15 mm above the bottom face, 85 mm under the top
+  const SurfaceProjection any = grid.project_rest(deep, 4);
+  ASSERT_TRUE(any.found);
+  EXPECT_LT(any.normal.z(), -0.9) << "the closest face is the bottom";
+  const Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  const SurfaceProjection facing = grid.project_rest(deep, 4, &up);
+  ASSERT_TRUE(facing.found);
+  EXPECT_GT(facing.normal.dot(up), BucketGrid::kFacingCos) << "a face turned away from +z was chosen";
+  EXPECT_GT(facing.distance, any.distance);
+}
+
 TEST_F(CollisionTest, NearestNodeMatchesBruteForce) {
   BucketGrid grid(mesh_, surface_);
   std::mt19937 rng(7);

@@ -172,6 +172,22 @@ TEST_F(LiverContactsTest, FastStabWithShaftPointsFeelsLikeASlowOne) {
   EXPECT_NEAR(t_fast.force.z(), t_slow.force.z(), 1e-9 * t_slow.force.z());
 }
 
+// Found by the stability suite: a tip pushed deeper than half the organ's thickness re-anchored on the closest rest
+// triangle, which was on the fixed bottom face, so the contact let go and the force fell to 0 N mid-push. The anchor
+// now keeps to triangles facing the way the contact's own triangle faced.
+TEST_F(LiverContactsTest, DeepPushKeepsItsFaceAndItsForce) {
+  LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
+  step(c, pose_at_depth(-0.005));
+  double previous = 0;
+  for (double depth = 0.001; depth <= 0.036 + 1e-12; depth += 0.001) {  // the block is 40 mm thick
+    const ContactTick t = step(c, pose_at_depth(depth));
+    ASSERT_EQ(t.points_in_contact, 1) << "at depth " << depth;
+    EXPECT_GT(c.point(0).normal.z(), 0.5) << "anchored on a face other than the top at depth " << depth;
+    EXPECT_GT(t.force.z(), previous) << "force fell at depth " << depth;
+    previous = t.force.z();
+  }
+}
+
 TEST_F(LiverContactsTest, StepAllocatesNothing) {
   LiverContacts c(*mesh_, *surface_, *tensors_, spec_);
   step(c, pose_at_depth(-0.005));

@@ -106,8 +106,11 @@ TEST(StabilityTest, DisplacementsLargerThanAnElementInvertTetsAndAreDetected) {
 TEST(StabilityTest, FastToolDoesNotTunnelAndItsForceIsClamped) {
   const std::vector<CaseResult> rows = liver_tool_speed_cases();
   expect_all_sound(rows);  // a tunnelling tool or a device force above the limit makes a case "failed"
-  for (const char* v : {"v=0.1 m/s", "v=1 m/s", "v=10 m/s", "v=10 m/s, through"}) expect(rows, "tool_speed", v, Outcome::kConverged);
+  for (const char* v : {"v=0.1 m/s", "v=1 m/s", "v=10 m/s"}) expect(rows, "tool_speed", v, Outcome::kConverged);
   expect(rows, "tool_speed", "v=10 m/s, E x 10", Outcome::kClamped);
+  // Pushed through the whole organ, the contact keeps to the top face and the device holds its limit; it used to
+  // re-anchor on the fixed bottom face past half the thickness and drop to 0 N, as if the organ had vanished.
+  expect(rows, "tool_speed", "v=10 m/s, through", Outcome::kClamped);
   // The same final pose gives the same force whatever the speed (the shaft points behind a fast tip used to soften it).
   const double slow = find(rows, "tool_speed", "v=0.1 m/s")->max_force_n;
   EXPECT_NEAR(find(rows, "tool_speed", "v=10 m/s")->max_force_n, slow, 1e-6 * slow);
