@@ -402,10 +402,26 @@ def intestine_section(rep):
                   first_key(lod[0], "frame_ms_p50", "frame_ms"), "intestine_lod",
                   "Intestine: tube geometric error and frame time per level of detail.", xlabel="LOD", yscale="log")
     rep.csv_section("intestine_frame_rate", "Guaranteed frame rate (paper eq. 15) on the real renderer", "")
+    embed_log_table(rep, "tube_skinning", "Tube skinning in the vertex shader against the CPU, per level of detail "
+                    "(tube_skinning_bench)")
     for path in sorted(glob.glob(os.path.join(rep.root, "csv", "intestine_*.csv"))):
         name = os.path.basename(path)[:-4]
         if name not in ("intestine_timestep", "intestine_pairs", "intestine_lod", "intestine_frame_rate"):
             rep.csv_section(name, name.replace("_", " "), "")
+
+
+def embed_log_table(rep, step, title):
+    """The Markdown table a step printed (its lines starting with '|', and '(' notes), under a heading."""
+    path = os.path.join(rep.root, "logs", step + ".log")
+    if not os.path.exists(path):
+        return
+    rep.md("### " + title)
+    rep.md()
+    with open(path) as f:
+        for line in f:
+            if line.startswith("|") or line.startswith("("):
+                rep.md(line.rstrip())
+    rep.md()
 
 
 def twin_plot(rep, rows, xk, yk, y2k, name, caption, xlabel, xscale="linear", yscale="linear"):
@@ -539,15 +555,7 @@ def bench_section(rep):
     rep.csv_section("liver_precompute", "Precompute: time and memory (direct CHOLMOD against CG per column)", "")
     rep.csv_section("liver_table1", "The paper's Table 1: tensor evaluation against the reference solve", "")
     rep.csv_section("node_tick", "Haptic tick against contacts and mesh size", "")
-    path = os.path.join(rep.root, "logs", "network.log")
-    if os.path.exists(path):
-        rep.md("### Round trips: one host and two hosts (scripts/network_figures.sh)")
-        rep.md()
-        with open(path) as f:
-            for line in f:
-                if line.startswith("|") or line.startswith("("):
-                    rep.md(line.rstrip())
-        rep.md()
+    embed_log_table(rep, "network", "Round trips: one host and two hosts (scripts/network_figures.sh)")
     for name in ("intestine_bench",):
         path = os.path.join(rep.root, "logs", name + ".log")
         if os.path.exists(path):

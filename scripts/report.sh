@@ -119,6 +119,9 @@ else
   failed+=(intestine_error); echo "intestine_error,0,missing,$bench/intestine_error_bench not built" >>"$steps_csv"
 fi
 
+# The intestine tube drawn with GPU (vertex-shader) against CPU two-matrix skinning, per level of detail.
+if [ -x "$bench/tube_skinning_bench" ]; then step tube_skinning "$bench/tube_skinning_bench" --frames 60; fi
+
 # 4. Stability on stiff and extreme cases.
 if [ -x "$bench/stability_report" ]; then
   step stability "$bench/stability_report" --out "$csv"
