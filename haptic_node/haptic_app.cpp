@@ -1,9 +1,11 @@
 #include "haptic_app.h"
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <thread>
 
 #include "Surgsim.h"
@@ -15,6 +17,7 @@
 #include "scene_mesh.h"
 #include "liver_setup.h"
 #include "tensor_cache.h"
+#include "thread_priority.h"
 #include "tool.h"
 
 namespace surgsim {
@@ -194,6 +197,13 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   wake_late_us_ = SampleRecorder(total_ticks_ + 16);
 
   // --- init: DDS entities (QoS from the XML profiles) ---
+  // Their threads start at SCHED_FIFO below the loop's priority (thread_priority.h): a device command or a visual
+  // status is taken the moment it arrives, and never delays the loop.
+  // Never at or above the loop: with a normally scheduled loop (--rt-priority 0) or --speed max, they stay normal too.
+  const int dds_priority_value = options_.speed > 0 && options_.rt_priority > 1
+                                     ? std::min(options_.dds_rt_priority, options_.rt_priority - 1) : 0;
+  std::optional<ScopedFifo> dds_priority(std::in_place, dds_priority_value);
+  dds_threads_note_ = dds_priority->note();
   dds::DdsOptions dopt;
   dopt.domain = options_.domain >= 0 ? options_.domain : dds::default_domain();
   dopt.profiles_file = options_.dds_profiles.empty() ? config_dir() + "/dds/profiles.xml" : options_.dds_profiles;
@@ -211,9 +221,12 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   dds_->status_reader = p.reader(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()),
                                  dds::kStreamReader, &dds_->visual_status);
   dds_->frame.contacts().reserve(msg::kMaxContacts);
-  if (!options_.quiet) std::cerr << "haptic_node: DDS " << p.profile() << ": " << p.description() << "\n";
+  if (!options_.quiet)
+    std::cerr << "haptic_node: DDS " << p.profile() << ": " << p.description() << "; DDS threads " << dds_threads_note_
+              << "\n";
   dds_->frame.scene_hash(scene_hash_);
   if (intestine_ != nullptr) intestine_->create_writer(p, scene_hash_);  // BodyState, every tick
+  dds_priority.reset();
 
   // SceneInfo is latched (transient local): a visual node that joins later still gets it.
   msg::SceneInfo info;
@@ -439,6 +452,7 @@ void HapticApp::shutdown() {
   j["record_lines_lost"] = record_writer_stats_;
   j["log_lines_lost"] = log_writer_stats_;
   j["dds_participant"] = dds_->participant.profile();
+  j["dds_threads"] = dds_threads_note_;
   j["loop_start_ns"] = loop_start_ns_;
   // Which organ model this run built (a liver run builds no intestine objects, an intestine run no liver ones).
   j["model_built"] = intestine_ != nullptr ? "intestine" : contacts_ != nullptr ? "liver" : "none";

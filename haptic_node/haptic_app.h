@@ -34,6 +34,7 @@ struct HapticOptions {
   std::string dds_profiles;         // Fast DDS XML; empty = <config>/dds/profiles.xml
   std::string dds_participant;      // empty: $SURGSIM_DDS_PARTICIPANT, else surgsim_default
   int rt_priority = 80;             // SCHED_FIFO priority; 0 = normal scheduling
+  int dds_rt_priority = 20;         // SCHED_FIFO priority of the DDS threads (below the loop); 0 = normal scheduling
   bool lock_memory = true;
   int cpu = -1;                     // pin the loop thread to this CPU (-1: don't)
   double wait_for_visual = 0;       // s to wait for a visual node to match before starting (0 = don't wait)
@@ -91,6 +92,7 @@ class HapticApp {
   std::uint64_t scene_hash_ = 0;
   std::uint64_t mesh_hash_ = 0;
   std::string realtime_note_;
+  std::string dds_threads_note_;   // how the DDS threads are scheduled (stats "dds_threads")
 
   // Tick statistics (preallocated).
   SampleRecorder tick_us_;

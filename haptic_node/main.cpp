@@ -36,6 +36,11 @@ int main(int argc, char** argv) {
   cli.add_option("--dds-participant", o.dds_participant, "Participant profile: surgsim_default, surgsim_shm, surgsim_udp, "
                  "surgsim_udp_peers, surgsim_ds_client (default $SURGSIM_DDS_PARTICIPANT or surgsim_default)");
   cli.add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority for the loop (0 = normal scheduling)")->capture_default_str();
+  cli.add_option("--dds-rt-priority", o.dds_rt_priority,
+                 "SCHED_FIFO priority for the DDS receive threads, below the loop's (0 = normal scheduling; not used "
+                 "with --speed max)")
+      ->check(CLI::Range(0, 99))
+      ->capture_default_str();
   cli.add_flag("!--no-mlock", o.lock_memory, "Do not lock memory");
   cli.add_option("--cpu", o.cpu, "Pin the loop thread to this CPU (default: not pinned)");
   cli.add_option("--wait-for-visual", o.wait_for_visual, "Wait up to S seconds for a visual node before starting");

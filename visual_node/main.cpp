@@ -29,6 +29,11 @@ int main(int argc, char** argv) {
                  "matrices are sent per frame), 'cpu' skins it on the CPU and uploads the vertices")
       ->check(CLI::IsMember({"gpu", "cpu"}))
       ->capture_default_str();
+  cli.add_option("--dds-rt-priority", o.dds_rt_priority,
+                 "SCHED_FIFO priority for the DDS receive threads, so contact frames preempt rendering (0 = normal "
+                 "scheduling; the haptic node's loop runs at 80)")
+      ->check(CLI::Range(0, 99))
+      ->capture_default_str();
   cli.add_flag("--video", o.video, "Also assemble the PNG frames into out/video.mp4 with ffmpeg (when installed)");
   cli.add_option("--cache", o.cache_dir, "Cache folder for generated meshes and tensors");
   cli.add_option("--domain", o.domain, "DDS domain id (default $SURGSIM_DOMAIN or 0)");

@@ -9,6 +9,7 @@
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -22,6 +23,7 @@
 #include "renderer.h"
 #include "liver_setup.h"
 #include "scene_mesh.h"
+#include "thread_priority.h"
 #include "tool.h"
 
 namespace surgsim {
@@ -216,6 +218,10 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
   }
 
   // --- init: DDS ---
+  // Its threads are started at SCHED_FIFO (thread_priority.h), so a contact frame preempts rendering when it arrives:
+  // on 2 cores with rendering competing, the one-way latency p99 was above 1 ms otherwise (about 0.2 ms with it).
+  std::optional<ScopedFifo> dds_priority(std::in_place, options_.dds_rt_priority);
+  dds_threads_note_ = dds_priority->note();
   dds::DdsOptions dopt;
   dopt.domain = options_.domain >= 0 ? options_.domain : dds::default_domain();
   dopt.profiles_file = options_.dds_profiles.empty() ? config_dir() + "/dds/profiles.xml" : options_.dds_profiles;
@@ -232,7 +238,10 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
   dds_->frames.set_echo(dds_->status_writer);
   watch_.mark_dds_ready(monotonic_ns());
   if (intestine_ != nullptr) intestine_->subscribe(p);  // BodyState
-  if (!options_.quiet) std::cerr << "visual_node: DDS " << p.profile() << ": " << p.description() << "\n";
+  dds_priority.reset();  // this thread renders at its previous scheduling
+  if (!options_.quiet)
+    std::cerr << "visual_node: DDS " << p.profile() << ": " << p.description() << "; DDS threads " << dds_threads_note_
+              << "\n";
 
   if (!options_.quiet) {
     std::cerr << "visual_node: scene '" << scene_.name << "', " << surface_.tris.rows() << " surface triangles, "
@@ -435,6 +444,7 @@ void VisualApp::shutdown() {
   j["first_png"] = first_png_;
   j["last_png"] = last_png_;
   j["dds_participant"] = dds_->participant.profile();
+  j["dds_threads"] = dds_threads_note_;
   watch_.add_stats(j);
   // Which organ model this run built (a liver run builds no intestine objects, an intestine run no mesh or tensors).
   j["model_built"] = intestine_ != nullptr ? "intestine" : "liver";

@@ -37,6 +37,7 @@ struct VisualOptions {
   int png_every = -1;            // >= 0 overrides the scene's png_every
   bool video = false;            // assemble out/video.mp4 with ffmpeg at exit (also when the scene asks)
   std::string tube_skinning = "gpu";  // intestine tube: "gpu" (vertex shader) or "cpu" (skinned vertices uploaded)
+  int dds_rt_priority = 20;      // SCHED_FIFO priority of the DDS threads (receive, events); 0 = normal scheduling
   bool quiet = false;
 };
 
@@ -55,6 +56,7 @@ class VisualApp {
   struct Dds;
 
   VisualOptions options_;
+  std::string dds_threads_note_;            // how the DDS threads are scheduled (stats "dds_threads")
   Scene scene_;
   TetMesh mesh_;
   SurfaceMesh surface_;
