@@ -34,7 +34,7 @@ EOF
 
 echo "| setup | RTT p50 ms | RTT p99 ms | RTT max ms | echoes | frames received / sent | haptic Hz | missed deadlines | tick p99 us |"
 echo "|---|---|---|---|---|---|---|---|---|"
-for profile in surgsim_default surgsim_udp; do
+for profile in surgsim_shm surgsim_default; do
   SURGSIM_OUT=$out/one_host_$profile SURGSIM_DOMAIN=${SURGSIM_DOMAIN:-0} \
     HAPTIC_ARGS="--rate $rate --duration $seconds --dds-participant $profile" \
     VISUAL_ARGS="--headless --dds-participant $profile" "$root/scripts/run_local.sh" liver >/dev/null 2>&1
