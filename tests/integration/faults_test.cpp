@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 
 #include "force_log.h"
@@ -127,6 +128,42 @@ TEST_F(Faults, LostHapticNodeIsDetectedAndRecovered) {
   EXPECT_LE(detect_ms, 1000.0) << v.dump(2);  // the 100 ms deadline QoS fires (figure reported), far below the 1 s lease
   EXPECT_LE(seen_ms, 5000.0);
   RecordProperty("haptic_lost_detect_ms", std::to_string(detect_ms));
+}
+
+std::set<std::string> data_sharing_segments() {
+  std::set<std::string> names;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator("/dev/shm", ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind("fast_datasharing_", 0) == 0) names.insert(name);
+  }
+  return names;
+}
+
+// Found on a fresh clone: Fast DDS's data sharing (on by default between processes of one host, whatever the
+// transport) guards its shared-memory pools with interprocess mutexes; a device killed mid-write left one locked and
+// the haptic node aborted ("Interprocess mutex timeout when locking"). The profiles now turn data sharing off: the
+// nodes and the device must not create a single data-sharing segment.
+TEST_F(Faults, NodesUseNoDataSharingSegments) {
+  const std::set<std::string> before = data_sharing_segments();
+  Process haptic(bin("haptic_node"),
+                 {"--scene", "liver", "--input", "device", "--duration", "3", "--rt-priority", "0"}, env_,
+                 path("haptic_ds.log"));
+  Process visual(bin("visual_node"), {"--scene", "liver", "--headless", "--duration", "3"}, env_, path("visual_ds.log"));
+  Process device(bin("surgsim-device-sim"),
+                 {"--trajectory", std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/liver_poke.csv", "--rate",
+                  "1000", "--wait-for-haptic", "60"},
+                 env_, path("device_ds.log"));
+  ASSERT_TRUE(wait_for_text(path("device_ds.log"), "haptic node matched", 60)) << testing::read_file(path("device_ds.log"));
+  sleep_s(0.5);  // samples flowing on every topic
+  std::vector<std::string> created;
+  for (const auto& name : data_sharing_segments())
+    if (!before.count(name)) created.push_back(name);
+  EXPECT_TRUE(created.empty()) << created.size() << " data-sharing segments, e.g. " << created.front();
+  device.signal(SIGINT);
+  EXPECT_EQ(haptic.wait(60), 0) << testing::read_file(path("haptic_ds.log"));
+  EXPECT_EQ(visual.wait(60), 0) << testing::read_file(path("visual_ds.log"));
+  device.wait(30);
 }
 
 TEST_F(Faults, DeviceKilledMidPressZeroesTheForce) {
