@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "force_log.h"
+#include "node_test.h"
 #include "process.h"
 
 namespace surgsim {
@@ -20,24 +21,10 @@ using testing::now_ns;
 using testing::Process;
 using testing::wait_for_text;
 
-class Faults : public ::testing::Test {
+class Faults : public testing::NodeTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) / ("surgsim_faults_" + std::to_string(getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    env_ = {"SURGSIM_DOMAIN=" + std::to_string(testing::private_domain(11)),
-            "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR, "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
-  }
-  void TearDown() override {
-    if (!HasFailure()) fs::remove_all(dir_);
-  }
-  std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  static nlohmann::json json(const std::string& file) { return nlohmann::json::parse(testing::read_file(file)); }
+  void SetUp() override { prepare("faults", 11); }
   static void sleep_s(double s) { std::this_thread::sleep_for(std::chrono::duration<double>(s)); }
-  fs::path dir_;
-  std::vector<std::string> env_;
 };
 
 TEST_F(Faults, VisualKilledThenRestartedHapticUnaffected) {

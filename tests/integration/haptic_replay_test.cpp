@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "node_test.h"
 #include "process.h"
 
 namespace surgsim {
@@ -15,24 +16,14 @@ namespace {
 namespace fs = std::filesystem;
 using testing::Process;
 
-class HapticProcess : public ::testing::Test {
+class HapticProcess : public testing::NodeTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) / ("surgsim_haptic_" + std::to_string(getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    env_ = {"SURGSIM_DOMAIN=" + std::to_string(testing::private_domain(3)),
-            "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR, "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
-  }
-  std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  void SetUp() override { prepare("haptic", 3); }
   std::string traj(const std::string& name) const { return std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/" + name; }
   int run_haptic(const std::vector<std::string>& args, const std::string& log_name) {
     Process p(bin("haptic_node"), args, env_, path(log_name));
     return p.wait(300);
   }
-  fs::path dir_;
-  std::vector<std::string> env_;
 };
 
 TEST_F(HapticProcess, ReplayAtMaxSpeedIsBitIdentical) {

@@ -18,6 +18,7 @@
 #include "SurgsimPubSubTypes.h"
 #include "dds_support.h"
 #include "force_log.h"
+#include "node_test.h"
 #include "process.h"
 
 namespace surgsim {
@@ -95,24 +96,9 @@ class Recorder : public DataReaderListener {
   msg::BodyState body_;
 };
 
-class IntestineInputLost : public ::testing::Test {
+class IntestineInputLost : public testing::NodeTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) / ("surgsim_intestine_lost_" + std::to_string(getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    domain_ = testing::private_domain(17);
-    env_ = {"SURGSIM_DOMAIN=" + std::to_string(domain_), "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR,
-            "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
-  }
-  void TearDown() override {
-    if (!HasFailure()) fs::remove_all(dir_);
-  }
-  std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  fs::path dir_;
-  int domain_ = 0;
-  std::vector<std::string> env_;
+  void SetUp() override { prepare("intestine_lost", 17); }
 };
 
 TEST_F(IntestineInputLost, DeviceStopsMidPushForceZeroProbeHeldNodeRunsOn) {

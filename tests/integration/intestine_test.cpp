@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "png_rgb.h"
+#include "node_test.h"
 #include "process.h"
 
 namespace surgsim {
@@ -23,21 +24,10 @@ using testing::Process;
 using testing::Rgb;
 using testing::read_png_rgb;
 
-class IntestineNodes : public ::testing::Test {
+class IntestineNodes : public testing::NodeTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) / ("surgsim_intestine_" + std::to_string(getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    env_ = {"SURGSIM_DOMAIN=" + std::to_string(testing::private_domain(3)),
-            "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR, "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
-  }
-  std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
-  nlohmann::json stats(const char* name) const {
-    return nlohmann::json::parse(testing::read_file((dir_ / name).string()));
-  }
-  fs::path dir_;
-  std::vector<std::string> env_;
+  void SetUp() override { prepare("intestine", 3); }
+  nlohmann::json stats(const char* name) const { return json(path(name)); }
 };
 
 // The push trajectory up to t = 4 s: the folds settle (0.5 s), the tip enters them at about 1.9 s and pushes 1-2 N.

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "node_test.h"
 #include "process.h"
 
 namespace surgsim {
@@ -15,16 +16,9 @@ namespace {
 namespace fs = std::filesystem;
 using testing::Process;
 
-class TwoHosts : public ::testing::Test {
+class TwoHosts : public testing::NodeTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) / ("surgsim_two_hosts_" + std::to_string(getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    if (!HasFailure()) fs::remove_all(dir_);
-  }
+  void SetUp() override { prepare("two_hosts", 0); }  // the script runs the nodes with its own environment
   /// Runs the script; returns its summary.json (empty on failure, with the reason recorded as a test failure).
   nlohmann::json run(const std::string& name, const std::vector<std::string>& args) {
     const std::string out = (dir_ / name).string();
@@ -41,7 +35,7 @@ class TwoHosts : public ::testing::Test {
                      << testing::read_file(log) << testing::read_file(out + "/haptic.log")
                      << testing::read_file(out + "/visual.log");
     if (rc != 0) return {};
-    return nlohmann::json::parse(testing::read_file(out + "/summary.json"));
+    return json(out + "/summary.json");
   }
   /// The haptic loop ran every tick of its run (deterministic). Its rate and missed deadlines are figures
   /// (scripts/network_figures.sh), not assertions: tests do not assert wall-clock speed.
@@ -49,7 +43,6 @@ class TwoHosts : public ::testing::Test {
     EXPECT_GT(s["ticks"].get<double>(), 0.0) << s.dump(2);
     ::testing::Test::RecordProperty("haptic_achieved_hz", std::to_string(s["achieved_hz"].get<double>()));
   }
-  fs::path dir_;
 };
 
 TEST_F(TwoHosts, UdpMulticastOverVeth) {

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "png_rgb.h"
+#include "node_test.h"
 #include "process.h"
 
 namespace surgsim {
@@ -22,18 +23,9 @@ using testing::Process;
 using testing::Rgb;
 using testing::read_png_rgb;
 
-class TwoNodes : public ::testing::Test {
+class TwoNodes : public testing::NodeTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) / ("surgsim_two_nodes_" + std::to_string(getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    env_ = {"SURGSIM_DOMAIN=" + std::to_string(testing::private_domain()),
-            "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR, "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
-  }
-  std::string bin(const std::string& name) const { return std::string(SURGSIM_TEST_BIN_DIR) + "/" + name; }
-  fs::path dir_;
-  std::vector<std::string> env_;
+  void SetUp() override { prepare("two_nodes", 0); }
 };
 
 TEST_F(TwoNodes, FramesArriveAndOrganIsRendered) {
