@@ -13,6 +13,7 @@
 #include "alloc_counter.h"
 #include "box_mesh.h"
 #include "error.h"
+#include "error_test_util.h"
 #include "liver_test_util.h"
 #include "precompute.h"
 #include "scene.h"
@@ -22,22 +23,13 @@
 namespace surgsim {
 namespace {
 
+using test::error_of;
+
 namespace fs = std::filesystem;
 
 const std::string kConfig = SURGSIM_TEST_CONFIG_DIR;
 const std::string kDrCurve = kConfig + "/curves/liver_dr.csv";
 const std::string kForceCurve = kConfig + "/curves/liver_force.csv";
-
-// The message of the surgsim::Error `f` throws ("" if it throws nothing).
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 NonlinearLaw shipped_law(int degree = 6) {
   NonlinearSpec spec;

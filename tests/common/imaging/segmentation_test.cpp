@@ -16,6 +16,7 @@
 #include <memory>
 #include <string>
 
+#include "../error_test_util.h"
 #include "error.h"
 #include "fem.h"
 #include "fixed_set.h"
@@ -28,6 +29,8 @@
 
 namespace surgsim {
 namespace {
+
+using test::contains;
 
 namespace fs = std::filesystem;
 
@@ -99,8 +102,6 @@ std::pair<int, std::string> run(const std::string& command) {
 }
 
 const std::string kProgram = std::string(SURGSIM_TEST_BIN_DIR) + "/surgsim-segment";
-
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 class SegmentationRoundTrip : public ::testing::TestWithParam<bool> {};
 

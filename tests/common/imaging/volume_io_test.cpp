@@ -10,10 +10,14 @@
 #include <fstream>
 #include <string>
 
+#include "../error_test_util.h"
 #include "error.h"
 
 namespace surgsim {
 namespace {
+
+using test::error_of;
+using test::contains;
 
 namespace fs = std::filesystem;
 
@@ -43,18 +47,6 @@ LabelVolume sample(int nx, int ny, int nz, std::int32_t max_label) {
   v.source = "sample";
   return v;
 }
-
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 void write_text(const std::string& path, const std::string& text) {
   std::ofstream f(path, std::ios::binary);

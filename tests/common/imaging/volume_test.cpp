@@ -6,10 +6,14 @@
 
 #include <string>
 
+#include "../error_test_util.h"
 #include "error.h"
 
 namespace surgsim {
 namespace {
+
+using test::error_of;
+using test::contains;
 
 LabelVolume blank(int nx, int ny, int nz, const std::string& source = "test.nrrd") {
   LabelVolume v;
@@ -25,19 +29,6 @@ void fill_box(LabelVolume& v, Eigen::Vector3i lo, Eigen::Vector3i hi, std::int32
     for (int j = lo.y(); j <= hi.y(); ++j)
       for (int i = lo.x(); i <= hi.x(); ++i) v.labels[static_cast<std::size_t>(v.grid.index(i, j, k))] = label;
 }
-
-// Runs f and returns the surgsim::Error message ("" if none was thrown).
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 TEST(Volume, SelectsTheOnlyLabelOrTheOneAskedFor) {
   LabelVolume v = blank(8, 8, 8);
