@@ -26,20 +26,21 @@ HapticOptions test_options() {
   return o;
 }
 
+// Runs ticks 0..warm-1, then counts the allocations of the remaining ticks.
+long allocations_once_warm(HapticApp& app, std::uint64_t warm) {
+  for (std::uint64_t k = 0; k < warm; ++k) app.tick(k);
+  test::AllocationCounter counter;
+  for (std::uint64_t k = warm; k < app.total_ticks(); ++k) app.tick(k);
+  return counter.count();
+}
+
 TEST(HapticApp, TickAllocatesNothingOnceWarm) {
   HapticOptions o = test_options();
   o.log = ::testing::TempDir() + "/haptic_app_alloc_log.csv";
   HapticApp app(o);
   // Warm up: first contact, first DDS sends, log buffer.
   const std::uint64_t warm = 500;  // the poke reaches the organ at about 1.2 s (tick 370 at 300 Hz)
-  for (std::uint64_t k = 0; k < warm; ++k) app.tick(k);
-  long allocations = 0;
-  {
-    test::AllocationCounter counter;
-    for (std::uint64_t k = warm; k < app.total_ticks(); ++k) app.tick(k);
-    allocations = counter.count();
-  }
-  EXPECT_EQ(allocations, 0) << "ticks " << warm << ".." << app.total_ticks();
+  EXPECT_EQ(allocations_once_warm(app, warm), 0) << "ticks " << warm << ".." << app.total_ticks();
 }
 
 // The intestine scene: mass-spring step, probe force, ContactFrame, ForceFeedback and BodyState every tick.
@@ -50,14 +51,7 @@ TEST(HapticApp, IntestineTickAllocatesNothingOnceWarm) {
   o.log = ::testing::TempDir() + "/haptic_app_intestine_alloc_log.csv";
   HapticApp app(o);
   const std::uint64_t warm = 200;  // first DDS sends, first self-contacts while the folds fall
-  for (std::uint64_t k = 0; k < warm; ++k) app.tick(k);
-  long allocations = 0;
-  {
-    test::AllocationCounter counter;
-    for (std::uint64_t k = warm; k < app.total_ticks(); ++k) app.tick(k);
-    allocations = counter.count();
-  }
-  EXPECT_EQ(allocations, 0) << "ticks " << warm << ".." << app.total_ticks();
+  EXPECT_EQ(allocations_once_warm(app, warm), 0) << "ticks " << warm << ".." << app.total_ticks();
 }
 
 }  // namespace
