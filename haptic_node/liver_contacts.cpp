@@ -97,8 +97,7 @@ void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& 
     if (!c.grasp) {
       // Unilateral, frictionless: the anchor follows the closest point of the rest surface on the side the contact
       // pressed (a tip pushed deeper than half the organ must not re-anchor on the opposite face and let go).
-      const Eigen::Vector3d facing = c.normal;
-      const SurfaceProjection proj = grid_.project_rest(p, 3, &facing);
+      const SurfaceProjection proj = grid_.project_rest(p, 3, &c.normal);
       if (proj.found) {
         c.triangle = proj.triangle;
         c.nodes = proj.nodes;

@@ -14,14 +14,17 @@ namespace surgsim::bench {
 class CsvOut {
  public:
   CsvOut() = default;
-  /// Opens DIR/NAME.csv and writes the header; an empty dir makes every call a no-op (no --out given).
-  CsvOut(const std::string& dir, const std::string& name, const char* header) {
+  /// Opens DIR/NAME.csv and writes the header; an empty dir makes every call a no-op (no --out given). With `append`,
+  /// rows go after those already in the file (several runs, one table) and the header is written only to a new file.
+  CsvOut(const std::string& dir, const std::string& name, const char* header, bool append = false) {
     if (dir.empty()) return;
     path_ = dir + "/" + name + ".csv";
-    file_ = std::fopen(path_.c_str(), "w");
+    std::FILE* existing = append ? std::fopen(path_.c_str(), "r") : nullptr;
+    if (existing) std::fclose(existing);
+    file_ = std::fopen(path_.c_str(), append ? "a" : "w");
     if (!file_)
       throw std::runtime_error(path_ + ": cannot write: " + std::strerror(errno) + " (check that --out names a writable folder)");
-    std::fprintf(file_, "%s\n", header);
+    if (!existing) std::fprintf(file_, "%s\n", header);
   }
   CsvOut(const CsvOut&) = delete;
   CsvOut& operator=(const CsvOut&) = delete;

@@ -5,13 +5,13 @@
 //   build/bench/rt_bench [--seconds 20] [--rate 1000] [--work-us 50] [--label alone] [--out DIR]
 // --out DIR appends a row to DIR/rt_floor.csv. A plain program (never a pass/fail test).
 #include <CLI/CLI.hpp>
-#include <sys/stat.h>
 
 #include <cmath>
 #include <cstdio>
 #include <string>
 
 #include "clock.h"
+#include "csv_out.h"
 #include "rt_loop.h"
 #include "stats.h"
 
@@ -56,20 +56,17 @@ int main(int argc, char** argv) {
               "max %.1f us; busy tick max %.1f us (asked %.0f)\n",
               label.c_str(), ticks, rate, rt.note.c_str(), static_cast<long long>(timer.misses()), missed_pct, l.p50,
               l.p99, l.max, b.max, work_us);
-  if (!out.empty()) {
-    const std::string path = out + "/rt_floor.csv";
-    struct stat st {};
-    const bool fresh = stat(path.c_str(), &st) != 0;
-    std::FILE* f = std::fopen(path.c_str(), "a");
-    if (!f) {
-      std::fprintf(stderr, "rt_bench: %s: cannot write (check that --out names a writable folder)\n", path.c_str());
-      return 1;
-    }
-    if (fresh) std::fprintf(f, "condition,ticks,rate_hz,work_us,realtime,missed,missed_pct,late_us_p50,late_us_p99,late_us_max,busy_us_max\n");
-    std::fprintf(f, "%s,%zu,%.0f,%.0f,%s,%lld,%.4f,%.2f,%.2f,%.1f,%.1f\n", label.c_str(), ticks, rate, work_us,
-                 rt.fifo ? "SCHED_FIFO" : "normal", static_cast<long long>(timer.misses()), missed_pct, l.p50, l.p99,
-                 l.max, b.max);
-    std::fclose(f);
+  try {
+    bench::CsvOut csv(out, "rt_floor",
+                      "condition,ticks,rate_hz,work_us,realtime,missed,missed_pct,late_us_p50,late_us_p99,late_us_max,"
+                      "busy_us_max",
+                      true);
+    csv.row("%s,%zu,%.0f,%.0f,%s,%lld,%.4f,%.2f,%.2f,%.1f,%.1f", label.c_str(), ticks, rate, work_us,
+            rt.fifo ? "SCHED_FIFO" : "normal", static_cast<long long>(timer.misses()), missed_pct, l.p50, l.p99, l.max,
+            b.max);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "rt_bench: %s\n", e.what());
+    return 1;
   }
   return 0;
 }
