@@ -37,7 +37,9 @@ if [ $build_first = 1 ]; then
 fi
 /usr/bin/python3 -c 'import numpy, matplotlib' 2>/dev/null || {
   echo "report: /usr/bin/python3 lacks numpy/matplotlib: run SURGSIM_WITH_REPORT=1 scripts/setup.sh" >&2; exit 1; }
-for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench; do
+for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench \
+         bench/liver_error_bench bench/intestine_error_bench bench/tube_skinning_bench bench/stability_report \
+         bench/rt_bench; do
   [ -x "$build/$p" ] || { echo "report: $build/$p not found: run scripts/build.sh first" >&2; exit 1; }
 done
 build_s=$(( $(date +%s) - start_all ))
@@ -87,14 +89,11 @@ step() {
 bench=$build/bench
 bin=$build/bin
 csv=$out/csv
+quick_flag=()
+[ $quick = 1 ] && quick_flag=(--quick)
 
 # 1. Liver: error against time per frame (solvers, precision, far-field dropping, meshes, non-linear reference).
-if [ -x "$bench/liver_error_bench" ]; then
-  if [ $quick = 1 ]; then step liver_error "$bench/liver_error_bench" --quick --out "$csv"
-  else step liver_error "$bench/liver_error_bench" --out "$csv"; fi
-else
-  failed+=(liver_error); echo "liver_error,0,missing,$bench/liver_error_bench not built" >>"$steps_csv"
-fi
+step liver_error "$bench/liver_error_bench" "${quick_flag[@]}" --out "$csv"
 
 # 2. Liver: haptic rate against a 10 kHz reference on replayed trajectories (the real haptic node, tick-exact).
 haptic_rates() {
@@ -112,22 +111,13 @@ haptic_rates() {
 step haptic_rates haptic_rates
 
 # 3. Intestine: time step, random pairs, level of detail.
-if [ -x "$bench/intestine_error_bench" ]; then
-  if [ $quick = 1 ]; then step intestine_error "$bench/intestine_error_bench" --quick --out "$csv"
-  else step intestine_error "$bench/intestine_error_bench" --out "$csv"; fi
-else
-  failed+=(intestine_error); echo "intestine_error,0,missing,$bench/intestine_error_bench not built" >>"$steps_csv"
-fi
+step intestine_error "$bench/intestine_error_bench" "${quick_flag[@]}" --out "$csv"
 
 # The intestine tube drawn with GPU (vertex-shader) against CPU two-matrix skinning, per level of detail.
-if [ -x "$bench/tube_skinning_bench" ]; then step tube_skinning "$bench/tube_skinning_bench" --frames 60; fi
+step tube_skinning "$bench/tube_skinning_bench" --frames 60
 
 # 4. Stability on stiff and extreme cases.
-if [ -x "$bench/stability_report" ]; then
-  step stability "$bench/stability_report" --out "$csv"
-else
-  failed+=(stability); echo "stability,0,missing,$bench/stability_report not built" >>"$steps_csv"
-fi
+step stability "$bench/stability_report" --out "$csv"
 
 # 5. Benchmarks: precompute and Table 1, node costs, intestine step, live runs of both nodes.
 if [ $quick = 1 ]; then
