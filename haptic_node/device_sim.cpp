@@ -11,13 +11,13 @@
 
 #include "Surgsim.h"
 #include "SurgsimPubSubTypes.h"
-#include "clock.h"
+#include "core/clock.h"
 #include "dds_support.h"
-#include "error.h"
+#include "core/error.h"
 #include "rt_loop.h"
-#include "scene.h"
-#include "stats.h"
-#include "trajectory.h"
+#include "scene/scene.h"
+#include "core/stats.h"
+#include "tool/trajectory.h"
 
 namespace {
 

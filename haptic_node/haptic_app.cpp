@@ -10,15 +10,15 @@
 
 #include "Surgsim.h"
 #include "SurgsimPubSubTypes.h"
-#include "clock.h"
+#include "core/clock.h"
 #include "dds_support.h"
-#include "error.h"
+#include "core/error.h"
 #include "rt_loop.h"
-#include "scene_mesh.h"
-#include "liver_setup.h"
-#include "tensor_cache.h"
-#include "thread_priority.h"
-#include "tool.h"
+#include "mesher/scene_mesh.h"
+#include "liver/liver_setup.h"
+#include "liver/tensor_cache.h"
+#include "os/thread_priority.h"
+#include "tool/tool.h"
 
 namespace surgsim {
 
@@ -166,7 +166,7 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
 
   // --- init: the organ model this scene names (a liver scene builds tensors, contacts and the bucket grid) ---
   if (scene_.model == "liver") {
-    const LiverTensorSetup setup = liver_tensor_setup(scene_, mesh_, cache);
+    const LiverTensorSetup setup = liver_tensor_setup(scene_.material, scene_.fixed, mesh_, cache, scene_.file);
     tensors_ = load_liver_tensors(setup, mesh_, scene_.material, {"haptic"}, options_.quiet ? nullptr : &std::cerr,
                                   nullptr, scene_.file);
     tensor_hash_ = setup.key.combined();

@@ -9,12 +9,12 @@
 #include "async_writer.h"
 #include "intestine_runner.h"
 #include "liver_contacts.h"
-#include "mesh.h"
-#include "nonlinear_law.h"
-#include "precompute.h"
-#include "scene.h"
-#include "stats.h"
-#include "trajectory.h"
+#include "mesh/mesh.h"
+#include "liver/nonlinear_law.h"
+#include "liver/precompute.h"
+#include "scene/scene.h"
+#include "core/stats.h"
+#include "tool/trajectory.h"
 
 namespace surgsim {
 

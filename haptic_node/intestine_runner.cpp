@@ -4,8 +4,8 @@
 #include <cmath>
 
 #include "SurgsimPubSubTypes.h"
-#include "clock.h"
-#include "error.h"
+#include "core/clock.h"
+#include "core/error.h"
 
 namespace surgsim {
 

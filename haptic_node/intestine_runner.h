@@ -11,11 +11,11 @@
 
 #include "Surgsim.h"
 #include "dds_support.h"
-#include "intestine_model.h"
+#include "intestine/intestine_model.h"
 #include "liver_contacts.h"
-#include "scene.h"
-#include "stats.h"
-#include "tool.h"
+#include "scene/scene.h"
+#include "core/stats.h"
+#include "tool/tool.h"
 
 namespace surgsim {
 

@@ -3,8 +3,8 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
-#include "error.h"
-#include "nonlinear_law.h"
+#include "core/error.h"
+#include "liver/nonlinear_law.h"
 
 namespace surgsim {
 

@@ -8,11 +8,11 @@
 #include <array>
 #include <cstdint>
 
-#include "collision.h"
-#include "mesh.h"
-#include "scene.h"
-#include "superposition.h"
-#include "tool.h"
+#include "liver/bucket_grid.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+#include "liver/superposition.h"
+#include "tool/tool.h"
 
 namespace surgsim {
 

@@ -8,7 +8,7 @@
 #include <cstring>
 #include <ctime>
 
-#include "clock.h"
+#include "core/clock.h"
 
 namespace surgsim {
 

@@ -6,7 +6,7 @@
 
 #include "Surgsim.h"
 #include "SurgsimPubSubTypes.h"
-#include "clock.h"
+#include "core/clock.h"
 #include "renderer.h"
 
 namespace surgsim {

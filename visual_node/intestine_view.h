@@ -27,10 +27,10 @@
 #include <vector>
 
 #include "dds_support.h"
-#include "frame_rate_controller.h"
-#include "scene.h"
-#include "stats.h"
-#include "tube_geometry.h"
+#include "intestine/frame_rate_controller.h"
+#include "scene/scene.h"
+#include "core/stats.h"
+#include "intestine/tube_geometry.h"
 
 namespace surgsim {
 

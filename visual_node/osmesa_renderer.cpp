@@ -18,7 +18,7 @@
 #include <cstring>
 #include <vector>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

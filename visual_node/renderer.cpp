@@ -3,7 +3,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
-#include "error.h"
+#include "core/error.h"
 #include "osmesa_renderer.h"
 
 namespace surgsim {

@@ -12,9 +12,9 @@
 #include <vector>
 
 #include "image.h"
-#include "scene.h"
-#include "tool.h"
-#include "tube_geometry.h"
+#include "scene/scene.h"
+#include "tool/tool.h"
+#include "intestine/tube_geometry.h"
 
 namespace surgsim {
 

@@ -3,10 +3,10 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
-#include "collision.h"
-#include "error.h"
+#include "liver/bucket_grid.h"
+#include "core/error.h"
 
-#include "nonlinear_law.h"
+#include "liver/nonlinear_law.h"
 
 namespace surgsim {
 

@@ -6,9 +6,9 @@
 #include <memory>
 #include <vector>
 
-#include "mesh.h"
-#include "precompute.h"
-#include "superposition.h"
+#include "mesh/mesh.h"
+#include "liver/precompute.h"
+#include "liver/superposition.h"
 
 namespace surgsim {
 

@@ -15,16 +15,16 @@
 
 #include "Surgsim.h"
 #include "SurgsimPubSubTypes.h"
-#include "clock.h"
+#include "core/clock.h"
 #include "dds_support.h"
-#include "error.h"
+#include "core/error.h"
 #include "image.h"
 #include "intestine_view.h"
 #include "renderer.h"
-#include "liver_setup.h"
-#include "scene_mesh.h"
-#include "thread_priority.h"
-#include "tool.h"
+#include "liver/liver_setup.h"
+#include "mesher/scene_mesh.h"
+#include "os/thread_priority.h"
+#include "tool/tool.h"
 
 namespace surgsim {
 
@@ -171,7 +171,7 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
 
   // --- init: the visual rows of the tensors (visible x surface), from the cache both nodes share ---
   if (scene_.model == "liver") {
-    const LiverTensorSetup setup = liver_tensor_setup(scene_, mesh_, cache);
+    const LiverTensorSetup setup = liver_tensor_setup(scene_.material, scene_.fixed, mesh_, cache, scene_.file);
     tensors_ = load_liver_tensors(setup, mesh_, scene_.material, {"visual"}, options_.quiet ? nullptr : &std::cerr,
                                   nullptr, scene_.file);
     tensor_hash_ = setup.key.combined();

@@ -10,12 +10,12 @@
 
 #include "haptic_watch.h"
 #include "image.h"
-#include "mesh.h"
-#include "precompute.h"
-#include "nonlinear_law.h"
+#include "mesh/mesh.h"
+#include "liver/precompute.h"
+#include "liver/nonlinear_law.h"
 #include "surface_deformer.h"
-#include "scene.h"
-#include "stats.h"
+#include "scene/scene.h"
+#include "core/stats.h"
 
 namespace surgsim {
 

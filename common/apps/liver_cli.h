@@ -10,49 +10,30 @@
 #include <string>
 #include <vector>
 
-#include "error.h"
-#include "fixed_set.h"
-#include "mesh.h"
-#include "precompute.h"
-#include "scene.h"
-#include "static_solver.h"
-#ifdef SURGSIM_HAVE_MESHER
+#include "core/error.h"
+#include "core/text.h"
+#include "liver/fixed_set.h"
+#include "mesh/mesh.h"
+#include "liver/precompute.h"
+#include "scene/scene.h"
+#include "liver/static_solver.h"
 #include "mesher/organ_mesher.h"
-#endif
 
 namespace surgsim::cli {
 
 inline std::vector<std::string> split(const std::string& s, char sep) {
   std::vector<std::string> out;
-  std::string cur;
-  for (char c : s) {
-    if (c == sep) {
-      out.push_back(cur);
-      cur.clear();
-    } else {
-      cur += c;
-    }
-  }
-  out.push_back(cur);
+  for (const std::string_view f : text::split(s, sep)) out.emplace_back(f);
   return out;
 }
 
-inline std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t");
-  if (b == std::string::npos) return "";
-  return s.substr(b, s.find_last_not_of(" \t") - b + 1);
-}
+inline std::string trim(const std::string& s) { return std::string(text::trim(s)); }
 
 /// A finite number, the whole string; throws surgsim::Error naming `what`.
-inline double parse_number(const std::string& text, const std::string& what) {
-  const std::string t = trim(text);
-  try {
-    std::size_t used = 0;
-    const double v = std::stod(t, &used);
-    if (used == t.size() && std::isfinite(v)) return v;
-  } catch (const std::exception&) {
-  }
-  throw_error(what, ": '", text, "' is not a finite number");
+inline double parse_number(const std::string& field, const std::string& what) {
+  double v = 0;
+  if (text::parse_double(field, v) == text::Number::kOk) return v;
+  throw_error(what, ": '", field, "' is not a finite number");
 }
 
 /// A non-negative integer node index, the whole string.
@@ -134,16 +115,10 @@ inline TetMesh load_mesh(const std::string& file, const std::string& generate, i
     validate_mesh(m);
     return m;
   }
-#ifdef SURGSIM_HAVE_MESHER
   OrganSpec spec;
   spec.shape = generate;
   spec.target_nodes = nodes;
   return generate_organ(spec, log);
-#else
-  (void)nodes;
-  (void)log;
-  throw_error("--generate ", generate, ": this build has no organ mesher (Gmsh); give a mesh file with --mesh");
-#endif
 }
 
 /// Prints precompute progress on stderr at most every `period` seconds, and the last one.

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "error.h"
-#include "nonlinear_law.h"
+#include "core/error.h"
+#include "liver/nonlinear_law.h"
 
 namespace {
 

@@ -8,9 +8,9 @@
 #include <iostream>
 #include <string>
 
-#include "error.h"
-#include "mesh.h"
-#include "organ_mesher.h"
+#include "core/error.h"
+#include "mesh/mesh.h"
+#include "mesher/organ_mesher.h"
 
 namespace {
 

@@ -6,15 +6,13 @@
 #include <iostream>
 #include <string>
 
-#include "error.h"
-#include "fem.h"
-#include "fixed_set.h"
+#include "core/error.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
 #include "liver_cli.h"
-#include "precompute.h"
-#include "tensor_cache.h"
-#ifdef SURGSIM_HAVE_MESHER
+#include "liver/precompute.h"
+#include "liver/tensor_cache.h"
 #include "mesher/scene_mesh.h"
-#endif
 
 int main(int argc, char** argv) {
   using namespace surgsim;
@@ -62,16 +60,12 @@ int main(int argc, char** argv) {
     FixedRegion region;
     std::string where;
     if (!scene_file.empty()) {
-#ifdef SURGSIM_HAVE_MESHER
       const Scene scene = load_scene(resolve_scene_path(scene_file));
       if (scene.model != "liver") throw_error(scene.file, ": model '", scene.model, "' has no tensors (liver only)");
       mesh = load_scene_mesh(scene, default_cache_dir(), quiet ? nullptr : &std::cerr);
       material = scene.material;
       region = scene.fixed;
       where = scene.file;
-#else
-      throw_error("--scene: this build has no organ mesher (Gmsh) to load scene meshes; use --mesh");
-#endif
     } else {
       if (young < 0 || poisson < 0) throw_error("--young and --poisson are required with --mesh or --generate");
       material.young_modulus = young;

@@ -13,9 +13,9 @@
 #include <string>
 #include <vector>
 
-#include "error.h"
-#include "segmentation.h"
-#include "volume_io.h"
+#include "core/error.h"
+#include "imaging/segmentation.h"
+#include "imaging/volume_io.h"
 
 namespace {
 

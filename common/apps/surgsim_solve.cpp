@@ -8,13 +8,13 @@
 #include <filesystem>
 #include <string>
 
-#include "error.h"
-#include "fem.h"
-#include "fixed_set.h"
+#include "core/error.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
 #include "liver_cli.h"
-#include "precompute.h"
-#include "static_solver.h"
-#include "superposition.h"
+#include "liver/precompute.h"
+#include "liver/static_solver.h"
+#include "liver/superposition.h"
 
 namespace {
 

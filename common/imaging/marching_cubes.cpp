@@ -1,11 +1,11 @@
-#include "marching_cubes.h"
+#include "imaging/marching_cubes.h"
 
 #include <Eigen/Geometry>
 #include <array>
 #include <unordered_map>
 #include <vector>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

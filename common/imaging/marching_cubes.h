@@ -14,8 +14,8 @@
 #pragma once
 #include <cstdint>
 
-#include "tri_mesh.h"
-#include "volume.h"
+#include "imaging/tri_mesh.h"
+#include "imaging/volume.h"
 
 namespace surgsim {
 

@@ -1,4 +1,4 @@
-#include "segmentation.h"
+#include "imaging/segmentation.h"
 
 #include <Eigen/LU>
 #include <algorithm>
@@ -9,10 +9,10 @@
 #include <ostream>
 #include <sstream>
 
-#include "error.h"
-#include "marching_cubes.h"
-#include "scene.h"
-#include "voxel_boundary.h"
+#include "core/error.h"
+#include "imaging/marching_cubes.h"
+#include "scene/scene.h"
+#include "imaging/voxel_boundary.h"
 
 namespace surgsim {
 namespace {

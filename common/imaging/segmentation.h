@@ -19,12 +19,12 @@
 #include <string>
 #include <vector>
 
-#include "mesh.h"
-#include "organ_mesher.h"
-#include "surface_decimation.h"
-#include "surface_smoothing.h"
-#include "tri_mesh.h"
-#include "volume.h"
+#include "mesh/mesh.h"
+#include "mesher/organ_mesher.h"
+#include "imaging/surface_decimation.h"
+#include "imaging/surface_smoothing.h"
+#include "imaging/tri_mesh.h"
+#include "imaging/volume.h"
 
 namespace surgsim {
 

@@ -1,4 +1,4 @@
-#include "surface_decimation.h"
+#include "imaging/surface_decimation.h"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -11,7 +11,7 @@
 #include <tuple>
 #include <vector>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

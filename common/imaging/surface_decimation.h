@@ -21,8 +21,8 @@
 // min_quality, or put the new vertex, or the centroid or an edge midpoint of a new triangle, farther than
 // max_distance from the voxel boundary.
 #pragma once
-#include "tri_mesh.h"
-#include "voxel_boundary.h"
+#include "imaging/tri_mesh.h"
+#include "imaging/voxel_boundary.h"
 
 namespace surgsim {
 

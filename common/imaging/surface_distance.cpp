@@ -1,11 +1,11 @@
-#include "surface_distance.h"
+#include "imaging/surface_distance.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 

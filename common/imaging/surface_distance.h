@@ -4,7 +4,7 @@
 #include <Eigen/Core>
 #include <vector>
 
-#include "tri_mesh.h"
+#include "imaging/tri_mesh.h"
 
 namespace surgsim {
 

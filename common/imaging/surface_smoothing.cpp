@@ -1,11 +1,11 @@
-#include "surface_smoothing.h"
+#include "imaging/surface_smoothing.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <vector>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 

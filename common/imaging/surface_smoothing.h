@@ -3,8 +3,8 @@
 // the way plain Laplacian smoothing does, with every vertex clamped after each step to within `max_distance` of the
 // voxel boundary (projected back onto that distance along the direction to its nearest boundary point).
 #pragma once
-#include "tri_mesh.h"
-#include "voxel_boundary.h"
+#include "imaging/tri_mesh.h"
+#include "imaging/voxel_boundary.h"
 
 namespace surgsim {
 

@@ -1,4 +1,4 @@
-#include "tri_mesh.h"
+#include "imaging/tri_mesh.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -7,7 +7,7 @@
 #include <utility>
 #include <vector>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

@@ -1,4 +1,4 @@
-#include "volume.h"
+#include "imaging/volume.h"
 
 #include <algorithm>
 #include <array>
@@ -7,7 +7,7 @@
 #include <random>
 #include <sstream>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

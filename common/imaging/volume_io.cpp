@@ -1,4 +1,4 @@
-#include "volume_io.h"
+#include "imaging/volume_io.h"
 
 #include <png.h>
 
@@ -17,7 +17,8 @@
 #include <sstream>
 #include <vector>
 
-#include "error.h"
+#include "core/error.h"
+#include "core/text.h"
 
 namespace surgsim {
 namespace {
@@ -167,17 +168,8 @@ long slice_number(const std::string& stem) {
 // ---------------------------------------------------------------------------------------------------------------
 // NRRD (http://teem.sourceforge.net/nrrd/format.html)
 
-std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string::npos) return "";
-  const auto e = s.find_last_not_of(" \t\r\n");
-  return s.substr(b, e - b + 1);
-}
-
-std::string lower(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
+std::string trim(const std::string& s) { return std::string(text::trim(s)); }
+std::string lower(const std::string& s) { return text::lower(s); }
 
 struct NrrdType {
   const char* name;  // canonical

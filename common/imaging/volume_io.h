@@ -4,7 +4,7 @@
 #include <Eigen/Core>
 #include <string>
 
-#include "volume.h"
+#include "imaging/volume.h"
 
 namespace surgsim {
 

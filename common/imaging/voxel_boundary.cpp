@@ -1,4 +1,4 @@
-#include "voxel_boundary.h"
+#include "imaging/voxel_boundary.h"
 
 #include <algorithm>
 #include <array>

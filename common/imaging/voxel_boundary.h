@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "volume.h"
+#include "imaging/volume.h"
 
 namespace surgsim {
 

@@ -1,4 +1,4 @@
-#include "organ_mesher.h"
+#include "mesher/organ_mesher.h"
 
 #include <gmsh.h>
 #include <unistd.h>
@@ -18,7 +18,7 @@
 #include <system_error>
 #include <utility>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "mesh.h"
+#include "mesh/mesh.h"
 
 namespace surgsim {
 

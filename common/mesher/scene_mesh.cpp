@@ -1,11 +1,11 @@
-#include "scene_mesh.h"
+#include "mesher/scene_mesh.h"
 
 #include <cstdlib>
 #include <filesystem>
 #include <ostream>
 
-#include "error.h"
-#include "organ_mesher.h"
+#include "core/error.h"
+#include "mesher/organ_mesher.h"
 
 namespace surgsim {
 

@@ -3,8 +3,8 @@
 #include <iosfwd>
 #include <string>
 
-#include "mesh.h"
-#include "scene.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
 
 namespace surgsim {
 

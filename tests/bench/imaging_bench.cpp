@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "imaging_test_util.h"
-#include "segmentation.h"
-#include "volume_io.h"
+#include "common/imaging/imaging_test_util.h"
+#include "imaging/segmentation.h"
+#include "imaging/volume_io.h"
 
 namespace {
 

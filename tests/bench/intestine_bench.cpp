@@ -17,11 +17,11 @@
 #include <string>
 #include <vector>
 
-#include "frame_rate_controller.h"
-#include "intestine_model.h"
+#include "intestine/frame_rate_controller.h"
+#include "intestine/intestine_model.h"
 #include "intestine_run.h"
-#include "intestine_test_util.h"
-#include "tube_geometry.h"
+#include "support/intestine_test_util.h"
+#include "intestine/tube_geometry.h"
 
 namespace {
 

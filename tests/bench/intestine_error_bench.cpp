@@ -28,13 +28,13 @@
 
 #include "bench_util.h"
 #include "csv_out.h"
-#include "intestine_model.h"
+#include "intestine/intestine_model.h"
 #include "intestine_run.h"
-#include "intestine_test_util.h"
+#include "support/intestine_test_util.h"
 #include "intestine_view.h"
 #include "renderer.h"
-#include "scene.h"
-#include "tube_geometry.h"
+#include "scene/scene.h"
+#include "intestine/tube_geometry.h"
 
 namespace {
 

@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "bench_util.h"
-#include "intestine_model.h"
-#include "intestine_test_util.h"
+#include "intestine/intestine_model.h"
+#include "support/intestine_test_util.h"
 
 namespace surgsim::intestine::bench {
 

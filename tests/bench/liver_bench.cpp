@@ -16,16 +16,14 @@
 #include <string>
 #include <vector>
 
-#include "box_mesh.h"
+#include "mesh/box_mesh.h"
 #include "csv_out.h"
-#include "fem.h"
-#include "fixed_set.h"
-#include "precompute.h"
-#include "static_solver.h"
-#include "superposition.h"
-#ifdef SURGSIM_HAVE_MESHER
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
+#include "liver/precompute.h"
+#include "liver/static_solver.h"
+#include "liver/superposition.h"
 #include "mesher/organ_mesher.h"
-#endif
 
 namespace {
 
@@ -62,12 +60,10 @@ struct Organ {
 
 std::unique_ptr<Organ> make_organ(int target_nodes, bool box) {
   auto o = std::make_unique<Organ>();
-#ifdef SURGSIM_HAVE_MESHER
   if (!box) {
     o->kind = "liver";
     o->mesh = generate_organ(OrganSpec{"liver", target_nodes});
   }
-#endif
   if (o->mesh.nodes.rows() == 0) {
     o->kind = "box";
     o->mesh = make_box_mesh_with_nodes(target_nodes, Eigen::Vector3d(0.26, 0.16, 0.08));

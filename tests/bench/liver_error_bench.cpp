@@ -76,20 +76,18 @@
 #include <vector>
 
 #include "bench_util.h"
-#include "box_mesh.h"
+#include "mesh/box_mesh.h"
 #include "csv_out.h"
-#include "error.h"
-#include "fem.h"
-#include "fixed_set.h"
-#include "hyperelastic.h"
-#include "nonlinear_law.h"
-#include "precompute.h"
-#include "scene.h"
-#include "static_solver.h"
-#include "superposition.h"
-#ifdef SURGSIM_HAVE_MESHER
+#include "core/error.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
+#include "liver/hyperelastic.h"
+#include "liver/nonlinear_law.h"
+#include "liver/precompute.h"
+#include "scene/scene.h"
+#include "liver/static_solver.h"
+#include "liver/superposition.h"
 #include "mesher/scene_mesh.h"
-#endif
 
 namespace {
 
@@ -142,14 +140,12 @@ struct Organ {
 
 std::unique_ptr<Organ> make_organ(const Scene& scene, int target_nodes, const Settings& s) {
   auto o = std::make_unique<Organ>();
-#ifdef SURGSIM_HAVE_MESHER
   if (!s.smoke) {
     Scene sized = scene;
     sized.mesh.target_nodes = target_nodes;
     o->kind = "liver";
     o->mesh = load_scene_mesh(sized, s.cache, nullptr);
   }
-#endif
   if (o->mesh.nodes.rows() == 0) {
     // The liver's bounding box (x [-0.13, 0.13], y [-0.08, 0.08], z [-0.04, 0.04] m), structured.
     o->kind = "box";
@@ -737,9 +733,7 @@ int main(int argc, char** argv) {
   try {
     const auto start = Clock::now();
     const Scene scene = load_scene(resolve_scene_path(s.scene));
-#ifdef SURGSIM_HAVE_MESHER
     if (s.cache.empty() && !s.smoke) s.cache = default_cache_dir();
-#endif
     if (!s.out.empty()) bench::make_dirs(s.out);
     const NonlinearLaw law = load_nonlinear_law(scene.nonlinear, scene.material);
 

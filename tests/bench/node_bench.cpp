@@ -11,16 +11,16 @@
 #include <iostream>
 #include <random>
 
-#include "clock.h"
+#include "core/clock.h"
 #include "csv_out.h"
-#include "collision.h"
+#include "liver/bucket_grid.h"
 #include "liver_contacts.h"
-#include "liver_setup.h"
-#include "organ_mesher.h"
+#include "liver/liver_setup.h"
+#include "mesher/organ_mesher.h"
 #include "renderer.h"
-#include "scene.h"
-#include "scene_mesh.h"
-#include "stats.h"
+#include "scene/scene.h"
+#include "mesher/scene_mesh.h"
+#include "core/stats.h"
 #include "surface_deformer.h"
 
 using namespace surgsim;
@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
     scene.mesh.target_nodes = n;
     TetMesh mesh = load_scene_mesh(scene, cache, nullptr);
     const SurfaceMesh surface = boundary_surface(mesh);
-    const LiverTensorSetup setup = liver_tensor_setup(scene, mesh, cache);
+    const LiverTensorSetup setup = liver_tensor_setup(scene.material, scene.fixed, mesh, cache, scene.file);
     Tensors tensors = load_liver_tensors(setup, mesh, scene.material, {"haptic", "visual"}, &std::cerr);
     const BucketGrid grid(mesh, surface);
     Superposition haptic(tensors, "haptic", kMaxContacts);

@@ -10,10 +10,10 @@
 #include <cstdio>
 #include <string>
 
-#include "clock.h"
+#include "core/clock.h"
 #include "csv_out.h"
 #include "rt_loop.h"
-#include "stats.h"
+#include "core/stats.h"
 
 int main(int argc, char** argv) {
   double seconds = 20, rate = 1000, work_us = 50;

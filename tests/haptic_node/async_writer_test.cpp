@@ -7,7 +7,7 @@
 #include <sstream>
 #include <string>
 
-#include "../common/alloc_counter.h"
+#include "support/alloc_counter.h"
 
 namespace surgsim {
 namespace {

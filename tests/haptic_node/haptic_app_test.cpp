@@ -7,7 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 
-#include "../common/alloc_counter.h"
+#include "support/alloc_counter.h"
 
 namespace surgsim {
 namespace {

@@ -5,11 +5,11 @@
 #include <cmath>
 #include <limits>
 
-#include "../common/alloc_counter.h"
-#include "box_mesh.h"
-#include "fem.h"
-#include "fixed_set.h"
-#include "precompute.h"
+#include "support/alloc_counter.h"
+#include "mesh/box_mesh.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
+#include "liver/precompute.h"
 
 namespace surgsim {
 namespace {

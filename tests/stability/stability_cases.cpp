@@ -10,20 +10,20 @@
 #include <memory>
 #include <sstream>
 
-#include "box_mesh.h"
-#include "cholmod_solver.h"
-#include "error.h"
-#include "fem.h"
-#include "fixed_set.h"
-#include "intestine_model.h"
+#include "mesh/box_mesh.h"
+#include "liver/cholmod_solver.h"
+#include "core/error.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
+#include "intestine/intestine_model.h"
 #include "liver_contacts.h"
-#include "mesh.h"
-#include "nonlinear_law.h"
-#include "precompute.h"
-#include "scene.h"
-#include "static_solver.h"
-#include "superposition.h"
-#include "tool.h"
+#include "mesh/mesh.h"
+#include "liver/nonlinear_law.h"
+#include "liver/precompute.h"
+#include "scene/scene.h"
+#include "liver/static_solver.h"
+#include "liver/superposition.h"
+#include "tool/tool.h"
 
 namespace surgsim::stability {
 

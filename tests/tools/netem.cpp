@@ -33,7 +33,7 @@
 #include <string>
 #include <vector>
 
-#include "clock.h"
+#include "core/clock.h"
 
 namespace {
 

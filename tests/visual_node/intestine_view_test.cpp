@@ -8,7 +8,7 @@
 #include <limits>
 #include <vector>
 
-#include "intestine_model.h"
+#include "intestine/intestine_model.h"
 #include "renderer.h"
 
 namespace surgsim {

@@ -13,7 +13,7 @@
 #include <utility>
 #include <vector>
 
-#include "error.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

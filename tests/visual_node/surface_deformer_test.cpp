@@ -5,13 +5,13 @@
 
 #include <random>
 
-#include "box_mesh.h"
-#include "error.h"
-#include "fem.h"
-#include "fixed_set.h"
-#include "precompute.h"
+#include "mesh/box_mesh.h"
+#include "core/error.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
+#include "liver/precompute.h"
 #include "renderer.h"
-#include "static_solver.h"
+#include "liver/static_solver.h"
 
 namespace surgsim {
 namespace {

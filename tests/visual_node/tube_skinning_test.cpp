@@ -8,9 +8,9 @@
 #include <string>
 #include <vector>
 
-#include "intestine_model.h"
+#include "intestine/intestine_model.h"
 #include "renderer.h"
-#include "tube_geometry.h"
+#include "intestine/tube_geometry.h"
 
 namespace surgsim {
 namespace {

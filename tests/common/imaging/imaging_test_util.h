@@ -8,12 +8,12 @@
 #include <utility>
 #include <vector>
 
-#include "mesh.h"
-#include "organ_mesher.h"
-#include "segmentation.h"
-#include "surface_distance.h"
-#include "tri_mesh.h"
-#include "volume.h"
+#include "mesh/mesh.h"
+#include "mesher/organ_mesher.h"
+#include "imaging/segmentation.h"
+#include "imaging/surface_distance.h"
+#include "imaging/tri_mesh.h"
+#include "imaging/volume.h"
 
 namespace surgsim::test {
 

@@ -1,14 +1,14 @@
 // Tests for common/imaging/marching_cubes.cpp: the generated table, watertight and outward surfaces on every single
 // cube configuration and on random volumes, vertices on the voxel boundary, the box and sphere volumes.
-#include "marching_cubes.h"
+#include "imaging/marching_cubes.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <random>
 
-#include "tri_mesh.h"
-#include "voxel_boundary.h"
+#include "imaging/tri_mesh.h"
+#include "imaging/voxel_boundary.h"
 
 namespace surgsim {
 namespace {

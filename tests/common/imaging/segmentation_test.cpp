@@ -2,7 +2,7 @@
 // through a voxelization (3 mm voxels, clean and noisy) with its figures, the written mesh and scene (validated,
 // loaded, and solved in the liver scene's setting), determinism, labels, mirrored axes, and bad volumes refused by
 // the program with the file named.
-#include "segmentation.h"
+#include "imaging/segmentation.h"
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
@@ -16,16 +16,16 @@
 #include <memory>
 #include <string>
 
-#include "../error_test_util.h"
-#include "error.h"
-#include "fem.h"
-#include "fixed_set.h"
+#include "support/error_test_util.h"
+#include "core/error.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
 #include "imaging_test_util.h"
-#include "mesh.h"
-#include "scene.h"
-#include "scene_mesh.h"
-#include "static_solver.h"
-#include "volume_io.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+#include "mesher/scene_mesh.h"
+#include "liver/static_solver.h"
+#include "imaging/volume_io.h"
 
 namespace surgsim {
 namespace {

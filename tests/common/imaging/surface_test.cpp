@@ -7,12 +7,12 @@
 #include <cmath>
 #include <random>
 
-#include "marching_cubes.h"
-#include "surface_decimation.h"
-#include "surface_distance.h"
-#include "surface_smoothing.h"
-#include "tri_mesh.h"
-#include "voxel_boundary.h"
+#include "imaging/marching_cubes.h"
+#include "imaging/surface_decimation.h"
+#include "imaging/surface_distance.h"
+#include "imaging/surface_smoothing.h"
+#include "imaging/tri_mesh.h"
+#include "imaging/voxel_boundary.h"
 
 namespace surgsim {
 namespace {

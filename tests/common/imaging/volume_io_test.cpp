@@ -1,6 +1,6 @@
 // Tests for common/imaging/volume_io.cpp: PNG slice folders and NRRD volumes, written and read back, and every bad
 // input refused with the file (and header line) named.
-#include "volume_io.h"
+#include "imaging/volume_io.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -10,8 +10,8 @@
 #include <fstream>
 #include <string>
 
-#include "../error_test_util.h"
-#include "error.h"
+#include "support/error_test_util.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

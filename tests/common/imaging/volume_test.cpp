@@ -1,13 +1,13 @@
 // Tests for common/imaging/volume.cpp: label selection and its refusals, clean-up, the majority filter, the
 // voxelization of a surface and the seeded noise.
-#include "volume.h"
+#include "imaging/volume.h"
 
 #include <gtest/gtest.h>
 
 #include <string>
 
-#include "../error_test_util.h"
-#include "error.h"
+#include "support/error_test_util.h"
+#include "core/error.h"
 
 namespace surgsim {
 namespace {

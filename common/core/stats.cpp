@@ -1,0 +1,60 @@
+#include "core/stats.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+
+namespace surgsim {
+
+SampleRecorder::SampleRecorder(std::size_t capacity) : samples_(capacity, 0.0) {}
+
+void SampleRecorder::add(double value) noexcept {
+  if (stored_ < samples_.size()) samples_[stored_++] = value;
+  if (count_ == 0 || value > max_) max_ = value;
+  sum_ += value;
+  ++count_;
+}
+
+void SampleRecorder::clear() noexcept {
+  stored_ = count_ = 0;
+  max_ = sum_ = 0;
+}
+
+Percentiles SampleRecorder::summary() const {
+  Percentiles p;
+  p.count = count_;
+  if (stored_ == 0) return p;
+  std::vector<double> v(samples_.begin(), samples_.begin() + static_cast<std::ptrdiff_t>(stored_));
+  std::sort(v.begin(), v.end());
+  auto at = [&](double q) {
+    const std::size_t i = std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
+    return v[i];
+  };
+  p.p50 = at(0.50);
+  p.p90 = at(0.90);
+  p.p99 = at(0.99);
+  p.max = max_;
+  p.mean = sum_ / static_cast<double>(count_);
+  return p;
+}
+
+nlohmann::json to_json(const Percentiles& p) {
+  return nlohmann::json{{"p50", p.p50}, {"p90", p.p90}, {"p99", p.p99}, {"max", p.max}, {"mean", p.mean},
+                        {"count", p.count}};
+}
+
+void write_json_file(const std::string& path, const nlohmann::json& value) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp);
+    if (!out) throw_error(path, ": cannot create the stats file (check that its folder exists and is writable)");
+    out << value.dump(2) << "\n";
+    if (!out) throw_error(path, ": write failed");
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw_error(path, ": cannot rename ", tmp, " into place");
+}
+
+}  // namespace surgsim

@@ -1,0 +1,190 @@
+// The intestine scene's body (Raghupathi et al. 2004; DESIGN.md 4.3): small intestine and mesentery as one
+// mass-spring grid, a probe, stochastic self-collisions and the displacement-velocity response, stepped at the
+// haptic rate.
+//
+// Rest shape: a folded sine curve of length `length` on the inner surface of a cylinder of radius
+// `cylinder_radius` whose axis is the mesenteric vessel; the intestine (a tube of radius `intestine_radius`) follows
+// the curve and the mesentery (a membrane `mesentery_thickness` thick) joins it to the axis. The grid has `rows` x
+// `columns` masses: row 0 is the intestine, row rows-1 lies on the vessel and is fixed, the rows between are the
+// mesentery; node (r, c) has index r * columns + c, so the intestine's points are the first `columns` positions.
+//
+// Callers:
+//   haptic node (1 kHz): IntestineModel once (init; throws surgsim::Error on bad parameters), one IntestineState
+//     (init; allocates everything), then per tick
+//       Probe probe{true, tool_tip, radius};
+//       intestine::step(model, state, probe, dt, report);        // noexcept, allocates nothing
+//       force feedback  = report.probe_force (N, on the tool, clamped to probe_force_limit; report.probe_saturated)
+//       BodyState       = state.positions(), state.point_count() points (x, y, z), <= kMaxIntestineNodes
+//       faults          = report.status != StepStatus::kOk (the state was restored, nothing non-finite escapes)
+//     Cost on this machine (intestine_bench, default parameters, n = 10): p50 about 0.4 ms, thread-CPU p99 about
+//     0.7 ms per step, so 1 kHz holds with margin; the time grows with the random pairs n and the contacts.
+//   visual node: receives the positions (same layout); the intestine's points are the first columns() of them, the
+//     whole rows x columns grid is the mesentery. Init: TubeBuilder tube(TubeParams{radius}, columns);
+//     TubeMesh mesh = tube.make_mesh(kTubeMaxLod); MesenteryMesh strip = make_mesentery_mesh(rows, columns);
+//     FrameRateController rate(FrameRateParams{target_hz}). Per frame: lod = rate.update(measured_fps);
+//     tube.build(points, columns, lod, mesh); mesentery_strip(points, strip); draw mesh (triangles) and strip
+//     (a triangle strip). All allocation-free (tube_geometry.h, frame_rate_controller.h).
+//   tests and benchmarks: the three phases step_dynamics / step_detection / step_response that step() chains, so
+//     that the brute-force reference can look at the same positions as the stochastic detector.
+#pragma once
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+#include "intestine/collision_response.h"
+#include "intestine/mass_spring.h"
+#include "intestine/stochastic_collision.h"
+
+namespace surgsim::intestine {
+
+/// Most nodes a model may have: the bound of a BodyState's positions.
+constexpr int kMaxIntestineNodes = 2048;
+
+struct IntestineParams {
+  // Rest shape.
+  double length = 4.0;               // m, arc length of the intestine
+  double cylinder_radius = 0.15;     // m, the curve lies on this cylinder around the vessel (mesentery width)
+  int folds = 5;                     // periods of the folded sine around the cylinder
+  double angular_span = 5.65486677646;  // rad (0.9 turn): angle covered around the vessel, < 2 pi keeps the ends apart
+  double fold_shape = 1.0;           // 0..2: 0 a plain sine, 1 vertical legs and round crests, 2 legs leaning back
+  Eigen::Vector3d axis_origin = Eigen::Vector3d::Zero();  // m, centre of the curve on the vessel
+  Eigen::Vector3d axis_direction = Eigen::Vector3d::UnitX();  // the vessel (normalized on use)
+  int columns = 100;                 // masses along the intestine, >= 4
+  int rows = 4;                      // masses across the mesentery (row 0 intestine, last row fixed on the vessel), >= 2
+  double intestine_radius = 0.02;    // m
+  double mesentery_thickness = 0.01; // m
+
+  // Masses and springs.
+  double intestine_node_mass = 0.012;  // kg per intestine node (1.2 kg for 100 nodes)
+  double mesentery_node_mass = 0.004;  // kg per mesentery node
+  double structural_stiffness = 300;   // N/m, grid edges
+  double shear_stiffness = 100;        // N/m, both diagonals of every grid cell
+  double bending_stiffness = 30;       // N/m, intestine nodes c and c + 2
+  double spring_damping = 0.1;         // N s/m, along every spring
+  double drag = 2.0;                   // 1/s, viscous drag of the surrounding medium, f = -drag m v
+  Eigen::Vector3d gravity = Eigen::Vector3d(0, 0, -9.81);  // m/s^2
+  Integrator integrator = Integrator::kImplicitEuler;
+
+  // Probe (the tool tip as a sphere).
+  double probe_stiffness = 300;      // N/m, penalty stiffness of the probe contact
+  double probe_force_limit = 8.0;    // N, the reported force on the tool is clamped to this
+  int probe_capacity = 32;           // simultaneous probe contacts (elements), more are counted and ignored
+
+  // Collisions.
+  bool self_collisions = true;
+  int segment_exclusion = 2;         // neighbouring segments, never tested (|a - b| <= this)
+  int cell_exclusion = 2;            // mesentery cells of the first row within this many columns of a segment
+  StochasticParams detection;        // random pairs per step, drop factor, moves, zone budget, capacity, seed
+  ResponseParams response;           // iterations
+  int contact_capacity = 1024;       // contacts per step (more are counted in StepReport::contacts_overflow)
+};
+
+/// The immutable model: parameters, rest shape, mass-spring system, collision topology.
+class IntestineModel {
+ public:
+  /// Init phase: builds the rest shape and the springs. Throws surgsim::Error on parameters out of range.
+  explicit IntestineModel(const IntestineParams& params);
+
+  const IntestineParams& params() const { return params_; }
+  int rows() const { return params_.rows; }
+  int columns() const { return params_.columns; }
+  int node_count() const { return params_.rows * params_.columns; }
+  int node(int row, int column) const { return row * params_.columns + column; }
+  const Eigen::Matrix3Xd& rest() const { return system_.rest(); }  // 3 x N, m
+  const MassSpring& mass_spring() const { return system_; }
+  const CollisionTopology& topology() const { return topology_; }
+  double fold_amplitude() const { return amplitude_; }  // m, along the vessel, found so that the length is right
+  double segment_length() const { return segment_length_; }  // m, intestine rest segment
+
+ private:
+  static MassSpring build(const IntestineParams& p, double& amplitude, double& segment_length);
+  IntestineParams params_;
+  double amplitude_ = 0;
+  double segment_length_ = 0;
+  MassSpring system_;
+  CollisionTopology topology_;
+};
+
+/// The probe driven by the tool: a sphere at the tool tip.
+struct Probe {
+  bool active = false;
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();  // m
+  double radius = 0.005;                             // m
+};
+
+enum class StepStatus : std::uint8_t {
+  kOk = 0,
+  kBadInput,      // non-finite or non-positive dt: nothing was done
+  kNonFinite,     // a non-finite value appeared: the state was restored to its value before the step
+  kSolverFailed,  // the implicit matrix was not positive definite: state restored
+};
+const char* to_string(StepStatus status);
+
+/// What one step did. Plain data.
+struct StepReport {
+  StepStatus status = StepStatus::kOk;
+  bool probe_rejected = false;      // the probe had a non-finite centre or radius and was ignored
+  int probe_contacts = 0;           // elements touched by the probe
+  int probe_overflow = 0;           // probe contacts beyond probe_capacity (ignored)
+  Eigen::Vector3d probe_force = Eigen::Vector3d::Zero();  // N, on the tool, clamped to probe_force_limit
+  double probe_force_raw = 0;       // N, magnitude before the clamp
+  bool probe_saturated = false;
+  DetectStats detection;            // active pairs, new, merged, dropped, distance tests
+  int contacts = 0;                 // self-collision contacts processed
+  int contacts_overflow = 0;        // contacts beyond contact_capacity (ignored)
+  ResponseReport response;          // penetration before / after
+};
+
+/// The mutable state: positions, velocities and every workspace of a step, preallocated for one model.
+class IntestineState {
+ public:
+  /// Init phase (allocates): rest positions, zero velocities, detector seeded with `seed` (params().detection.seed
+  /// when 0).
+  explicit IntestineState(const IntestineModel& model, std::uint64_t seed = 0);
+
+  /// Back to rest, zero velocity, time 0, detector reseeded. No allocation.
+  void reset(const IntestineModel& model, std::uint64_t seed = 0) noexcept;
+
+  Eigen::Matrix3Xd x;  // 3 x N positions (m); column n = node n
+  Eigen::Matrix3Xd v;  // 3 x N velocities (m/s)
+  double time = 0;     // s, simulated
+  std::uint64_t steps = 0;
+  std::uint64_t faults = 0;  // steps that ended with a status other than kOk
+
+  /// Flat positions, (x, y, z) of node n at 3n..3n+2; point_count() nodes. The intestine's points come first.
+  const double* positions() const { return x.data(); }
+  int point_count() const { return static_cast<int>(x.cols()); }
+
+  StochasticDetector& detector() { return detector_; }
+  const StochasticDetector& detector() const { return detector_; }
+  const ContactList& contacts() const { return contacts_; }
+  ContactList& contacts() { return contacts_; }
+  const MassSpringWorkspace& workspace() const { return work_; }
+
+ private:
+  friend void step_dynamics(const IntestineModel&, IntestineState&, const Probe&, double, StepReport&) noexcept;
+  friend void step_detection(const IntestineModel&, IntestineState&, StepReport&) noexcept;
+  friend void step_response(const IntestineModel&, IntestineState&, StepReport&) noexcept;
+  friend void step(const IntestineModel&, IntestineState&, const Probe&, double, StepReport&) noexcept;
+  MassSpringWorkspace work_;
+  StochasticDetector detector_;
+  ContactList contacts_;
+  std::vector<PenaltyContact> probe_contacts_;
+  Eigen::Matrix3Xd x_entry_, v_entry_;  // the state at step entry (guard)
+};
+
+/// Run phase: one step of dt (s) at the haptic rate: mass-spring (probe included), stochastic detection, response.
+/// Allocates nothing; on a non-finite result or a failed solve the state is restored and report.status says why.
+void step(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
+          StepReport& report) noexcept;
+
+/// The phases of step(), in order (report is reset by step_dynamics). For tests and benchmarks.
+void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
+                   StepReport& report) noexcept;
+void step_detection(const IntestineModel& model, IntestineState& state, StepReport& report) noexcept;
+void step_response(const IntestineModel& model, IntestineState& state, StepReport& report) noexcept;
+
+/// Kinetic + spring + gravity energy (J) of the state.
+double energy(const IntestineModel& model, const IntestineState& state);
+
+}  // namespace surgsim::intestine

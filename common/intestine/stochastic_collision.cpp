@@ -1,0 +1,658 @@
+#include "intestine/stochastic_collision.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <set>
+#include <tuple>
+#include <utility>
+
+#include "mesh/geometry.h"
+#include "core/error.h"
+
+namespace surgsim::intestine {
+
+namespace {
+
+constexpr double kTiny = 1e-12;
+constexpr double kContactEps = 1e-9;  // m: below this the closest points give no direction
+
+double clamp01(double v) { return v < 0 ? 0 : (v > 1 ? 1 : v); }
+
+// A unit vector orthogonal to d (any, deterministic).
+Eigen::Vector3d orthogonal(const Eigen::Vector3d& d) {
+  const Eigen::Vector3d axis =
+      std::abs(d.x()) < std::abs(d.y()) ? (std::abs(d.x()) < std::abs(d.z()) ? Eigen::Vector3d::UnitX()
+                                                                               : Eigen::Vector3d::UnitZ())
+                                        : (std::abs(d.y()) < std::abs(d.z()) ? Eigen::Vector3d::UnitY()
+                                                                             : Eigen::Vector3d::UnitZ());
+  const Eigen::Vector3d o = d.cross(axis);
+  const double n = o.norm();
+  return n > kTiny ? Eigen::Vector3d(o / n) : Eigen::Vector3d::UnitZ();
+}
+
+}  // namespace
+
+double segment_segment(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& q0,
+                       const Eigen::Vector3d& q1, double& s, double& t) noexcept {
+  const Eigen::Vector3d d1 = p1 - p0, d2 = q1 - q0, r = p0 - q0;
+  const double a = d1.squaredNorm(), e = d2.squaredNorm(), f = d2.dot(r);
+  if (a <= kTiny && e <= kTiny) {
+    s = t = 0;
+  } else if (a <= kTiny) {
+    s = 0;
+    t = clamp01(f / e);
+  } else {
+    const double c = d1.dot(r);
+    if (e <= kTiny) {
+      t = 0;
+      s = clamp01(-c / a);
+    } else {
+      const double b = d1.dot(d2);
+      const double denom = a * e - b * b;
+      if (denom > 1e-10 * a * e) {
+        s = clamp01((b * f - c * e) / denom);
+      } else {
+        // (Nearly) parallel: the middle of the overlap of q's projection on p, so that the contact is centred.
+        const double u0 = clamp01(-c / a), u1 = clamp01((b - c) / a);
+        s = 0.5 * (u0 + u1);
+      }
+      t = (b * s + f) / e;
+      if (t < 0) {
+        t = 0;
+        s = clamp01(-c / a);
+      } else if (t > 1) {
+        t = 1;
+        s = clamp01((b - c) / a);
+      }
+    }
+  }
+  return ((p0 + s * d1) - (q0 + t * d2)).norm();
+}
+
+double segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& a,
+                        const Eigen::Vector3d& b, const Eigen::Vector3d& c, double& s, Eigen::Vector3d& bary,
+                        double bound) noexcept {
+  const Eigen::Vector3d e1 = b - a, e2 = c - a, d = p1 - p0;
+  if (bound < std::numeric_limits<double>::infinity()) {
+    // Bounding spheres: segment about its middle, triangle about its centroid.
+    const Eigen::Vector3d m = 0.5 * (p0 + p1), g = (a + b + c) / 3.0;
+    const double rt = std::sqrt(std::max({(a - g).squaredNorm(), (b - g).squaredNorm(), (c - g).squaredNorm()}));
+    if ((m - g).norm() - 0.5 * d.norm() - rt >= bound) return std::numeric_limits<double>::infinity();
+    // The triangle's plane, when both ends are on the same side.
+    const Eigen::Vector3d nrm = e1.cross(e2);
+    const double nn = nrm.norm();
+    if (nn > kTiny) {
+      const double d0 = (p0 - a).dot(nrm) / nn, d1 = (p1 - a).dot(nrm) / nn;
+      if (d0 * d1 > 0 && std::min(std::abs(d0), std::abs(d1)) >= bound) return std::numeric_limits<double>::infinity();
+    }
+  }
+  // The segment crossing the triangle (Moller-Trumbore restricted to [p0, p1]).
+  const Eigen::Vector3d h = d.cross(e2);
+  const double det = e1.dot(h);
+  if (std::abs(det) > kTiny * e1.norm() * e2.norm() * (d.norm() + kTiny)) {
+    const double inv = 1.0 / det;
+    const Eigen::Vector3d sv = p0 - a;
+    const double u = inv * sv.dot(h);
+    if (u >= 0 && u <= 1) {
+      const Eigen::Vector3d q = sv.cross(e1);
+      const double v = inv * d.dot(q);
+      const double tt = inv * e2.dot(q);
+      if (v >= 0 && u + v <= 1 && tt >= 0 && tt <= 1) {
+        s = tt;
+        bary = Eigen::Vector3d(1 - u - v, u, v);
+        return 0;
+      }
+    }
+  }
+  // Point-triangle: the segment's ends.
+  Eigen::Vector3d b0, b1;
+  const double dd0 = (closest_point_triangle(p0, a, b, c, b0) - p0).norm();
+  const double dd1 = (closest_point_triangle(p1, a, b, c, b1) - p1).norm();
+  double best = dd0;
+  s = 0;
+  bary = b0;
+  if (dd1 < best) {
+    best = dd1;
+    s = 1;
+    bary = b1;
+  }
+  // Both ends above the triangle's interior and no crossing: the segment lies over the triangle, the distance to the
+  // plane is linear along it, so an end is the closest point and the edges need no test.
+  if ((b0.array() > 0).all() && (b1.array() > 0).all()) return best;
+  // Edge-triangle: the segment against each edge.
+  const Eigen::Vector3d* v[3] = {&a, &b, &c};
+  for (int k = 0; k < 3; ++k) {
+    double ss = 0, tt = 0;
+    const double dd = segment_segment(p0, p1, *v[k], *v[(k + 1) % 3], ss, tt);
+    if (dd < best) {
+      best = dd;
+      s = ss;
+      bary.setZero();
+      bary[k] = 1 - tt;
+      bary[(k + 1) % 3] = tt;
+    }
+  }
+  return best;
+}
+
+void CollisionTopology::triangle(int t, int out[3]) const {
+  const int cell = t / 2, r = cell / (cols - 1), c = cell % (cols - 1);
+  if (t % 2 == 0) {
+    out[0] = node(r, c);
+    out[1] = node(r, c + 1);
+    out[2] = node(r + 1, c + 1);
+  } else {
+    out[0] = node(r, c);
+    out[1] = node(r + 1, c + 1);
+    out[2] = node(r + 1, c);
+  }
+}
+
+bool CollisionTopology::segments_tested(int a, int b) const {
+  return a >= 0 && b >= 0 && a < segments() && b < segments() && std::abs(a - b) > segment_exclusion;
+}
+
+bool CollisionTopology::cell_tested(int segment, int cell) const {
+  if (segment < 0 || segment >= segments() || cell < 0 || cell >= cells()) return false;
+  const int r = cell / (cols - 1), c = cell % (cols - 1);
+  if (r == 0 && std::abs(c - segment) <= cell_exclusion) return false;
+  // Never a cell that shares a node with the segment.
+  const int sa = node(0, segment), sb = node(0, segment + 1);
+  for (int rr = r; rr <= r + 1; ++rr) {
+    for (int cc = c; cc <= c + 1; ++cc) {
+      const int n = node(rr, cc);
+      if (n == sa || n == sb) return false;
+    }
+  }
+  return true;
+}
+
+StochasticDetector::StochasticDetector(CollisionTopology topology, const StochasticParams& params)
+    : topo_(std::move(topology)), params_(params) {
+  if (topo_.rows < 2 || topo_.cols < 2 || topo_.grid.size() != static_cast<std::size_t>(topo_.rows * topo_.cols)) {
+    throw_error("stochastic collision: the grid needs rows x cols >= 2 x 2 node indices");
+  }
+  if (!(topo_.intestine_radius > 0) || !(topo_.mesentery_half_thickness >= 0) || topo_.segment_exclusion < 0 ||
+      topo_.cell_exclusion < 0) {
+    throw_error("stochastic collision: radii must be positive and exclusions >= 0");
+  }
+  if (params_.capacity < 1 || params_.random_pairs < 0 || params_.random_mesentery_pairs < 0 ||
+      params_.max_moves < 0 || params_.new_pair_moves < 0 || !(params_.drop_factor >= 1) || params_.zone_budget < 0) {
+    throw_error("stochastic collision: capacity >= 1, random pairs >= 0, moves >= 0, drop_factor >= 1, "
+                "zone_budget >= 0");
+  }
+  zone_.resize(static_cast<std::size_t>(params_.zone_budget) + 1);
+  seg_pairs_.resize(static_cast<std::size_t>(params_.capacity));
+  cell_pairs_.resize(static_cast<std::size_t>(params_.capacity));
+  seg_owner_.assign(static_cast<std::size_t>(topo_.segments()) * static_cast<std::size_t>(topo_.segments()), 0);
+  cell_owner_.assign(static_cast<std::size_t>(topo_.segments()) * static_cast<std::size_t>(topo_.cells()), 0);
+  seg_reported_.assign(seg_owner_.size(), 0);
+  cell_reported_.assign(cell_owner_.size(), 0);
+  reset(params_.seed);
+}
+
+void StochasticDetector::set_random_pairs(int segment_pairs, int mesentery_pairs) noexcept {
+  params_.random_pairs = std::max(0, segment_pairs);
+  params_.random_mesentery_pairs = std::max(0, mesentery_pairs);
+}
+
+void StochasticDetector::reset(std::uint64_t seed) noexcept {
+  rng_ = seed;
+  seg_count_ = cell_count_ = 0;
+  for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_}) std::fill(t->begin(), t->end(), 0u);
+  stamp_ = 0;
+}
+
+// splitmix64: small state, fast, and identical on every platform (std distributions are not).
+std::uint64_t StochasticDetector::next_random() noexcept {
+  std::uint64_t z = (rng_ += 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+int StochasticDetector::uniform(int n) noexcept {
+  return static_cast<int>((next_random() >> 11) * (1.0 / 9007199254740992.0) * n);
+}
+
+double StochasticDetector::eval_segments(const Eigen::Matrix3Xd& x, int a, int b, ActivePair& out) noexcept {
+  ++tests_;
+  const auto p0 = x.col(topo_.node(0, a)), p1 = x.col(topo_.node(0, a + 1));
+  const auto q0 = x.col(topo_.node(0, b)), q1 = x.col(topo_.node(0, b + 1));
+  double s = 0, t = 0;
+  const double d = segment_segment(p0, p1, q0, q1, s, t);
+  out.a = a;
+  out.b = b;
+  out.tri = 0;
+  out.distance = d;
+  out.s = s;
+  out.wb = Eigen::Vector3d(1 - t, t, 0);
+  if (d > kContactEps) {
+    out.normal = ((p0 + s * (p1 - p0)) - (q0 + t * (q1 - q0))) / d;
+  } else if (out.normal.squaredNorm() < 0.5) {
+    out.normal = orthogonal(p1 - p0);
+  }
+  return d;
+}
+
+double StochasticDetector::eval_cell(const Eigen::Matrix3Xd& x, int seg, int cell, double bound,
+                                     ActivePair& out) noexcept {
+  const auto p0 = x.col(topo_.node(0, seg)), p1 = x.col(topo_.node(0, seg + 1));
+  double best = std::numeric_limits<double>::infinity();
+  for (int t = 0; t < 2; ++t) {
+    ++tests_;
+    int n[3];
+    topo_.triangle(2 * cell + t, n);
+    double s = 0;
+    Eigen::Vector3d bary;
+    const double d = segment_triangle(p0, p1, x.col(n[0]), x.col(n[1]), x.col(n[2]), s, bary, std::min(bound, best));
+    if (d < best) {
+      best = d;
+      out.tri = t;
+      out.s = s;
+      out.wb = bary;
+    }
+  }
+  if (!(best < bound)) return std::numeric_limits<double>::infinity();  // not closer than the bound: out unchanged
+  out.a = seg;
+  out.b = cell;
+  out.distance = best;
+  int n[3];
+  topo_.triangle(2 * cell + out.tri, n);
+  const Eigen::Vector3d pa = p0 + out.s * (p1 - p0);
+  const Eigen::Vector3d pb = out.wb[0] * x.col(n[0]) + out.wb[1] * x.col(n[1]) + out.wb[2] * x.col(n[2]);
+  if (best > kContactEps) {
+    out.normal = (pa - pb) / best;
+  } else {
+    // The segment crosses the membrane: push along the triangle's normal, on the side the pair came from.
+    Eigen::Vector3d nt = (x.col(n[1]) - x.col(n[0])).cross(x.col(n[2]) - x.col(n[0]));
+    nt = nt.norm() > kTiny ? Eigen::Vector3d(nt.normalized()) : orthogonal(p1 - p0);
+    out.normal = nt.dot(out.normal) < 0 ? Eigen::Vector3d(-nt) : nt;
+  }
+  return best;
+}
+
+void StochasticDetector::converge_segments(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept {
+  eval_segments(x, p.a, p.b, p);
+  for (int move = 0; move < moves; ++move) {
+    // The 9-neighbour update: the closest of (a + {-1,0,1}, b + {-1,0,1}).
+    ActivePair best = p, cand = p;
+    for (int da = -1; da <= 1; ++da) {
+      for (int db = -1; db <= 1; ++db) {
+        if (da == 0 && db == 0) continue;
+        const int a = p.a + da, b = p.b + db;
+        if (!topo_.segments_tested(a, b)) continue;
+        cand.normal = p.normal;
+        if (eval_segments(x, a, b, cand) < best.distance) best = cand;
+      }
+    }
+    if (best.a == p.a && best.b == p.b) return;  // a local minimum
+    p = best;
+  }
+}
+
+void StochasticDetector::converge_cell(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept {
+  const int cw = topo_.cols - 1;
+  eval_cell(x, p.a, p.b, std::numeric_limits<double>::infinity(), p);
+  int done = 0;
+  while (done < moves) {
+    bool moved = false;
+    // Step 1: along the intestine, the cell fixed.
+    ActivePair best = p, cand = p;
+    for (int ds = -1; ds <= 1; ds += 2) {
+      if (!topo_.cell_tested(p.a + ds, p.b)) continue;
+      cand.normal = p.normal;
+      if (eval_cell(x, p.a + ds, p.b, best.distance, cand) < best.distance) best = cand;
+    }
+    if (best.a != p.a) {
+      p = best;
+      moved = true;
+      ++done;
+    }
+    // Step 2: over the mesentery, the segment fixed.
+    const int r = p.b / cw, c = p.b % cw;
+    best = p;
+    for (int dr = -1; dr <= 1; ++dr) {
+      for (int dc = -1; dc <= 1; ++dc) {
+        if (dr == 0 && dc == 0) continue;
+        const int rr = r + dr, cc = c + dc;
+        if (rr < 0 || cc < 0 || rr >= topo_.rows - 1 || cc >= cw) continue;
+        const int cell = rr * cw + cc;
+        if (!topo_.cell_tested(p.a, cell)) continue;
+        cand.normal = p.normal;
+        if (eval_cell(x, p.a, cell, best.distance, cand) < best.distance) best = cand;
+      }
+    }
+    if (best.b != p.b && done < moves) {
+      p = best;
+      moved = true;
+      ++done;
+    }
+    if (!moved) return;  // a local minimum of both steps
+  }
+}
+
+bool StochasticDetector::claim(std::vector<std::uint32_t>& owner, int key) noexcept {
+  auto& o = owner[static_cast<std::size_t>(key)];
+  if (o == stamp_) return false;
+  o = stamp_;
+  return true;
+}
+
+bool StochasticDetector::add_pair(int a, int b, bool mesentery) noexcept {
+  if (mesentery) {
+    if (!topo_.cell_tested(a, b) || cell_count_ >= params_.capacity) return false;
+    ActivePair& p = cell_pairs_[static_cast<std::size_t>(cell_count_++)];
+    p = ActivePair{};
+    p.a = a;
+    p.b = b;
+    return true;
+  }
+  if (a > b) std::swap(a, b);
+  if (!topo_.segments_tested(a, b) || seg_count_ >= params_.capacity) return false;
+  ActivePair& p = seg_pairs_[static_cast<std::size_t>(seg_count_++)];
+  p = ActivePair{};
+  p.a = a;
+  p.b = b;
+  return true;
+}
+
+bool StochasticDetector::emit(const ActivePair& p, bool mesentery, ContactList& out, DetectStats& st) noexcept {
+  const double contact =
+      mesentery ? topo_.intestine_radius + topo_.mesentery_half_thickness : 2 * topo_.intestine_radius;
+  if (!(p.distance < contact)) return false;
+  const int key = mesentery ? p.a * topo_.cells() + p.b : p.a * topo_.segments() + p.b;
+  auto& reported = (mesentery ? cell_reported_ : seg_reported_)[static_cast<std::size_t>(key)];
+  if (reported == stamp_) return false;  // reported already (by a neighbouring minimum)
+  reported = stamp_;
+  CollisionContact c;
+  if (mesentery) {
+    int n[3];
+    topo_.triangle(2 * p.b + p.tri, n);
+    c.kind = ContactKind::kSegmentTriangle;
+    c.count_b = 3;
+    c.nodes = {topo_.node(0, p.a), topo_.node(0, p.a + 1), n[0], n[1], n[2]};
+    c.weights = {1 - p.s, p.s, p.wb[0], p.wb[1], p.wb[2]};
+    c.element_b = 2 * p.b + p.tri;
+  } else {
+    c.kind = ContactKind::kSegmentSegment;
+    c.count_b = 2;
+    c.nodes = {topo_.node(0, p.a), topo_.node(0, p.a + 1), topo_.node(0, p.b), topo_.node(0, p.b + 1), -1};
+    c.weights = {1 - p.s, p.s, p.wb[0], p.wb[1], 0};
+    c.element_b = p.b;
+  }
+  c.count_a = 2;
+  c.normal = p.normal;
+  c.radius_sum = contact;
+  c.distance = p.distance;
+  c.element_a = p.a;
+  if (out.push(c)) {
+    ++st.contacts;
+  } else {
+    ++st.overflow;
+  }
+  return true;
+}
+
+void StochasticDetector::expand(const Eigen::Matrix3Xd& x, const ActivePair& start, bool mes, ContactList& out,
+                                DetectStats& st) noexcept {
+  const double contact = mes ? topo_.intestine_radius + topo_.mesentery_half_thickness : 2 * topo_.intestine_radius;
+  const int cw = topo_.cols - 1;
+  const auto& reported = mes ? cell_reported_ : seg_reported_;
+  auto seen = [&](int a, int b) {
+    const int key = mes ? a * topo_.cells() + b : a * topo_.segments() + b;
+    return reported[static_cast<std::size_t>(key)] == stamp_;
+  };
+  // Flood fill from the minimum over colliding neighbouring pairs.
+  int head = 0, tail = 0, added = 0;
+  zone_[static_cast<std::size_t>(tail++)] = start;
+  while (head < tail && added < params_.zone_budget) {
+    const ActivePair q = zone_[static_cast<std::size_t>(head++)];
+    ActivePair cand = q;
+    auto visit = [&](int a, int b) {
+      if (added >= params_.zone_budget || seen(a, b)) return;
+      cand.normal = q.normal;
+      const double d = mes ? eval_cell(x, a, b, contact, cand) : eval_segments(x, a, b, cand);
+      if (!(d < contact) || !emit(cand, mes, out, st)) return;
+      ++added;
+      if (tail < static_cast<int>(zone_.size())) zone_[static_cast<std::size_t>(tail++)] = cand;
+    };
+    if (mes) {
+      for (int ds = -1; ds <= 1; ds += 2) {
+        if (topo_.cell_tested(q.a + ds, q.b)) visit(q.a + ds, q.b);
+      }
+      const int r = q.b / cw, c = q.b % cw;
+      for (int dr = -1; dr <= 1; ++dr) {
+        for (int dc = -1; dc <= 1; ++dc) {
+          const int rr = r + dr, cc = c + dc;
+          if ((dr == 0 && dc == 0) || rr < 0 || cc < 0 || rr >= topo_.rows - 1 || cc >= cw) continue;
+          if (topo_.cell_tested(q.a, rr * cw + cc)) visit(q.a, rr * cw + cc);
+        }
+      }
+    } else {
+      for (int da = -1; da <= 1; ++da) {
+        for (int db = -1; db <= 1; ++db) {
+          if ((da == 0 && db == 0) || !topo_.segments_tested(q.a + da, q.b + db)) continue;
+          visit(q.a + da, q.b + db);
+        }
+      }
+    }
+  }
+}
+
+DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& out) noexcept {
+  DetectStats st;
+  tests_ = 0;
+  if (++stamp_ == 0) {  // wrapped: clear the tables so that no stale stamp matches
+    for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_}) std::fill(t->begin(), t->end(), 0u);
+    stamp_ = 1;
+  }
+  const int nseg = topo_.segments(), ncell = topo_.cells();
+  const double drop_seg = params_.drop_factor * 2 * topo_.intestine_radius;
+  const double drop_cell = params_.drop_factor * (topo_.intestine_radius + topo_.mesentery_half_thickness);
+
+  // Each kind: update the tracked minima (merging pairs that meet and dropping far ones), then n new random pairs;
+  // contacts are emitted as each surviving pair is settled, with its colliding neighbours.
+  for (int kind = 0; kind < 2; ++kind) {
+    const bool mes = kind == 1;
+    std::vector<ActivePair>& pairs = mes ? cell_pairs_ : seg_pairs_;
+    std::vector<std::uint32_t>& owner = mes ? cell_owner_ : seg_owner_;
+    int& count = mes ? cell_count_ : seg_count_;
+    const int width = mes ? ncell : nseg;
+    const double drop = mes ? drop_cell : drop_seg;
+    auto settle = [&](ActivePair& p, int moves) {
+      if (mes) {
+        converge_cell(x, p, moves);
+      } else {
+        converge_segments(x, p, moves);
+      }
+    };
+    auto report = [&](const ActivePair& p) {
+      if (emit(p, mes, out, st) && params_.zone_budget > 0) expand(x, p, mes, out, st);
+    };
+    int keep = 0;
+    for (int i = 0; i < count; ++i) {
+      ActivePair p = pairs[static_cast<std::size_t>(i)];
+      settle(p, params_.max_moves);
+      if (p.distance > drop) {
+        ++st.dropped;
+      } else if (!claim(owner, p.a * width + p.b)) {
+        ++st.merged;
+      } else {
+        pairs[static_cast<std::size_t>(keep++)] = p;
+        report(p);
+      }
+    }
+    count = keep;
+    const int draws = mes ? params_.random_mesentery_pairs : params_.random_pairs;
+    for (int k = 0; k < draws; ++k) {
+      int a = 0, b = 0;
+      bool ok = false;
+      for (int attempt = 0; attempt < 8 && !ok; ++attempt) {
+        a = uniform(nseg);
+        b = uniform(mes ? ncell : nseg);
+        if (!mes && a > b) std::swap(a, b);
+        ok = mes ? topo_.cell_tested(a, b) : topo_.segments_tested(a, b);
+      }
+      if (!ok || owner[static_cast<std::size_t>(a * width + b)] == stamp_) continue;  // tracked already
+      ActivePair p;
+      p.a = a;
+      p.b = b;
+      settle(p, params_.new_pair_moves);
+      if (p.distance > drop || !claim(owner, p.a * width + p.b)) continue;
+      if (count >= params_.capacity) {
+        ++st.overflow;
+        continue;
+      }
+      pairs[static_cast<std::size_t>(count++)] = p;
+      ++st.new_pairs;
+      report(p);
+    }
+  }
+  st.segment_pairs = seg_count_;
+  st.cell_pairs = cell_count_;
+  st.distance_tests = tests_;
+  return st;
+}
+
+void detect_brute_force(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, ContactList& out,
+                        double margin) noexcept {
+  const int nseg = topo.segments();
+  const double rr = 2 * topo.intestine_radius, rm = topo.intestine_radius + topo.mesentery_half_thickness;
+  auto box_gap = [](const Eigen::Vector3d& lo1, const Eigen::Vector3d& hi1, const Eigen::Vector3d& lo2,
+                    const Eigen::Vector3d& hi2, double r) {
+    return (lo1.array() > hi2.array() + r).any() || (lo2.array() > hi1.array() + r).any();
+  };
+  for (int a = 0; a < nseg; ++a) {
+    const Eigen::Vector3d p0 = x.col(topo.node(0, a)), p1 = x.col(topo.node(0, a + 1));
+    const Eigen::Vector3d plo = p0.cwiseMin(p1), phi = p0.cwiseMax(p1);
+    // Intestine-intestine.
+    for (int b = a + 1; b < nseg; ++b) {
+      if (!topo.segments_tested(a, b)) continue;
+      const Eigen::Vector3d q0 = x.col(topo.node(0, b)), q1 = x.col(topo.node(0, b + 1));
+      if (box_gap(plo, phi, q0.cwiseMin(q1), q0.cwiseMax(q1), rr + margin)) continue;
+      double s = 0, t = 0;
+      const double d = segment_segment(p0, p1, q0, q1, s, t);
+      if (d >= rr + margin) continue;
+      CollisionContact c;
+      c.kind = ContactKind::kSegmentSegment;
+      c.nodes = {topo.node(0, a), topo.node(0, a + 1), topo.node(0, b), topo.node(0, b + 1), -1};
+      c.weights = {1 - s, s, 1 - t, t, 0};
+      const Eigen::Vector3d diff = (p0 + s * (p1 - p0)) - (q0 + t * (q1 - q0));
+      c.normal = d > kContactEps ? Eigen::Vector3d(diff / d) : orthogonal(p1 - p0);
+      c.radius_sum = rr;
+      c.distance = d;
+      c.element_a = a;
+      c.element_b = b;
+      out.push(c);
+    }
+    // Intestine-mesentery.
+    for (int tri = 0; tri < 2 * topo.cells(); ++tri) {
+      if (!topo.cell_tested(a, tri / 2)) continue;
+      int n[3];
+      topo.triangle(tri, n);
+      const Eigen::Vector3d A = x.col(n[0]), B = x.col(n[1]), C = x.col(n[2]);
+      if (box_gap(plo, phi, A.cwiseMin(B).cwiseMin(C), A.cwiseMax(B).cwiseMax(C), rm + margin)) continue;
+      double s = 0;
+      Eigen::Vector3d bary;
+      const double d = segment_triangle(p0, p1, A, B, C, s, bary);
+      if (d >= rm + margin) continue;
+      CollisionContact c;
+      c.kind = ContactKind::kSegmentTriangle;
+      c.count_b = 3;
+      c.nodes = {topo.node(0, a), topo.node(0, a + 1), n[0], n[1], n[2]};
+      c.weights = {1 - s, s, bary[0], bary[1], bary[2]};
+      const Eigen::Vector3d diff = (p0 + s * (p1 - p0)) - (bary[0] * A + bary[1] * B + bary[2] * C);
+      if (d > kContactEps) {
+        c.normal = diff / d;
+      } else {
+        const Eigen::Vector3d nt = (B - A).cross(C - A);
+        c.normal = nt.norm() > kTiny ? Eigen::Vector3d(nt.normalized()) : orthogonal(p1 - p0);
+      }
+      c.radius_sum = rm;
+      c.distance = d;
+      c.element_a = a;
+      c.element_b = tri;
+      out.push(c);
+    }
+  }
+}
+
+RecallStats& RecallStats::operator+=(const RecallStats& o) {
+  truth += o.truth;
+  found += o.found;
+  depth_truth += o.depth_truth;
+  depth_found += o.depth_found;
+  max_missed = std::max(max_missed, o.max_missed);
+  regions += o.regions;
+  regions_found += o.regions_found;
+  return *this;
+}
+
+RecallStats compare_with_reference(const CollisionTopology& topo, const ContactList& found,
+                                   const ContactList& truth) {
+  // Identity of a contact: (kind, segment, segment or cell).
+  auto key = [](const CollisionContact& c) {
+    const int b = c.kind == ContactKind::kSegmentSegment ? c.element_b : c.element_b / 2;
+    return std::tuple<int, int, int>(static_cast<int>(c.kind), c.element_a, b);
+  };
+  std::set<std::tuple<int, int, int>> reported;
+  for (const auto& c : found) reported.insert(key(c));
+  RecallStats st;
+  const int n = truth.size();
+  std::vector<char> hit(static_cast<std::size_t>(n), 0);
+  for (int i = 0; i < n; ++i) {
+    const bool h = reported.count(key(truth[i])) > 0;
+    const double depth = truth[i].radius_sum - truth[i].distance;
+    hit[static_cast<std::size_t>(i)] = h;
+    ++st.truth;
+    st.found += h;
+    st.depth_truth += depth;
+    if (h) {
+      st.depth_found += depth;
+    } else {
+      st.max_missed = std::max(st.max_missed, depth);
+    }
+  }
+  // Contact zones: union-find over neighbouring reference contacts of the same kind.
+  std::vector<int> parent(static_cast<std::size_t>(n));
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int i) {
+    while (parent[static_cast<std::size_t>(i)] != i) {
+      parent[static_cast<std::size_t>(i)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(i)])];
+      i = parent[static_cast<std::size_t>(i)];
+    }
+    return i;
+  };
+  const int cw = topo.cols - 1;
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      const auto& a = truth[i];
+      const auto& b = truth[j];
+      if (a.kind != b.kind || std::abs(a.element_a - b.element_a) > 1) continue;
+      bool near = false;
+      if (a.kind == ContactKind::kSegmentSegment) {
+        near = std::abs(a.element_b - b.element_b) <= 1;
+      } else {
+        const int ca = a.element_b / 2, cb = b.element_b / 2;
+        near = std::abs(ca / cw - cb / cw) <= 1 && std::abs(ca % cw - cb % cw) <= 1;
+      }
+      if (near) parent[static_cast<std::size_t>(find(i))] = find(j);
+    }
+  }
+  std::vector<char> root_hit(static_cast<std::size_t>(n), 0), is_root(static_cast<std::size_t>(n), 0);
+  for (int i = 0; i < n; ++i) {
+    const int r = find(i);
+    is_root[static_cast<std::size_t>(r)] = 1;
+    if (hit[static_cast<std::size_t>(i)]) root_hit[static_cast<std::size_t>(r)] = 1;
+  }
+  for (int i = 0; i < n; ++i) {
+    st.regions += is_root[static_cast<std::size_t>(i)];
+    st.regions_found += is_root[static_cast<std::size_t>(i)] && root_hit[static_cast<std::size_t>(i)];
+  }
+  return st;
+}
+
+}  // namespace surgsim::intestine

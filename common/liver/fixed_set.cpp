@@ -1,0 +1,203 @@
+#include "liver/fixed_set.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/hash.h"
+
+namespace surgsim {
+
+FixedSet::FixedSet(int node_count, const std::vector<int>& fixed_nodes) {
+  if (node_count < 0) throw_error("fixed set: negative node count ", node_count);
+  masks_.assign(static_cast<std::size_t>(node_count), 0);
+  for (int n : fixed_nodes) {
+    if (n < 0 || n >= node_count)
+      throw_error("fixed node ", n, " is out of range: the mesh has ", node_count, " nodes (0..", node_count - 1, ")");
+    masks_[static_cast<std::size_t>(n)] = 7;
+  }
+  number();
+}
+
+FixedSet::FixedSet(std::vector<std::uint8_t> component_masks) : masks_(std::move(component_masks)) {
+  for (auto& m : masks_) m &= 7;
+  number();
+}
+
+void FixedSet::number() {
+  free_index_.assign(masks_.size() * 3, -1);
+  free_dofs_.clear();
+  for (std::size_t dof = 0; dof < free_index_.size(); ++dof)
+    if (!(masks_[dof / 3] & (1u << (dof % 3)))) {
+      free_index_[dof] = static_cast<int>(free_dofs_.size());
+      free_dofs_.push_back(static_cast<int>(dof));
+    }
+}
+
+std::vector<int> FixedSet::fixed_nodes() const {
+  std::vector<int> out;
+  for (int n = 0; n < node_count(); ++n)
+    if (node_touched(n)) out.push_back(n);
+  return out;
+}
+
+std::uint64_t FixedSet::hash() const {
+  Hasher h;
+  h.str("FixedSet/1");
+  h.value<std::uint64_t>(masks_.size());
+  if (!masks_.empty()) h.bytes(masks_.data(), masks_.size());
+  return h.digest();
+}
+
+std::vector<int> nodes_in_region(const TetMesh& mesh, const FixedRegion& region) {
+  const int n = static_cast<int>(mesh.nodes.rows());
+  std::vector<char> hit(static_cast<std::size_t>(n), 0);
+  for (int i : region.nodes) {
+    if (i < 0 || i >= n)
+      throw_error("fixed node ", i, " is out of range: the mesh", (mesh.source.empty() ? "" : " " + mesh.source), " has ",
+                  n, " nodes (0..", n - 1, ")");
+    hit[static_cast<std::size_t>(i)] = 1;
+  }
+  if (n > 0) {
+    const double tol = 1e-9 * (mesh.nodes.colwise().maxCoeff() - mesh.nodes.colwise().minCoeff()).norm();
+    const auto& boxes = region.boxes;
+    const Eigen::Vector3d normal = region.plane_normal.normalized();
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector3d x = mesh.nodes.row(i).transpose();
+      for (const auto& b : boxes)
+        if ((x.array() >= b.first.array() - tol).all() && (x.array() <= b.second.array() + tol).all())
+          hit[static_cast<std::size_t>(i)] = 1;
+      if (region.has_plane && (x - region.plane_point).dot(normal) >= -tol) hit[static_cast<std::size_t>(i)] = 1;
+    }
+  }
+  std::vector<int> out;
+  for (int i = 0; i < n; ++i)
+    if (hit[static_cast<std::size_t>(i)]) out.push_back(i);
+  return out;
+}
+
+FixedSet fixed_set_from_region(const TetMesh& mesh, const FixedRegion& region) {
+  return FixedSet(static_cast<int>(mesh.nodes.rows()), nodes_in_region(mesh, region));
+}
+
+namespace {
+
+int find_root(std::vector<int>& parent, int i) {
+  while (parent[static_cast<std::size_t>(i)] != i) {
+    parent[static_cast<std::size_t>(i)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(i)])];
+    i = parent[static_cast<std::size_t>(i)];
+  }
+  return i;
+}
+
+std::string list_nodes(const std::vector<int>& nodes, std::size_t max_shown = 12) {
+  std::ostringstream os;
+  for (std::size_t i = 0; i < nodes.size() && i < max_shown; ++i) os << (i ? ", " : "") << nodes[i];
+  if (nodes.size() > max_shown) os << ", ... (" << nodes.size() - max_shown << " more)";
+  return os.str();
+}
+
+// Unit vector with tiny components zeroed and its largest component positive (stable text in messages).
+Eigen::Vector3d canonical_direction(Eigen::Vector3d v) {
+  v.normalize();
+  Eigen::Index big = 0;
+  v.cwiseAbs().maxCoeff(&big);
+  if (v[big] < 0) v = -v;
+  for (int a = 0; a < 3; ++a)
+    if (std::abs(v[a]) < 1e-9) v[a] = 0;
+  return v;
+}
+
+}  // namespace
+
+void check_rigid_modes_removed(const TetMesh& mesh, const FixedSet& fixed, const std::string& where) {
+  const int n = static_cast<int>(mesh.nodes.rows());
+  const std::string prefix = where.empty() ? std::string() : where + ": ";
+  const std::string fix_hint =
+      "fix at least 3 non-collinear nodes (scene key 'fixed': nodes, box, boxes or plane; programs: --fixed i,j,k, "
+      "--fixed-box or --fixed-plane)";
+  if (fixed.node_count() != n)
+    throw_error(prefix, "fixed set is for ", fixed.node_count(), " nodes but the mesh has ", n);
+  const std::vector<int> fixed_nodes = fixed.fixed_nodes();
+  if (fixed_nodes.empty())
+    throw_error(prefix, "no node is fixed, so the organ can translate and rotate freely (6 rigid modes): ", fix_hint);
+
+  // Connected parts of the mesh (nodes sharing a tet).
+  std::vector<int> parent(static_cast<std::size_t>(n));
+  std::iota(parent.begin(), parent.end(), 0);
+  for (Eigen::Index t = 0; t < mesh.tets.rows(); ++t)
+    for (int a = 1; a < 4; ++a) {
+      const int r0 = find_root(parent, mesh.tets(t, 0)), r1 = find_root(parent, mesh.tets(t, a));
+      if (r0 != r1) parent[static_cast<std::size_t>(std::max(r0, r1))] = std::min(r0, r1);
+    }
+
+  // Per part: the rigid modes (3 translations, 3 rotations about the part's centroid, scaled by its size) evaluated
+  // at the fixed dofs. A mode is free when this 6-column matrix has a null vector.
+  std::vector<std::vector<int>> groups(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) groups[static_cast<std::size_t>(find_root(parent, i))].push_back(i);
+  for (int root = 0; root < n; ++root) {
+    const std::vector<int>& nodes = groups[static_cast<std::size_t>(root)];
+    if (nodes.empty()) continue;
+    if (nodes.size() == 1 && mesh.tets.rows() > 0) continue;  // a node in no tet: validate_mesh reports it
+    std::vector<int> part_fixed;
+    for (int i : nodes)
+      if (fixed.node_touched(i)) part_fixed.push_back(i);
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (int i : nodes) centroid += mesh.nodes.row(i).transpose();
+    centroid /= static_cast<double>(nodes.size());
+    double size = 0;
+    for (int i : nodes) size = std::max(size, (mesh.nodes.row(i).transpose() - centroid).norm());
+    if (size <= 0) size = 1;
+    const std::string part =
+        static_cast<int>(nodes.size()) == n
+            ? std::string("the organ")
+            : "the part of the mesh containing node " + std::to_string(root) + " (" + std::to_string(nodes.size()) +
+                  " of " + std::to_string(n) + " nodes; the mesh is not connected)";
+    if (part_fixed.empty())
+      throw_error(prefix, part, " has no fixed node and can move freely (", fixed_nodes.size(),
+                  " node(s) are fixed elsewhere: ", list_nodes(fixed_nodes), "): ", fix_hint, " in every part");
+
+    Eigen::Matrix<double, 6, 6> gram = Eigen::Matrix<double, 6, 6>::Zero();
+    for (int i : part_fixed) {
+      const Eigen::Vector3d r = (mesh.nodes.row(i).transpose() - centroid) / size;
+      for (int c = 0; c < 3; ++c) {
+        if (!(fixed.mask(i) & (1u << c))) continue;
+        Eigen::Matrix<double, 6, 1> row = Eigen::Matrix<double, 6, 1>::Zero();
+        row[c] = 1;
+        for (int a = 0; a < 3; ++a) row[3 + a] = Eigen::Vector3d::Unit(a).cross(r)[c];  // (e_a x r)_c
+        gram += row * row.transpose();
+      }
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(gram);
+    const double tol = 1e-10 * std::max(1.0, eig.eigenvalues().maxCoeff());
+    int free_modes = 0;
+    for (int k = 0; k < 6; ++k)
+      if (eig.eigenvalues()[k] <= tol) ++free_modes;
+    if (free_modes == 0) continue;
+
+    // Describe the first free mode: a translation, or a rotation about an axis.
+    const Eigen::Matrix<double, 6, 1> mode = eig.eigenvectors().col(0);
+    std::ostringstream what;
+    const Eigen::Vector3d w = mode.tail<3>();
+    if (w.norm() < 1e-6) {
+      what << "a translation along (" << canonical_direction(mode.head<3>()).transpose() << ")";
+    } else {
+      what << "a rotation about the axis along (" << canonical_direction(w).transpose() << ")";
+    }
+    std::string shape;
+    const bool whole_nodes = std::all_of(part_fixed.begin(), part_fixed.end(), [&](int i) { return fixed.mask(i) == 7; });
+    if (whole_nodes && part_fixed.size() == 1)
+      shape = "a single fixed node";
+    else if (whole_nodes)
+      shape = "all fixed nodes lie on one line";
+    else
+      shape = "the fixed components do not hold every rigid motion";
+    throw_error(prefix, "the fixed set leaves ", free_modes, " rigid mode(s) of ", part, " free (", shape, "; e.g. ",
+                what.str(), "); ", part_fixed.size(), " node(s) fixed there: ", list_nodes(part_fixed), "; ", fix_hint);
+  }
+}
+
+}  // namespace surgsim

@@ -1,0 +1,38 @@
+// One place that turns a liver scene + its mesh into the tensor inputs (fixed set, contactable nodes, row sets,
+// options, cache key and path), so that the haptic node, the visual node and surgsim-precompute always agree on
+// the cache they share.
+#pragma once
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "liver/fixed_set.h"
+#include "liver/precompute.h"
+#include "liver/liver_spec.h"
+#include "mesh/mesh.h"
+#include "liver/tensor_cache.h"
+
+namespace surgsim {
+
+struct LiverTensorSetup {
+  FixedSet fixed;
+  std::vector<int> contacts;     // contactable (free surface) nodes
+  std::vector<RowSet> rows;      // "haptic" (surface x surface) and "visual" (boundary x surface)
+  PrecomputeOptions options;     // default: direct, double precision
+  TensorCacheKey key;
+  std::string cache_path;        // <cache_dir>/tensors-<combined key, hex>.bin
+};
+
+/// Resolves the fixed region on the mesh and derives everything the tensors depend on (the material enters the key).
+/// Throws surgsim::Error (e.g. a fixed set leaving a rigid mode free) naming `where` (the scene file).
+LiverTensorSetup liver_tensor_setup(const Material& material, const FixedRegion& fixed, const TetMesh& mesh,
+                                    const std::string& cache_dir, const std::string& where);
+
+/// Loads the cached tensors keeping only `blocks` ("haptic", "visual"; empty = all), or, when the cache is missing,
+/// stale or corrupt, precomputes them (progress with ETA on `log`), saves the cache and keeps `blocks`. Concurrent
+/// callers on the same cache serialize on a lock file, so the work is done once. Throws surgsim::Error.
+Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, const Material& material,
+                           const std::vector<std::string>& blocks, std::ostream* log, CacheOutcome* outcome = nullptr,
+                           const std::string& where = "");
+
+}  // namespace surgsim

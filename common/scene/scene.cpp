@@ -1,0 +1,748 @@
+#include "scene/scene.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <climits>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <iterator>
+#include <limits>
+#include <sstream>
+#include <system_error>
+
+#include "core/error.h"
+#include "core/hash.h"
+
+#ifndef SURGSIM_DEFAULT_CONFIG_DIR
+#define SURGSIM_DEFAULT_CONFIG_DIR "config"
+#endif
+
+namespace surgsim {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// ---------------------------------------------------------------------------------------------------------------
+// Small helpers: messages, key suggestions, shipped scene list.
+
+std::string fmt(double v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+
+std::string join(const std::vector<std::string>& items, const char* sep = ", ") {
+  std::string out;
+  for (std::size_t i = 0; i < items.size(); ++i) out += (i ? sep : "") + items[i];
+  return out;
+}
+
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diag = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      const bool same =
+          std::tolower(static_cast<unsigned char>(a[i - 1])) == std::tolower(static_cast<unsigned char>(b[j - 1]));
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (same ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// Sorted names of the *.yaml files in the shipped config folder ("liver", "plate", ...).
+std::vector<std::string> shipped_scenes() {
+  std::vector<std::string> names;
+  std::error_code ec;
+  for (fs::directory_iterator it(config_dir(), ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->path().extension() == ".yaml" && it->is_regular_file(ec)) names.push_back(it->path().stem().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::string shipped_list() {
+  const auto names = shipped_scenes();
+  return names.empty() ? "none found in " + config_dir() : join(names);
+}
+
+// An interval of admissible values; lo/hi may be infinite.
+struct Range {
+  double lo, hi;
+  bool lo_open, hi_open;
+  bool contains(double v) const { return (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi); }
+  std::string str() const {
+    return std::string(lo_open ? "(" : "[") + fmt(lo) + ", " + fmt(hi) + (hi_open ? ")" : "]");
+  }
+};
+Range closed(double lo, double hi) { return {lo, hi, false, false}; }
+Range positive() { return {0, kInf, true, true}; }
+
+// ---------------------------------------------------------------------------------------------------------------
+// Reading a YAML tree with messages "FILE:LINE: key 'a.b': what (fix)".
+
+// A value in the document with its dotted key path and its 1-based line.
+struct Field {
+  YAML::Node node;
+  std::string key;
+  int line = 1;
+};
+
+int line_of(const YAML::Node& n, int fallback) {
+  const YAML::Mark m = n.Mark();
+  return m.is_null() ? fallback : m.line + 1;
+}
+
+class Reader {
+ public:
+  Reader(std::string shown, fs::path dir) : shown_(std::move(shown)), dir_(std::move(dir)) {}
+
+  [[noreturn]] void fail(int line, const std::string& key, const std::string& what, const std::string& fix) const {
+    std::ostringstream os;
+    os << shown_ << ":" << line << ": ";
+    if (!key.empty()) os << "key '" << key << "': ";
+    os << what;
+    if (!fix.empty()) os << " (" << fix << ")";
+    throw Error(os.str());
+  }
+
+  // The node's kind, for "expected X, got Y".
+  static std::string kind(const YAML::Node& n) {
+    switch (n.Type()) {
+      case YAML::NodeType::Sequence:
+        return "a list";
+      case YAML::NodeType::Map:
+        return "a map";
+      case YAML::NodeType::Null:
+        return "nothing";
+      default:
+        return "'" + n.Scalar() + "'";
+    }
+  }
+
+  // A plain (unquoted) scalar, else a type error saying what was expected.
+  const std::string& plain_scalar(const Field& f, const std::string& expected, const std::string& fix) const {
+    if (f.node.IsNull()) fail(f.line, f.key, "missing value, expected " + expected, fix);
+    if (!f.node.IsScalar()) fail(f.line, f.key, "expected " + expected + ", got " + kind(f.node), fix);
+    if (f.node.Tag() == "!") {
+      fail(f.line, f.key, "expected " + expected + ", got the quoted string \"" + f.node.Scalar() + "\"",
+           "write it without quotes");
+    }
+    return f.node.Scalar();
+  }
+
+  double number(const Field& f, const Range& range, const std::string& fix) const {
+    std::string_view s = plain_scalar(f, "a number", fix);
+    if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+    double v = 0;
+    const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+    const bool whole = !s.empty() && r.ptr == s.data() + s.size();
+    std::string lower(s);
+    for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    const bool yaml_special = lower == ".inf" || lower == "-.inf" || lower == ".nan";
+    if (yaml_special || (whole && (r.ec == std::errc::result_out_of_range || !std::isfinite(v)))) {
+      fail(f.line, f.key, f.node.Scalar() + " is not finite", fix);
+    }
+    if (!whole || r.ec != std::errc()) fail(f.line, f.key, "'" + f.node.Scalar() + "' is not a number", fix);
+    if (!range.contains(v)) fail(f.line, f.key, f.node.Scalar() + " is out of range " + range.str(), fix);
+    return v;
+  }
+
+  int integer(const Field& f, long long lo, long long hi, const std::string& fix) const {
+    const std::string& s0 = plain_scalar(f, "an integer", fix);
+    std::string_view s = s0;
+    if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+    long long v = 0;
+    const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (s.empty() || r.ptr != s.data() + s.size() || r.ec != std::errc()) {
+      double d = 0;
+      const auto rd = std::from_chars(s.data(), s.data() + s.size(), d);
+      const bool is_real = !s.empty() && rd.ptr == s.data() + s.size() && rd.ec == std::errc();
+      fail(f.line, f.key, is_real ? "expected an integer, got " + s0 : "'" + s0 + "' is not an integer", fix);
+    }
+    if (v < lo || v > hi) {
+      fail(f.line, f.key, s0 + " is out of range [" + std::to_string(lo) + ", " + std::to_string(hi) + "]", fix);
+    }
+    return static_cast<int>(v);
+  }
+
+  bool boolean(const Field& f) const {
+    const std::string fix = "write true or false";
+    plain_scalar(f, "true or false", fix);
+    bool b = false;
+    if (!YAML::convert<bool>::decode(f.node, b)) fail(f.line, f.key, "'" + f.node.Scalar() + "' is not a boolean", fix);
+    return b;
+  }
+
+  std::string text(const Field& f, const std::string& fix) const {
+    if (f.node.IsNull()) fail(f.line, f.key, "missing value, expected a string", fix);
+    if (!f.node.IsScalar()) fail(f.line, f.key, "expected a string, got " + kind(f.node), fix);
+    if (f.node.Scalar().empty()) fail(f.line, f.key, "is empty", fix);
+    return f.node.Scalar();
+  }
+
+  std::string one_of(const Field& f, std::initializer_list<const char*> allowed) const {
+    std::vector<std::string> names(allowed.begin(), allowed.end());
+    const std::string fix = "use one of: " + join(names);
+    const std::string v = text(f, fix);
+    if (std::find(names.begin(), names.end(), v) == names.end()) fail(f.line, f.key, "unknown value '" + v + "'", fix);
+    return v;
+  }
+
+  Eigen::Vector3d vec3(const Field& f, const std::string& fix) const {
+    const std::string want = "3 numbers [x, y, z]";
+    if (f.node.IsNull()) fail(f.line, f.key, "missing value, expected " + want, fix);
+    if (!f.node.IsSequence()) fail(f.line, f.key, "expected " + want + ", got " + kind(f.node), fix);
+    if (f.node.size() != 3) {
+      fail(f.line, f.key, "expected " + want + ", got a list of " + std::to_string(f.node.size()), fix);
+    }
+    Eigen::Vector3d v;
+    for (int i = 0; i < 3; ++i) {
+      const YAML::Node e = f.node[static_cast<std::size_t>(i)];
+      v[i] = number({e, f.key + "[" + std::to_string(i) + "]", line_of(e, f.line)}, {-kInf, kInf, true, true}, fix);
+    }
+    return v;
+  }
+
+  // A non-zero vector, returned normalized.
+  Eigen::Vector3d direction(const Field& f, const std::string& fix) const {
+    const Eigen::Vector3d v = vec3(f, fix);
+    if (!(v.norm() > 1e-12)) fail(f.line, f.key, "is the zero vector, a direction is needed", fix);
+    return v.normalized();
+  }
+
+  // A file that must exist, relative to the scene's folder; returned absolute and normalized.
+  std::string file(const Field& f, const std::string& what) const {
+    const std::string fix = what + ", relative to the scene file's folder or absolute";
+    const fs::path given(text(f, fix));
+    const fs::path p = (given.is_absolute() ? given : dir_ / given).lexically_normal();
+    std::error_code ec;
+    if (!fs::exists(p, ec)) fail(f.line, f.key, "file '" + given.string() + "' not found at " + p.string(), fix);
+    if (!fs::is_regular_file(p, ec)) fail(f.line, f.key, "'" + p.string() + "' is not a regular file", fix);
+    return p.string();
+  }
+
+ private:
+  std::string shown_;  // the scene path as given, for messages
+  fs::path dir_;       // absolute folder of the scene file
+};
+
+// A YAML map whose keys are checked against a fixed set when it is opened. A null node is an empty map.
+class Map {
+ public:
+  Map(const Reader& r, const Field& f, std::initializer_list<const char*> allowed) : r_(r), self_(f) {
+    const std::vector<std::string> names(allowed.begin(), allowed.end());
+    if (f.node.IsNull()) return;
+    if (!f.node.IsMap()) {
+      r.fail(f.line, f.key, "expected a map, got " + Reader::kind(f.node), "give keys: " + join(names));
+    }
+    for (auto it = f.node.begin(); it != f.node.end(); ++it) {
+      const YAML::Node k = it->first;
+      const int kline = line_of(k, f.line);
+      if (!k.IsScalar()) r.fail(kline, f.key, "a key is " + Reader::kind(k) + ", keys must be plain names", "");
+      const std::string& name = k.Scalar();
+      const std::string path = f.key.empty() ? name : f.key + "." + name;
+      if (std::find(names.begin(), names.end(), name) == names.end()) {
+        std::string best;
+        std::size_t best_d = std::numeric_limits<std::size_t>::max();
+        for (const auto& n : names) {
+          const std::size_t d = edit_distance(name, n);
+          if (d < best_d) best_d = d, best = n;
+        }
+        const bool close = best_d <= std::max<std::size_t>(2, name.size() / 3);
+        r.fail(kline, path, "unknown key",
+               (close ? "did you mean '" + best + "'? " : std::string()) + "valid keys here: " + join(names));
+      }
+      for (const auto& e : entries_) {
+        if (e.first == name) {
+          r.fail(kline, path, "duplicate key (first given on line " + std::to_string(e.second.line) + ")",
+                 "keep one of them");
+        }
+      }
+      // Scalars report their own line; a block map or list starts below its key, so report the key's line.
+      entries_.emplace_back(name, Field{it->second, path, it->second.IsScalar() ? line_of(it->second, kline) : kline});
+    }
+  }
+
+  bool has(const char* k) const { return find(k) != nullptr; }
+  const Field& at(const char* k) const {
+    const Field* f = find(k);
+    if (f == nullptr) r_.fail(self_.line, key(k), "missing", "");
+    return *f;
+  }
+  std::string key(const char* k) const { return self_.key.empty() ? k : self_.key + "." + k; }
+  const Field& self() const { return self_; }
+
+ private:
+  const Field* find(const char* k) const {
+    for (const auto& e : entries_) {
+      if (e.first == k) return &e.second;
+    }
+    return nullptr;
+  }
+
+  const Reader& r_;
+  Field self_;
+  std::vector<std::pair<std::string, Field>> entries_;
+};
+
+// ---------------------------------------------------------------------------------------------------------------
+// Sections.
+
+MeshSource read_mesh_source(const Reader& r, const Field& f) {
+  const Map m(r, f, {"generate", "file", "target_nodes"});
+  MeshSource mesh;
+  if (m.has("generate") && m.has("file")) {
+    r.fail(m.at("file").line, f.key, "has both 'generate' and 'file'", "keep exactly one of them");
+  }
+  if (!m.has("generate") && !m.has("file")) {
+    r.fail(f.line, f.key, "names no mesh", "add 'generate: liver' (liver | plate | cylinder) or 'file: meshes/x.msh'");
+  }
+  if (m.has("generate")) {
+    mesh.generate = r.one_of(m.at("generate"), {"liver", "plate", "cylinder"});
+    if (m.has("target_nodes")) {
+      mesh.target_nodes =
+          r.integer(m.at("target_nodes"), 100, 100000, "approximate node count; ~1500 runs in real time");
+    }
+  } else {
+    if (m.has("target_nodes")) {
+      r.fail(m.at("target_nodes").line, m.key("target_nodes"), "only applies to generated meshes",
+             "remove it: a mesh file has its own node count");
+    }
+    const Field& ff = m.at("file");
+    mesh.file = r.file(ff, "a tetrahedral mesh: Gmsh .msh (v1/v2/v4) or legacy VTK .vtk");
+    const std::string ext = fs::path(mesh.file).extension().string();
+    if (ext != ".msh" && ext != ".vtk") {
+      r.fail(ff.line, ff.key, "unsupported mesh format '" + ext + "'", "use a Gmsh .msh or a legacy VTK .vtk file");
+    }
+  }
+  return mesh;
+}
+
+Material read_material(const Reader& r, const Field& f) {
+  const Map m(r, f, {"young_modulus", "poisson_ratio"});
+  Material mat;
+  if (m.has("young_modulus")) {
+    mat.young_modulus = r.number(m.at("young_modulus"), positive(), "Young's modulus in Pa, > 0; liver ~3000");
+  }
+  if (m.has("poisson_ratio")) {
+    mat.poisson_ratio = r.number(m.at("poisson_ratio"), {0, 0.5, false, true},
+                                 "use a value in [0, 0.5); soft tissue is nearly incompressible, e.g. 0.45");
+  }
+  return mat;
+}
+
+std::pair<Eigen::Vector3d, Eigen::Vector3d> read_box(const Reader& r, const Field& f) {
+  const Map m(r, f, {"min", "max"});
+  const std::string fix = "corner in m, [x, y, z]";
+  if (!m.has("min") || !m.has("max")) {
+    r.fail(f.line, f.key, std::string("needs both 'min' and 'max' (missing '") + (m.has("min") ? "max" : "min") + "')",
+           "write {min: [x, y, z], max: [x, y, z]} in m");
+  }
+  const Eigen::Vector3d lo = r.vec3(m.at("min"), fix);
+  const Eigen::Vector3d hi = r.vec3(m.at("max"), fix);
+  for (int i = 0; i < 3; ++i) {
+    if (!(lo[i] < hi[i])) {
+      r.fail(m.at("max").line, m.key("max"),
+             std::string("is not above min in ") + "xyz"[i] + " (" + fmt(hi[i]) + " <= " + fmt(lo[i]) + ")",
+             "min must be < max in every component");
+    }
+  }
+  return {lo, hi};
+}
+
+FixedRegion read_fixed(const Reader& r, const Field& f) {
+  const Map m(r, f, {"nodes", "box", "boxes", "plane"});
+  FixedRegion fixed;
+  if (m.has("nodes")) {
+    const Field& nf = m.at("nodes");
+    const std::string fix = "a list of 0-based node indices, e.g. [0, 5, 7]";
+    if (!nf.node.IsSequence()) r.fail(nf.line, nf.key, "expected a list, got " + Reader::kind(nf.node), fix);
+    for (std::size_t i = 0; i < nf.node.size(); ++i) {
+      const YAML::Node e = nf.node[i];
+      fixed.nodes.push_back(
+          r.integer({e, nf.key + "[" + std::to_string(i) + "]", line_of(e, nf.line)}, 0, INT_MAX, fix));
+    }
+  }
+  if (m.has("box")) {
+    const auto box = read_box(r, m.at("box"));
+    fixed.boxes.push_back(box);
+  }
+  if (m.has("boxes")) {
+    const Field& bf = m.at("boxes");
+    const std::string fix = "write a list of {min: [x, y, z], max: [x, y, z]}";
+    if (!bf.node.IsSequence()) r.fail(bf.line, bf.key, "expected a list, got " + Reader::kind(bf.node), fix);
+    for (std::size_t i = 0; i < bf.node.size(); ++i) {
+      const YAML::Node e = bf.node[i];
+      fixed.boxes.push_back(read_box(r, {e, bf.key + "[" + std::to_string(i) + "]", line_of(e, bf.line)}));
+    }
+  }
+  if (m.has("plane")) {
+    const Map p(r, m.at("plane"), {"point", "normal"});
+    if (!p.has("point") || !p.has("normal")) {
+      r.fail(p.self().line, p.self().key,
+             std::string("needs both 'point' and 'normal' (missing '") + (p.has("point") ? "normal" : "point") + "')",
+             "write {point: [x, y, z], normal: [x, y, z]}; nodes with (x - point) . normal >= 0 are fixed");
+    }
+    fixed.has_plane = true;
+    fixed.plane_point = r.vec3(p.at("point"), "a point on the plane in m");
+    fixed.plane_normal = r.direction(p.at("normal"), "a non-zero normal pointing into the fixed side");
+  }
+  return fixed;
+}
+
+NonlinearSpec read_nonlinear(const Reader& r, const Field& f) {
+  const Map m(r, f, {"displacement_curve", "force_curve", "degree"});
+  NonlinearSpec nl;
+  if (m.has("displacement_curve")) {
+    nl.displacement_curve = r.file(m.at("displacement_curve"), "a CSV curve x,d_r in m");
+  }
+  if (m.has("force_curve")) nl.force_curve = r.file(m.at("force_curve"), "a CSV curve x,f in m, N");
+  if (m.has("degree")) nl.degree = r.integer(m.at("degree"), 4, 10, "polynomial degree of the fitted law, 4..10");
+  if (!nl.enabled()) {
+    r.fail(f.line, f.key, "names no curve", "add displacement_curve and/or force_curve, or remove the section");
+  }
+  return nl;
+}
+
+ToolSpec read_tool(const Reader& r, const Field& f) {
+  const Map m(r, f,
+              {"trocar", "axis", "shaft_length", "shaft_radius", "shaft_points", "shaft_spacing", "jaw_length",
+               "force_limit", "contact_capacity"});
+  ToolSpec t;
+  if (m.has("trocar")) t.trocar = r.vec3(m.at("trocar"), "the fulcrum in world coordinates, m");
+  if (m.has("axis")) t.axis = r.direction(m.at("axis"), "non-zero shaft direction into the body at pitch = yaw = 0");
+  if (m.has("shaft_length")) t.shaft_length = r.number(m.at("shaft_length"), positive(), "length in m, > 0");
+  if (m.has("shaft_radius")) t.shaft_radius = r.number(m.at("shaft_radius"), positive(), "radius in m, > 0");
+  if (m.has("shaft_points")) {
+    t.shaft_points = r.integer(m.at("shaft_points"), 1, 32, "contact points along the shaft, tip first, 1..32");
+  }
+  if (m.has("shaft_spacing")) t.shaft_spacing = r.number(m.at("shaft_spacing"), positive(), "spacing in m, > 0");
+  if (m.has("jaw_length")) t.jaw_length = r.number(m.at("jaw_length"), positive(), "length in m, > 0");
+  if (m.has("force_limit")) t.force_limit = r.number(m.at("force_limit"), positive(), "device force clamp in N, > 0");
+  if (m.has("contact_capacity")) {
+    t.contact_capacity = r.integer(m.at("contact_capacity"), 1, 64, "simultaneous contact nodes, 1..64");
+  }
+  // The contact points must lie on the shaft.
+  if ((t.shaft_points - 1) * t.shaft_spacing >= t.shaft_length) {
+    const char* k = m.has("shaft_spacing") ? "shaft_spacing" : m.has("shaft_points") ? "shaft_points" : "shaft_length";
+    r.fail(m.has(k) ? m.at(k).line : f.line, m.key(k),
+           "(shaft_points - 1) * shaft_spacing = " + fmt((t.shaft_points - 1) * t.shaft_spacing) +
+               " m does not fit in shaft_length = " + fmt(t.shaft_length) + " m",
+           "use fewer points, a smaller spacing or a longer shaft");
+  }
+  return t;
+}
+
+HapticSpec read_haptic(const Reader& r, const Field& f) {
+  const Map m(r, f, {"rate_hz"});
+  HapticSpec h;
+  if (m.has("rate_hz"))
+    h.rate_hz = r.number(m.at("rate_hz"), closed(50, 20000), "haptic rate in Hz, >= 300 for stable force feedback");
+  return h;
+}
+
+VisualSpec read_visual(const Reader& r, const Field& f) {
+  const Map m(r, f, {"rate_hz", "width", "height", "camera", "png_every", "vtk", "video", "surface", "target_fps"});
+  VisualSpec v;
+  if (m.has("rate_hz")) v.rate_hz = r.number(m.at("rate_hz"), closed(1, 1000), "frame rate in Hz, e.g. 50");
+  if (m.has("target_fps")) {
+    v.target_fps = r.number(m.at("target_fps"), closed(1, 1000),
+                            "frame rate in Hz the intestine's level of detail is adapted to hold, e.g. 60");
+  }
+  if (m.has("width")) v.width = r.integer(m.at("width"), 16, 8192, "image width in pixels");
+  if (m.has("height")) v.height = r.integer(m.at("height"), 16, 8192, "image height in pixels");
+  if (m.has("png_every")) {
+    v.png_every = r.integer(m.at("png_every"), 0, INT_MAX, "write every n-th frame as PNG; 0 = no PNG");
+  }
+  if (m.has("vtk")) v.vtk = r.boolean(m.at("vtk"));
+  if (m.has("video")) v.video = r.boolean(m.at("video"));
+  if (m.has("surface")) v.surface = r.file(m.at("surface"), "a finer visual surface mesh");
+  if (m.has("camera")) {
+    const Map c(r, m.at("camera"), {"eye", "target", "up", "fov_deg"});
+    Camera& cam = v.camera;
+    if (c.has("eye")) cam.eye = r.vec3(c.at("eye"), "camera position in m");
+    if (c.has("target")) cam.target = r.vec3(c.at("target"), "point looked at, in m");
+    if (c.has("up")) cam.up = r.direction(c.at("up"), "a non-zero up direction");
+    if (c.has("fov_deg")) {
+      cam.fov_deg = r.number(c.at("fov_deg"), {1, 170, true, true}, "vertical field of view in degrees");
+    }
+    const Eigen::Vector3d view = cam.target - cam.eye;
+    const auto line_or = [&](const char* k) { return c.has(k) ? c.at(k).line : c.self().line; };
+    if (!(view.norm() > 1e-9)) {
+      r.fail(line_or("target"), c.key("target"), "equals the camera eye", "the eye must be away from the target");
+    }
+    if (!(view.normalized().cross(cam.up).norm() > 1e-6)) {
+      r.fail(line_or("up"), c.key("up"), "is parallel to the viewing direction",
+             "choose an up vector that is not along target - eye");
+    }
+  }
+  return v;
+}
+
+IntestineSpec read_intestine(const Reader& r, const Field& f) {
+  const Map m(r, f,
+              {"length", "cylinder_radius", "folds", "angular_span", "fold_shape", "axis_origin", "axis_direction",
+               "columns", "rows", "intestine_radius", "mesentery_thickness", "intestine_node_mass",
+               "mesentery_node_mass", "structural_stiffness", "shear_stiffness", "bending_stiffness", "spring_damping",
+               "drag", "gravity", "integrator", "probe_radius", "probe_stiffness", "self_collisions", "random_pairs",
+               "random_mesentery_pairs", "seed", "response_iterations", "contact_capacity"});
+  IntestineSpec spec;
+  intestine::IntestineParams& p = spec.params;
+  const Range non_negative{0, kInf, false, true};
+  const auto read_number = [&](const char* k, double& out, const Range& range, const char* fix) {
+    if (m.has(k)) out = r.number(m.at(k), range, fix);
+  };
+
+  // Rest shape.
+  read_number("length", p.length, positive(), "arc length of the intestine in m, e.g. 4.0");
+  read_number("cylinder_radius", p.cylinder_radius, positive(), "radius in m of the cylinder around the vessel, e.g. 0.15");
+  if (m.has("folds")) p.folds = r.integer(m.at("folds"), 1, 100, "periods of the folded sine, e.g. 5");
+  read_number("angular_span", p.angular_span, {0, 2 * 3.14159265358979323846, true, false},
+           "angle in rad covered around the vessel, < 2 pi keeps the ends apart");
+  read_number("fold_shape", p.fold_shape, closed(0, 2), "0 a plain sine, 1 vertical legs and round crests");
+  if (m.has("axis_origin")) p.axis_origin = r.vec3(m.at("axis_origin"), "centre of the curve on the vessel, m");
+  if (m.has("axis_direction")) p.axis_direction = r.direction(m.at("axis_direction"), "non-zero vessel direction");
+  if (m.has("columns")) {
+    p.columns = r.integer(m.at("columns"), 4, intestine::kMaxIntestineNodes, "masses along the intestine, e.g. 100");
+  }
+  if (m.has("rows")) p.rows = r.integer(m.at("rows"), 2, intestine::kMaxIntestineNodes / 4, "masses across, e.g. 4");
+  if (p.rows * p.columns > intestine::kMaxIntestineNodes) {
+    const char* k = m.has("columns") ? "columns" : "rows";
+    r.fail(m.at(k).line, m.key(k),
+           "rows x columns = " + std::to_string(p.rows * p.columns) + " masses exceed " +
+               std::to_string(intestine::kMaxIntestineNodes),
+           "a BodyState carries at most " + std::to_string(intestine::kMaxIntestineNodes) + " positions");
+  }
+  read_number("intestine_radius", p.intestine_radius, positive(), "tube radius in m, e.g. 0.02");
+  read_number("mesentery_thickness", p.mesentery_thickness, non_negative, "membrane thickness in m, e.g. 0.01");
+  if (!(p.length > p.cylinder_radius * p.angular_span)) {
+    const char* k = m.has("length") ? "length" : m.has("cylinder_radius") ? "cylinder_radius" : "angular_span";
+    r.fail(m.has(k) ? m.at(k).line : f.line, m.key(k),
+           "length " + fmt(p.length) + " m does not exceed the arc the curve covers (cylinder_radius x angular_span = " +
+               fmt(p.cylinder_radius * p.angular_span) + " m)",
+           "a longer intestine, a smaller cylinder or span: the folds need room");
+  }
+
+  // Masses and springs.
+  read_number("intestine_node_mass", p.intestine_node_mass, positive(), "kg per intestine node, e.g. 0.012");
+  read_number("mesentery_node_mass", p.mesentery_node_mass, positive(), "kg per mesentery node, e.g. 0.004");
+  read_number("structural_stiffness", p.structural_stiffness, non_negative, "N/m, e.g. 300");
+  read_number("shear_stiffness", p.shear_stiffness, non_negative, "N/m, e.g. 100");
+  read_number("bending_stiffness", p.bending_stiffness, non_negative, "N/m, e.g. 30");
+  read_number("spring_damping", p.spring_damping, non_negative, "N s/m along every spring, e.g. 0.1");
+  read_number("drag", p.drag, non_negative, "1/s, viscous drag of the surrounding medium, e.g. 2");
+  if (m.has("gravity")) p.gravity = r.vec3(m.at("gravity"), "acceleration in m/s^2, e.g. [0, 0, -9.81]");
+  if (m.has("integrator")) {
+    p.integrator = r.one_of(m.at("integrator"), {"implicit_euler", "symplectic_euler"}) == "implicit_euler"
+                       ? intestine::Integrator::kImplicitEuler
+                       : intestine::Integrator::kSymplecticEuler;
+  }
+
+  // Probe and collisions.
+  read_number("probe_radius", spec.probe_radius, positive(), "radius in m of the sphere at the tool tip, e.g. 0.01");
+  read_number("probe_stiffness", p.probe_stiffness, non_negative, "penalty stiffness of the probe contact in N/m");
+  if (m.has("self_collisions")) p.self_collisions = r.boolean(m.at("self_collisions"));
+  if (m.has("random_pairs")) {
+    p.detection.random_pairs = r.integer(m.at("random_pairs"), 0, 100000, "new pairs drawn per step (n), e.g. 10");
+  }
+  if (m.has("random_mesentery_pairs")) {
+    p.detection.random_mesentery_pairs =
+        r.integer(m.at("random_mesentery_pairs"), 0, 100000, "new intestine-mesentery pairs per step, e.g. 10");
+  }
+  if (m.has("seed")) p.detection.seed = r.integer(m.at("seed"), 1, INT_MAX, "seed of the random pairs, >= 1");
+  if (m.has("response_iterations")) {
+    p.response.iterations = r.integer(m.at("response_iterations"), 0, 100, "sweeps of the collision response, e.g. 4");
+  }
+  if (m.has("contact_capacity")) {
+    p.contact_capacity = r.integer(m.at("contact_capacity"), 1, 100000, "self-collision contacts per step");
+  }
+  return spec;
+}
+
+// Hash helpers: -0.0 and 0.0 hash alike.
+void hash_double(Hasher& h, double v) { h.value<double>(v == 0.0 ? 0.0 : v); }
+void hash_vec(Hasher& h, const Eigen::Vector3d& v) {
+  for (int i = 0; i < 3; ++i) hash_double(h, v[i]);
+}
+std::string file_name(const std::string& path) {
+  return path.empty() ? std::string() : fs::path(path).filename().string();
+}
+
+
+}  // namespace
+
+// -----------------------------------------------------------------------------------------------------------------
+
+
+std::uint64_t Scene::hash() const {
+  Hasher h;
+  h.str("surgsim-scene-v1");
+  h.str(model);
+
+  // Mesh source: the file's name (not its folder, so two hosts agree), or the generator and its size.
+  h.str(file_name(mesh.file));
+  h.str(mesh.generate);
+  h.value<std::int32_t>(mesh.generate.empty() ? 0 : mesh.target_nodes);
+
+  hash_double(h, material.young_modulus);
+  hash_double(h, material.poisson_ratio);
+
+  // Fixed set: nodes, boxes (the single `box` key is the first entry of `boxes`), plane.
+  h.value<std::uint64_t>(fixed.nodes.size());
+  for (int n : fixed.nodes) h.value<std::int32_t>(n);
+  h.value<std::uint64_t>(fixed.boxes.size());
+  for (const auto& b : fixed.boxes) {
+    hash_vec(h, b.first);
+    hash_vec(h, b.second);
+  }
+  h.value<std::uint8_t>(fixed.has_plane);
+  if (fixed.has_plane) {
+    hash_vec(h, fixed.plane_point);
+    hash_vec(h, fixed.plane_normal);
+  }
+
+  h.value<std::uint8_t>(nonlinear.enabled());
+  if (nonlinear.enabled()) {
+    h.str(file_name(nonlinear.displacement_curve));
+    h.str(file_name(nonlinear.force_curve));
+    h.value<std::int32_t>(nonlinear.degree);
+  }
+
+  hash_vec(h, tool.trocar);
+  hash_vec(h, tool.axis);
+  hash_double(h, tool.shaft_length);
+  hash_double(h, tool.shaft_radius);
+  h.value<std::int32_t>(tool.shaft_points);
+  hash_double(h, tool.shaft_spacing);
+  hash_double(h, tool.jaw_length);
+  hash_double(h, tool.force_limit);
+  h.value<std::int32_t>(tool.contact_capacity);
+
+  hash_double(h, haptic.rate_hz);
+
+  // The intestine's parameters (other models hash as before).
+  if (model == "intestine") {
+    const intestine::IntestineParams& p = intestine.params;
+    for (double v : {p.length, p.cylinder_radius, p.angular_span, p.fold_shape, p.intestine_radius,
+                     p.mesentery_thickness, p.intestine_node_mass, p.mesentery_node_mass, p.structural_stiffness,
+                     p.shear_stiffness, p.bending_stiffness, p.spring_damping, p.drag, p.probe_stiffness,
+                     p.probe_force_limit, p.detection.drop_factor, intestine.probe_radius}) {
+      hash_double(h, v);
+    }
+    for (int v : {p.folds, p.columns, p.rows, p.probe_capacity, p.segment_exclusion, p.cell_exclusion,
+                  p.detection.random_pairs, p.detection.random_mesentery_pairs, p.detection.max_moves,
+                  p.detection.new_pair_moves, p.detection.zone_budget, p.detection.capacity, p.response.iterations,
+                  p.contact_capacity, static_cast<int>(p.integrator), static_cast<int>(p.self_collisions),
+                  static_cast<int>(p.response.correct_velocity), static_cast<int>(p.response.correct_position)}) {
+      h.value<std::int32_t>(v);
+    }
+    hash_vec(h, p.axis_origin);
+    hash_vec(h, p.axis_direction);
+    hash_vec(h, p.gravity);
+    h.value<std::uint64_t>(p.detection.seed);
+  }
+  return h.digest();
+}
+
+Scene load_scene(const std::string& path) {
+  // Read the file and parse the YAML.
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw_error(path, ": is a folder, not a scene file (give the .yaml file)");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    throw_error(path, ": cannot open scene file: ", std::strerror(errno),
+                " (check the path, or give a shipped scene: ", shipped_list(), ")");
+  }
+  const std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const fs::path abs = fs::absolute(path, ec).lexically_normal();
+  const Reader r(path, abs.parent_path());
+  YAML::Node root;
+  try {
+    root = YAML::Load(content);
+  } catch (const YAML::Exception& e) {
+    // An unclosed bracket is reported at the end of input: name the last line that exists instead.
+    const int lines = static_cast<int>(std::count(content.begin(), content.end(), '\n')) +
+                      (!content.empty() && content.back() != '\n' ? 1 : 0);
+    r.fail(e.mark.is_null() ? 1 : std::clamp(e.mark.line + 1, 1, std::max(1, lines)), "", "YAML syntax error: " + e.msg,
+           "check indentation, the ':' after each key and matching brackets and quotes");
+  }
+  if (root.IsNull()) r.fail(1, "", "the scene is empty", "a scene needs at least 'name' and 'mesh'");
+  if (!root.IsMap()) {
+    r.fail(line_of(root, 1), "", "the scene must be a map of keys, got " + Reader::kind(root),
+           "write 'name: ...', 'mesh: ...' etc. one per line");
+  }
+
+  const Map top(r, {root, "", 1},
+                {"name", "model", "mesh", "material", "fixed", "nonlinear", "tool", "haptic", "visual", "intestine",
+                 "trajectory"});
+  Scene s;
+  s.file = abs.string();
+  s.dir = abs.parent_path().string();
+
+  if (!top.has("name")) r.fail(1, "name", "missing", "every scene needs a name, e.g. 'name: liver'");
+  s.name = r.text(top.at("name"), "the scene's name, e.g. liver");
+  if (top.has("model")) s.model = r.one_of(top.at("model"), {"liver", "intestine"});
+
+  if (top.has("mesh")) {
+    s.mesh = read_mesh_source(r, top.at("mesh"));
+  } else if (s.model != "intestine") {  // the intestine builds its own bodies
+    r.fail(1, "mesh", "missing", "add 'mesh: {generate: liver}' (liver | plate | cylinder) or 'mesh: {file: x.msh}'");
+  }
+  if (top.has("material")) s.material = read_material(r, top.at("material"));
+  if (top.has("fixed")) s.fixed = read_fixed(r, top.at("fixed"));
+  if (top.has("nonlinear")) s.nonlinear = read_nonlinear(r, top.at("nonlinear"));
+  if (top.has("tool")) s.tool = read_tool(r, top.at("tool"));
+  if (top.has("haptic")) s.haptic = read_haptic(r, top.at("haptic"));
+  if (top.has("visual")) s.visual = read_visual(r, top.at("visual"));
+  if (top.has("intestine")) {
+    if (s.model != "intestine") {
+      r.fail(top.at("intestine").line, "intestine", "is only read for 'model: intestine'",
+             "set 'model: intestine' or remove the section");
+    }
+    s.intestine = read_intestine(r, top.at("intestine"));
+  }
+  s.intestine.params.probe_force_limit = s.tool.force_limit;  // the device clamp is the tool's
+  if (top.has("trajectory"))
+    s.trajectory = r.file(top.at("trajectory"), "a tool trajectory CSV (surgsim-trajectory v1)");
+  return s;
+}
+
+std::string config_dir() {
+  const char* env = std::getenv("SURGSIM_CONFIG_DIR");
+  return env != nullptr && *env != '\0' ? std::string(env) : std::string(SURGSIM_DEFAULT_CONFIG_DIR);
+}
+
+std::string resolve_scene_path(const std::string& name_or_path) {
+  if (name_or_path.empty()) throw_error("empty scene argument (give a scene file or one of: ", shipped_list(), ")");
+  std::error_code ec;
+  if (fs::is_regular_file(name_or_path, ec)) return name_or_path;
+
+  // A bare name: look it up among the shipped scenes.
+  const fs::path p(name_or_path);
+  if (!p.has_parent_path()) {
+    const fs::path candidate =
+        fs::path(config_dir()) / (p.extension() == ".yaml" ? name_or_path : name_or_path + ".yaml");
+    if (fs::is_regular_file(candidate, ec)) return candidate.string();
+  }
+  throw_error("scene '", name_or_path, "': no such file and no shipped scene of that name in ", config_dir(),
+              " (shipped scenes: ", shipped_list(), "; or give the path of a scene .yaml)");
+}
+
+}  // namespace surgsim

@@ -1,0 +1,36 @@
+#include "core/stats.h"
+
+#include <gtest/gtest.h>
+
+namespace surgsim {
+namespace {
+
+TEST(SampleRecorder, PercentilesOfKnownSamples) {
+  SampleRecorder r(1000);
+  for (int i = 1; i <= 100; ++i) r.add(i);
+  const Percentiles p = r.summary();
+  EXPECT_EQ(p.count, 100u);
+  EXPECT_NEAR(p.p50, 50.0, 1.0);
+  EXPECT_NEAR(p.p99, 99.0, 1.0);
+  EXPECT_DOUBLE_EQ(p.max, 100.0);
+  EXPECT_DOUBLE_EQ(p.mean, 50.5);
+}
+
+TEST(SampleRecorder, BeyondCapacityKeepsCountAndMax) {
+  SampleRecorder r(10);
+  for (int i = 0; i < 50; ++i) r.add(i);
+  const Percentiles p = r.summary();
+  EXPECT_EQ(p.count, 50u);
+  EXPECT_DOUBLE_EQ(p.max, 49.0);
+  EXPECT_LE(p.p99, 9.0);  // percentiles come from the stored prefix only
+}
+
+TEST(SampleRecorder, EmptyIsZero) {
+  SampleRecorder r(4);
+  const Percentiles p = r.summary();
+  EXPECT_EQ(p.count, 0u);
+  EXPECT_EQ(p.max, 0.0);
+}
+
+}  // namespace
+}  // namespace surgsim

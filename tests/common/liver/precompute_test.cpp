@@ -1,0 +1,166 @@
+#include "liver/precompute.h"
+
+#include <gtest/gtest.h>
+
+#include "liver/cholmod_solver.h"
+#include "core/error.h"
+#include "support/liver_test_util.h"
+
+namespace surgsim {
+namespace {
+
+std::vector<int> all_nodes(int n) {
+  std::vector<int> v(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) v[static_cast<std::size_t>(i)] = i;
+  return v;
+}
+
+TEST(Precompute, ColumnsAreSolvesOfKff) {
+  auto organ = test::box_organ(5, 4, 3);
+  const auto contacts = contactable_nodes(organ->mesh, organ->fixed);
+  ASSERT_GT(contacts.size(), 10u);
+  PrecomputeOptions opts;
+  opts.block_columns = 50;
+  const auto rows = std::vector<RowSet>{{"all", all_nodes(static_cast<int>(organ->mesh.nodes.rows()))}};
+  PrecomputeReport report;
+  const Tensors t = precompute_tensors(organ->model, contacts, rows, opts, &report);
+  ASSERT_EQ(t.column_count(), static_cast<int>(contacts.size()));
+  const TensorBlock& b = *t.find("all");
+  EXPECT_EQ(b.g.rows(), 3 * organ->mesh.nodes.rows());
+  EXPECT_EQ(b.g.cols(), 3 * t.column_count());
+  EXPECT_GT(report.memory.factor, 0u);
+  EXPECT_EQ(report.memory.tensors, b.bytes());
+
+  // Column of a unit force on contact c, component a = K_ff^-1 e, scattered to nodes (0 on fixed dofs).
+  CholmodSolver solver(organ->model.k_ff);
+  const auto& fixed = organ->fixed;
+  for (int c : {0, t.column_count() / 2, t.column_count() - 1})
+    for (int a = 0; a < 3; ++a) {
+      Eigen::VectorXd e = Eigen::VectorXd::Zero(fixed.free_dof_count());
+      e[fixed.free_index()[static_cast<std::size_t>(3 * t.contact_nodes[static_cast<std::size_t>(c)] + a)]] = 1;
+      const Eigen::VectorXd x = solver.solve(Eigen::MatrixXd(e));
+      Eigen::VectorXd full = Eigen::VectorXd::Zero(fixed.dof_count());
+      for (int f = 0; f < fixed.free_dof_count(); ++f) full[fixed.free_dofs()[static_cast<std::size_t>(f)]] = x[f];
+      EXPECT_LT(test::rel_error(b.g.col(3 * c + a), full), 1e-12);
+    }
+  // G_SS is symmetric (rows = all nodes: compare the contact-row sub-block with its transpose).
+  double asym = 0;
+  for (int i = 0; i < t.column_count(); i += 3)
+    for (int j = 0; j < t.column_count(); j += 5) {
+      const int ri = t.contact_nodes[static_cast<std::size_t>(i)], rj = t.contact_nodes[static_cast<std::size_t>(j)];
+      asym = std::max(asym, (b.block3(ri, j) - b.block3(rj, i).transpose()).norm());
+    }
+  EXPECT_LT(asym, 1e-12 * b.g.cwiseAbs().maxCoeff());
+}
+
+TEST(Precompute, StandardRowSetsAndFloatStorage) {
+  auto organ = test::box_organ(4, 3, 3);
+  const auto contacts = contactable_nodes(organ->mesh, organ->fixed);
+  const auto rows = standard_row_sets(organ->mesh, contacts);
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].name, "haptic");
+  EXPECT_EQ(rows[0].nodes, contacts);
+  EXPECT_EQ(rows[1].name, "visual");
+  EXPECT_GT(rows[1].nodes.size(), contacts.size());  // the clamped bottom face is visible but not contactable
+  PrecomputeOptions opts;
+  const Tensors d = precompute_tensors(organ->model, contacts, rows, opts);
+  opts.precision = Precision::kFloat;
+  const Tensors f = precompute_tensors(organ->model, contacts, rows, opts);
+  for (const char* name : {"haptic", "visual"}) {
+    const TensorBlock& bd = *d.find(name);
+    const TensorBlock& bf = *f.find(name);
+    EXPECT_EQ(bf.g.size(), 0);
+    EXPECT_EQ(bf.bytes() * 2, bd.bytes());
+    EXPECT_LT(test::rel_error(bf.g_float.cast<double>(), bd.g), 1e-6) << name;
+  }
+  // Fixed rows of the visual block are zero.
+  const TensorBlock& v = *d.find("visual");
+  for (int r = 0; r < v.row_count(); ++r)
+    if (organ->fixed.node_touched(v.row_nodes[static_cast<std::size_t>(r)])) {
+      EXPECT_EQ(v.g.middleRows<3>(3 * r).norm(), 0);
+    }
+}
+
+TEST(Precompute, CgPerColumnAgreesWithDirectWithinTolerance) {
+  auto organ = test::box_organ(4, 3, 2);
+  const auto contacts = contactable_nodes(organ->mesh, organ->fixed);
+  const auto rows = standard_row_sets(organ->mesh, contacts);
+  const Tensors d = precompute_tensors(organ->model, contacts, rows, PrecomputeOptions());
+  PrecomputeOptions opts;
+  opts.method = SolveMethod::kCg;
+  opts.cg_tolerance = 1e-9;
+  PrecomputeReport report;
+  const Tensors c = precompute_tensors(organ->model, contacts, rows, opts, &report);
+  EXPECT_TRUE(report.cg_all_converged);
+  EXPECT_GT(report.cg_max_iterations, 0);
+  EXPECT_LE(report.cg_max_residual, 1e-9);
+  EXPECT_EQ(c.method, SolveMethod::kCg);
+  EXPECT_LT(test::rel_error(c.find("visual")->g, d.find("visual")->g), 1e-5);
+}
+
+TEST(Precompute, ProgressReportsFractionAndEta) {
+  auto organ = test::box_organ(4, 3, 3);
+  const auto contacts = contactable_nodes(organ->mesh, organ->fixed);
+  PrecomputeOptions opts;
+  opts.block_columns = 30;
+  std::vector<PrecomputeProgress> seen;
+  opts.progress = [&](const PrecomputeProgress& p) { seen.push_back(p); };
+  precompute_tensors(organ->model, contacts, standard_row_sets(organ->mesh, contacts), opts);
+  ASSERT_GE(seen.size(), 3u);
+  EXPECT_EQ(seen.front().columns_done, 0);
+  EXPECT_EQ(seen.back().columns_done, 3 * static_cast<int>(contacts.size()));
+  EXPECT_DOUBLE_EQ(seen.back().fraction, 1.0);
+  EXPECT_DOUBLE_EQ(seen.back().eta_s, 0.0);
+  for (std::size_t i = 1; i < seen.size(); ++i) {
+    EXPECT_GT(seen[i].fraction, seen[i - 1].fraction);
+    EXPECT_GE(seen[i].eta_s, 0.0);
+  }
+}
+
+TEST(Precompute, MemoryLimitRefusesWithTheEstimate) {
+  auto organ = test::box_organ(6, 5, 4);
+  const auto contacts = contactable_nodes(organ->mesh, organ->fixed);
+  const auto rows = standard_row_sets(organ->mesh, contacts);
+  PrecomputeOptions opts;
+  const MemoryEstimate est = estimate_precompute_memory(organ->model, static_cast<int>(contacts.size()), rows, opts);
+  std::size_t r = 0;
+  for (const auto& s : rows) r += s.nodes.size();
+  EXPECT_EQ(est.tensors, 9 * r * contacts.size() * sizeof(double));
+  EXPECT_GT(est.factor, 0u);
+  opts.memory_limit_mb = 0.5 * static_cast<double>(est.total()) / (1024.0 * 1024.0);
+  bool called = false;
+  opts.progress = [&](const PrecomputeProgress&) { called = true; };
+  try {
+    precompute_tensors(organ->model, contacts, rows, opts);
+    FAIL() << "expected a refusal";
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("exceeds the limit"), std::string::npos) << m;
+    EXPECT_NE(m.find("--memory-limit-mb"), std::string::npos) << m;
+    EXPECT_NE(m.find("MiB (tensors"), std::string::npos) << m;
+  }
+  EXPECT_FALSE(called);  // refused before solving anything
+}
+
+TEST(Precompute, BadNodeSetsAreErrors) {
+  auto organ = test::box_organ(3, 2, 2);
+  const std::vector<RowSet> rows = {{"haptic", {5}}};
+  EXPECT_THROW(precompute_tensors(organ->model, {0}, rows, PrecomputeOptions()), Error);  // node 0 is fixed
+  EXPECT_THROW(precompute_tensors(organ->model, {30, 30}, rows, PrecomputeOptions()), Error);
+  EXPECT_THROW(precompute_tensors(organ->model, {30}, {{"a", {1000}}}, PrecomputeOptions()), Error);
+  EXPECT_THROW(precompute_tensors(organ->model, {30}, {{"a", {1}}, {"a", {2}}}, PrecomputeOptions()), Error);
+}
+
+TEST(Precompute, IsDeterministic) {
+  auto organ = test::box_organ(4, 3, 3);
+  const auto contacts = contactable_nodes(organ->mesh, organ->fixed);
+  const auto rows = standard_row_sets(organ->mesh, contacts);
+  const Tensors a = precompute_tensors(organ->model, contacts, rows, PrecomputeOptions());
+  const Tensors b = precompute_tensors(organ->model, contacts, rows, PrecomputeOptions());
+  const auto& ga = a.find("visual")->g;
+  const auto& gb = b.find("visual")->g;
+  EXPECT_EQ(0, std::memcmp(ga.data(), gb.data(), sizeof(double) * static_cast<std::size_t>(ga.size())));
+}
+
+}  // namespace
+}  // namespace surgsim

@@ -1,0 +1,40 @@
+// Shared by the intestine tests: a scripted probe that pushes and lifts the folds (the scripted run of the recall
+// test, also used by intestine_bench).
+#pragma once
+#include <Eigen/Core>
+#include <algorithm>
+#include <array>
+
+#include "intestine/intestine_model.h"
+
+namespace surgsim::intestine::test {
+
+/// Probe path for the default model (vessel along x through the origin, the folds hanging below it once gravity has
+/// acted): settle 0.4 s, push the folds sideways, lift them, sweep along the vessel, pull back. Piecewise linear.
+inline Probe scripted_probe(double t) {
+  struct Key {
+    double t;
+    double x, y, z;
+  };
+  static constexpr std::array<Key, 6> keys{{{0.4, 0.0, 0.22, -0.12},
+                                            {1.0, 0.0, -0.02, -0.12},
+                                            {1.6, 0.08, -0.02, -0.01},
+                                            {2.2, -0.12, 0.0, -0.08},
+                                            {2.8, 0.1, 0.05, -0.13},
+                                            {3.4, 0.0, 0.25, -0.1}}};
+  Probe p;
+  p.radius = 0.01;
+  if (t < keys.front().t || t > keys.back().t) return p;
+  p.active = true;
+  for (std::size_t i = 0; i + 1 < keys.size(); ++i) {
+    if (t <= keys[i + 1].t) {
+      const double f = (t - keys[i].t) / (keys[i + 1].t - keys[i].t);
+      p.center = Eigen::Vector3d((1 - f) * keys[i].x + f * keys[i + 1].x, (1 - f) * keys[i].y + f * keys[i + 1].y,
+                                 (1 - f) * keys[i].z + f * keys[i + 1].z);
+      break;
+    }
+  }
+  return p;
+}
+
+}  // namespace surgsim::intestine::test

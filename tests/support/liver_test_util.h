@@ -1,0 +1,63 @@
+// Shared helpers for the liver physics tests: small organs built from structured meshes, and error norms.
+#pragma once
+#include <Eigen/Core>
+#include <algorithm>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "mesh/box_mesh.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+
+namespace surgsim::test {
+
+/// A mesh, its material and fixed set, and the assembled model pointing at them (not movable: the model holds a
+/// pointer to the mesh).
+struct Organ {
+  TetMesh mesh;
+  Material material;
+  FixedSet fixed;
+  ElasticModel model;
+
+  Organ(TetMesh m, const Material& mat, FixedSet f)
+      : mesh(std::move(m)), material(mat), fixed(std::move(f)), model(build_elastic_model(mesh, material, fixed)) {}
+  Organ(const Organ&) = delete;
+  Organ& operator=(const Organ&) = delete;
+};
+
+inline Material liver_material() {
+  Material m;
+  m.young_modulus = 3000.0;  // Pa
+  m.poisson_ratio = 0.45;
+  return m;
+}
+
+/// A liver-sized box (0.16 x 0.12 x 0.08 m) of nx x ny x nz cells, clamped on its bottom face (z = 0).
+inline std::unique_ptr<Organ> box_organ(int nx = 8, int ny = 6, int nz = 4, BoxSplit split = BoxSplit::kSix) {
+  TetMesh mesh = make_box_mesh(nx, ny, nz, Eigen::Vector3d(0.16, 0.12, 0.08), Eigen::Vector3d::Zero(), split);
+  FixedRegion region;
+  region.has_plane = true;
+  region.plane_point = Eigen::Vector3d::Zero();
+  region.plane_normal = -Eigen::Vector3d::UnitZ();  // z <= 0 fixed
+  FixedSet fixed = fixed_set_from_region(mesh, region);
+  return std::make_unique<Organ>(std::move(mesh), liver_material(), std::move(fixed));
+}
+
+/// |a - b| / |b| (max norm over all entries), with |b| floored at `floor`.
+template <typename A, typename B>
+double rel_error(const A& a, const B& b, double floor = 1e-300) {
+  return (a - b).cwiseAbs().maxCoeff() / std::max(b.cwiseAbs().maxCoeff(), floor);
+}
+
+/// m distinct random picks from `pool`.
+inline std::vector<int> pick(const std::vector<int>& pool, int m, std::mt19937& rng) {
+  std::vector<int> p = pool;
+  std::shuffle(p.begin(), p.end(), rng);
+  p.resize(static_cast<std::size_t>(m));
+  return p;
+}
+
+}  // namespace surgsim::test
