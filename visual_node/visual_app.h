@@ -1,26 +1,26 @@
-// The visual node: init (scene, mesh, renderer, DDS), run (frame-paced loop drawing the newest contact frame),
-// shutdown (video, stats).
+// The visual node: init (scene, organ view, renderer, frame output, DDS), run (frame-paced loop drawing the newest
+// contact frame), shutdown (video, stats). The organ is behind OrganView (organ_view.h): nothing here depends on
+// which model the scene uses.
 #pragma once
-#include <array>
 #include <atomic>
-#include <cstdio>
 #include <cstdint>
 #include <memory>
 #include <string>
 
-#include "haptic_watch.h"
-#include "image.h"
-#include "mesh/mesh.h"
-#include "liver/precompute.h"
-#include "liver/nonlinear_law.h"
-#include "surface_deformer.h"
-#include "scene/scene.h"
 #include "core/stats.h"
+#include "haptic_watch.h"
+#include "render/image.h"
+#include "scene/scene.h"
 
 namespace surgsim {
 
+namespace msg {
+class ContactFrame;
+}
+class FrameOutput;
+class OrganView;
 class Renderer;
-class IntestineView;
+class VisualDds;
 
 struct VisualOptions {
   std::string scene = "liver";
@@ -53,42 +53,32 @@ class VisualApp {
   void shutdown();
 
  private:
-  struct Dds;
+  /// Once the haptic side's SceneInfo is known: whether it runs this scene with the same tensors (else frames are
+  /// ignored and run() returns 3).
+  void check_scene_identity();
+  /// Deformation, drawing and the PNG of one frame: `frame` is the newest frame taken (shown when `have_frame`),
+  /// `fresh` when it arrived since the last one.
+  void render_frame(const msg::ContactFrame& frame, bool have_frame, bool fresh);
 
   VisualOptions options_;
   std::string dds_threads_note_;            // how the DDS threads are scheduled (stats "dds_threads")
   Scene scene_;
-  TetMesh mesh_;
-  SurfaceMesh surface_;
+  std::unique_ptr<OrganView> organ_;        // the scene's organ (organ_view.h); the only organ-specific part
   std::uint64_t scene_hash_ = 0;
-  std::uint64_t tensor_hash_ = 0;
-  Tensors tensors_;                         // "visual" block only (no interior rows)
-  std::unique_ptr<NonlinearLaw> law_;
-  std::unique_ptr<SurfaceDeformer> deformer_;    // liver-type scenes only
-  std::unique_ptr<IntestineView> intestine_;     // model "intestine" only (then no mesh, tensors or deformer_)
-  std::FILE* index_ = nullptr;              // frames.csv: which contact frame each PNG shows
-  std::array<int, 64> contact_nodes_{};
-  std::array<Eigen::Vector3d, 64> contact_lambda_{};
-  Eigen::MatrixX3f markers_;                // contact points drawn as markers
-  std::uint64_t deform_errors_ = 0;
-  std::uint64_t vtk_written_ = 0;
   std::unique_ptr<Renderer> renderer_;
+  std::unique_ptr<FrameOutput> output_;     // PNG, frames.csv, VTK, video
   HapticWatch watch_;                       // built before the constructor body: its clock origin is the node's start
-  std::unique_ptr<Dds> dds_;
+  std::unique_ptr<VisualDds> dds_;
   std::atomic<bool> stop_requested_{false};
 
   double rate_hz_ = 50;
-  int png_every_ = 5;
+  bool hash_checked_ = false;
+  bool hash_ok_ = true;
   std::uint64_t frames_rendered_ = 0;
-  std::uint64_t pngs_written_ = 0;
-  std::uint64_t png_errors_ = 0;
   Image image_;  // read-back buffer, reused every frame
   double wall_seconds_ = 0;
   SampleRecorder deform_us_{1 << 18};
   SampleRecorder render_ms_{1 << 18};
-  std::string video_;            // path of the MP4 written, or why not
-  std::string first_png_;
-  std::string last_png_;
 };
 
 }  // namespace surgsim

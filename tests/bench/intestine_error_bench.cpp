@@ -31,8 +31,8 @@
 #include "intestine/intestine_model.h"
 #include "intestine_run.h"
 #include "support/intestine_test_util.h"
-#include "intestine_view.h"
-#include "renderer.h"
+#include "organs/intestine_view.h"
+#include "render/renderer.h"
 #include "scene/scene.h"
 #include "intestine/tube_geometry.h"
 

@@ -17,11 +17,11 @@
 #include "liver_contacts.h"
 #include "liver/liver_setup.h"
 #include "mesher/organ_mesher.h"
-#include "renderer.h"
+#include "render/renderer.h"
 #include "scene/scene.h"
 #include "mesher/scene_mesh.h"
 #include "core/stats.h"
-#include "surface_deformer.h"
+#include "organs/surface_deformer.h"
 
 using namespace surgsim;
 

@@ -1,4 +1,4 @@
-#include "osmesa_renderer.h"
+#include "render/osmesa_renderer.h"
 
 // GL types, enums and function-pointer types come from the core-profile header only. osmesa.h includes the legacy
 // <GL/gl.h>, which would clash with glcorearb.h: its include guard is set so that only the OSMesa API is declared.

@@ -18,6 +18,9 @@
 //
 // Phases: construction allocates everything (tube meshes for the finest LOD, the mesentery's triangles, the
 // BodyState sample); update(), set_positions(), frame_done() allocate nothing; stats() is for shutdown.
+//
+// IntestineOrganView is the intestine behind the visual node's OrganView (organ_view.h): an IntestineView, the
+// fallback to CPU skinning when the renderer has none, the BodyState subscription, the intestine's stats and lines.
 #pragma once
 #include <Eigen/Core>
 #include <array>
@@ -26,11 +29,12 @@
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "core/stats.h"
 #include "dds_support.h"
 #include "intestine/frame_rate_controller.h"
-#include "scene/scene.h"
-#include "core/stats.h"
 #include "intestine/tube_geometry.h"
+#include "organ_view.h"
+#include "scene/scene.h"
 
 namespace surgsim {
 
@@ -120,6 +124,35 @@ class IntestineView {
   SampleRecorder build_us_{1 << 18};
   int tube_vertices_max_ = 0;
   int tube_triangles_max_ = 0;
+};
+
+/// The intestine as the visual node's organ: the frame loop's update() takes the newest BodyState (contact frames do
+/// not deform it), the frame-rate controller gets each frame's work time.
+class IntestineOrganView : public OrganView {
+ public:
+  /// Init: see IntestineView (no mesh, no tensors).
+  IntestineOrganView(const Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning);
+
+  /// Skins the tube on the CPU when the renderer cannot on the GPU (says so on stderr).
+  void attach(const Renderer& renderer) override;
+  void subscribe(dds::Participant& participant) override { view_.subscribe(participant); }
+  void print_init(std::ostream& out) const override;
+
+  /// The newest BodyState as tube and mesentery, at the LOD the frame-rate controller chose; the time of a frame that
+  /// took a new body state is its deformation time.
+  double update(const msg::ContactFrame* frame, bool fresh) noexcept override;
+  void draw(Renderer& renderer) const override { view_.draw(renderer); }
+  void frame_done(double work_seconds) noexcept override { view_.frame_done(work_seconds); }
+  std::uint32_t lod() const override { return static_cast<std::uint32_t>(view_.lod()); }
+
+  /// "model_built", "intestine" (IntestineView::stats), "lod_mean", "lod_target_fps".
+  void add_stats(nlohmann::json& stats) const override;
+  void print_summary(std::ostream& out, const nlohmann::json& stats) const override;
+
+  const IntestineView& view() const { return view_; }
+
+ private:
+  IntestineView view_;
 };
 
 }  // namespace surgsim

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "intestine/intestine_model.h"
-#include "renderer.h"
+#include "render/renderer.h"
 #include "intestine/tube_geometry.h"
 
 namespace surgsim {

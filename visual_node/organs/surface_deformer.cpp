@@ -1,4 +1,4 @@
-#include "surface_deformer.h"
+#include "organs/surface_deformer.h"
 
 #include <Eigen/Geometry>
 #include <cmath>

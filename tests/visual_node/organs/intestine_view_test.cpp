@@ -1,5 +1,5 @@
 // IntestineView without DDS or GL: body states in, tube and mesentery drawn on the null renderer, LOD control.
-#include "intestine_view.h"
+#include "organs/intestine_view.h"
 
 #include <gtest/gtest.h>
 
@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "intestine/intestine_model.h"
-#include "renderer.h"
+#include "render/renderer.h"
 
 namespace surgsim {
 namespace {

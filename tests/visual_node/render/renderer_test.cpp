@@ -1,4 +1,4 @@
-#include "renderer.h"
+#include "render/renderer.h"
 
 #include <gtest/gtest.h>
 

@@ -1,13 +1,14 @@
-#include "intestine_view.h"
+#include "organs/intestine_view.h"
 
 #include <algorithm>
 #include <cmath>
+#include <iostream>
 #include <mutex>
 
 #include "Surgsim.h"
 #include "SurgsimPubSubTypes.h"
 #include "core/clock.h"
-#include "renderer.h"
+#include "render/renderer.h"
 
 namespace surgsim {
 
@@ -244,6 +245,47 @@ nlohmann::json IntestineView::stats() const {
                     {"narrowed_rings", ts.narrowed_rings},
                     {"min_radius_m", ts.min_radius}};
   return j;
+}
+
+IntestineOrganView::IntestineOrganView(const Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning)
+    : view_(scene, scene_hash, skinning) {}
+
+void IntestineOrganView::attach(const Renderer& renderer) {
+  if (view_.skinning() == intestine::TubeSkinning::kGpu && !renderer.gpu_skinning()) {
+    std::cerr << "visual_node: " << renderer.info() << ": skinning the intestine tube on the CPU instead "
+              << "(--tube-skinning cpu)\n";
+    view_.set_skinning(intestine::TubeSkinning::kCpu);
+  }
+}
+
+void IntestineOrganView::print_init(std::ostream& out) const {
+  out << "visual_node: intestine: tube skinned on the "
+      << (view_.skinning() == intestine::TubeSkinning::kGpu ? "GPU (vertex shader)" : "CPU")
+      << " + mesentery strip, LOD by the frame-rate "
+      << "controller (target " << view_.controller().params().target_hz << " Hz)\n";
+}
+
+double IntestineOrganView::update(const msg::ContactFrame*, bool) noexcept {
+  const std::uint64_t t0 = monotonic_ns();
+  if (!view_.update()) return -1;
+  return static_cast<double>(monotonic_ns() - t0) * 1e-3;
+}
+
+void IntestineOrganView::add_stats(nlohmann::json& j) const {
+  // Which organ model this run built (an intestine run builds no mesh or tensors).
+  j["model_built"] = "intestine";
+  j["intestine"] = view_.stats();
+  j["lod_mean"] = j["intestine"]["lod_mean"];
+  j["lod_target_fps"] = j["intestine"]["target_fps"];
+}
+
+void IntestineOrganView::print_summary(std::ostream& out, const nlohmann::json& j) const {
+  const nlohmann::json& in = j["intestine"];
+  out << "visual_node: intestine: " << in["body_states_received"].get<std::uint64_t>()
+      << " body states received, LOD mean " << in["lod_mean"].get<double>() << " (final "
+      << in["lod_final"].get<int>() << ", target " << in["target_fps"].get<double>() << " Hz, frame work p50 "
+      << in["work_ms"]["p50"].get<double>() << " ms), tube up to " << in["tube_triangles_max"].get<int>()
+      << " triangles\n";
 }
 
 }  // namespace surgsim

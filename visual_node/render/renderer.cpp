@@ -1,10 +1,10 @@
-#include "renderer.h"
+#include "render/renderer.h"
 
 #include <Eigen/Geometry>
 #include <cmath>
 
 #include "core/error.h"
-#include "osmesa_renderer.h"
+#include "render/osmesa_renderer.h"
 
 namespace surgsim {
 namespace {

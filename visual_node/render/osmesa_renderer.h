@@ -2,7 +2,7 @@
 #pragma once
 #include <memory>
 
-#include "renderer.h"
+#include "render/renderer.h"
 
 namespace surgsim {
 

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "image.h"
+#include "render/image.h"
 #include "scene/scene.h"
 #include "tool/tool.h"
 #include "intestine/tube_geometry.h"

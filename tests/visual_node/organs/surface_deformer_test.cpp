@@ -1,5 +1,5 @@
 // The visual node's deformation equals the reference solve, and a rendered dent changes pixels near the contact only.
-#include "surface_deformer.h"
+#include "organs/surface_deformer.h"
 
 #include <gtest/gtest.h>
 
@@ -10,7 +10,7 @@
 #include "liver/fem.h"
 #include "liver/fixed_set.h"
 #include "liver/precompute.h"
-#include "renderer.h"
+#include "render/renderer.h"
 #include "liver/static_solver.h"
 
 namespace surgsim {

@@ -1,0 +1,21 @@
+#include "organ_view.h"
+
+#include "organs/intestine_view.h"
+#include "organs/liver_view.h"
+
+namespace surgsim {
+
+std::uint64_t visual_scene_hash(const Scene& scene, std::uint64_t mesh_hash) {
+  return scene.hash() ^ (mesh_hash * 0x9E3779B97F4A7C15ull);
+}
+
+std::unique_ptr<OrganView> make_organ_view(const Scene& scene, const OrganViewOptions& options) {
+  // The intestine: a skinned tube and the mesentery from BodyStates; no tetrahedral mesh (hash 0, as in the haptic
+  // node), no tensors, no deformer.
+  if (scene.model == "intestine") {
+    return std::make_unique<IntestineOrganView>(scene, visual_scene_hash(scene, 0), options.tube_skinning);
+  }
+  return std::make_unique<LiverView>(scene, options);
+}
+
+}  // namespace surgsim
