@@ -1,4 +1,6 @@
-// The haptic node: init (scene, mesh, model, DDS, buffers), run (the fixed-rate loop), shutdown (stats).
+// The haptic node: init (scene, input, the organ from the factory, outputs, DDS), run (the fixed-rate loop), shutdown
+// (stats). The organ is behind HapticOrgan (organ.h), the DDS entities behind HapticDds (haptic_dds.h): nothing here
+// depends on which organ the scene names.
 #pragma once
 #include <atomic>
 #include <cstdint>
@@ -7,16 +9,14 @@
 #include <string>
 
 #include "async_writer.h"
-#include "intestine_runner.h"
-#include "liver_contacts.h"
-#include "mesh/mesh.h"
-#include "liver/nonlinear_law.h"
-#include "liver/precompute.h"
-#include "scene/scene.h"
 #include "core/stats.h"
+#include "organ.h"
+#include "scene/scene.h"
 #include "tool/trajectory.h"
 
 namespace surgsim {
+
+class HapticDds;
 
 struct HapticOptions {
   std::string scene = "liver";      // scene YAML path or shipped scene name
@@ -60,28 +60,23 @@ class HapticApp {
   std::uint64_t total_ticks() const { return total_ticks_; }
 
  private:
-  struct Dds;
 
   /// The pose to use this tick: trajectory sample, or the newest device command (held when lost).
   bool input_pose(double t, Pose5& pose);
 
   HapticOptions options_;
   Scene scene_;
-  TetMesh mesh_;
-  SurfaceMesh surface_;
   Trajectory trajectory_;
   TrajectoryRecorder recorder_;
   std::FILE* log_ = nullptr;
   std::unique_ptr<AsyncLineWriter> log_writer_;     // --log lines, written off the loop thread
   std::unique_ptr<AsyncLineWriter> record_writer_;  // --record lines, written off the loop thread
-  Tensors tensors_;                        // "haptic" block only
-  std::unique_ptr<NonlinearLaw> law_;      // identity when the scene has no curves
-  std::unique_ptr<LiverContacts> contacts_;
-  std::unique_ptr<IntestineRunner> intestine_;  // model "intestine" only (then no mesh, tensors or contacts_)
-  ContactSolution no_contacts_;                 // what the intestine's ContactFrames carry: no contact entries
-  std::uint64_t tensor_hash_ = 0;
-  std::unique_ptr<Dds> dds_;
+  std::unique_ptr<HapticOrgan> organ_;     // the scene's organ (make_haptic_organ)
+  std::unique_ptr<HapticDds> dds_;
   Pose5 held_pose_;                         // last good pose (held while device input is lost)
+  Pose5 last_command_;                      // newest device command, its arrival (monotonic ns), commands so far
+  std::uint64_t last_command_ns_ = 0;
+  std::uint64_t commands_received_ = 0;
   bool live_ = false;
   std::atomic<bool> stop_requested_{false};
 
@@ -90,7 +85,6 @@ class HapticApp {
   std::uint64_t total_ticks_ = 0;    // 0 = unbounded
   std::uint64_t ticks_done_ = 0;
   std::uint64_t scene_hash_ = 0;
-  std::uint64_t mesh_hash_ = 0;
   std::string realtime_note_;
   std::string dds_threads_note_;   // how the DDS threads are scheduled (stats "dds_threads")
 

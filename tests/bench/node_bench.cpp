@@ -14,7 +14,7 @@
 #include "core/clock.h"
 #include "csv_out.h"
 #include "liver/bucket_grid.h"
-#include "liver_contacts.h"
+#include "organs/liver_contacts.h"
 #include "liver/liver_setup.h"
 #include "mesher/organ_mesher.h"
 #include "render/renderer.h"

@@ -16,7 +16,7 @@
 #include "liver/fem.h"
 #include "liver/fixed_set.h"
 #include "intestine/intestine_model.h"
-#include "liver_contacts.h"
+#include "organs/liver_contacts.h"
 #include "mesh/mesh.h"
 #include "liver/nonlinear_law.h"
 #include "liver/precompute.h"
@@ -512,7 +512,7 @@ std::vector<CaseResult> liver_contact_cases() {
       r.outcome = ok ? Outcome::kIgnored : Outcome::kFailed;
       r.message = text("contact on a triangle with ", fixed_corners, " fixed corner(s): ", fixed_corners,
                        " ignored, ", constrained, " constrained; force ", tick.force.norm(), " N, status ",
-                       to_string(tick.status));
+                       to_string(contacts.status()));
     }));
   }
   return out;
@@ -599,7 +599,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
         if (crossing_tick < 0 && g.tip.z() < top) crossing_tick = k;
         if (contact_tick < 0 && tick.points_in_contact > 0) contact_tick = k;
         saturated += tick.saturated ? 1 : 0;
-        faults += tick.nonfinite || tick.status != ContactStatus::kOk ? 1 : 0;
+        faults += tick.nonfinite || contacts.status() != ContactStatus::kOk ? 1 : 0;
         bool finite = tick.force.allFinite() && tick.device_force.allFinite();
         const ContactSolution& s = contacts.solution();
         for (int l = 0; l < s.count; ++l) {

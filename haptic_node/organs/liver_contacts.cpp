@@ -1,4 +1,4 @@
-#include "liver_contacts.h"
+#include "organs/liver_contacts.h"
 
 #include <Eigen/Geometry>
 #include <cmath>
@@ -53,6 +53,7 @@ Eigen::Vector3d LiverContacts::corrected(int l) const noexcept {
 
 void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& out) noexcept {
   out = ContactTick{};
+  status_ = ContactStatus::kOk;
   const int n_points = geometry.point_count;
 
   // A non-finite tool pose never reaches the physics: drop contacts, zero force, report.
@@ -162,10 +163,11 @@ void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& 
     solution_ = ContactSolution{};
     return;
   }
-  out.status = superposition_.solve(requests_.data(), m, solution_);
-  if (out.status != ContactStatus::kOk) {
-    if (out.status == ContactStatus::kOverCapacity) out.over_capacity = true;
-    if (out.status == ContactStatus::kNonFinite) out.nonfinite = true;
+  status_ = superposition_.solve(requests_.data(), m, solution_);
+  const ContactStatus status = status_;
+  if (status != ContactStatus::kOk) {
+    if (status == ContactStatus::kOverCapacity) out.over_capacity = true;
+    if (status == ContactStatus::kNonFinite) out.nonfinite = true;
     solution_ = ContactSolution{};
     return;
   }

@@ -1,4 +1,7 @@
-#include "intestine_runner.h"
+#include "organs/intestine_organ.h"
+
+#include <ostream>
+#include <string>
 
 #include <algorithm>
 #include <cmath>
@@ -9,7 +12,7 @@
 
 namespace surgsim {
 
-IntestineRunner::IntestineRunner(const Scene& scene, std::uint64_t ticks)
+IntestineOrgan::IntestineOrgan(const Scene& scene, std::uint64_t ticks)
     : model_(scene.intestine.params),
       state_(model_),
       probe_radius_(scene.intestine.probe_radius),
@@ -20,14 +23,14 @@ IntestineRunner::IntestineRunner(const Scene& scene, std::uint64_t ticks)
   }
 }
 
-void IntestineRunner::create_writer(dds::Participant& participant, std::uint64_t scene_hash) {
+void IntestineOrgan::create_writers(dds::Participant& participant, std::uint64_t scene_hash) {
   writer_ = participant.writer(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()),
                                dds::kStreamWriter);
   sample_.scene_hash(scene_hash);
   sample_.positions().resize(static_cast<std::size_t>(state_.point_count()));  // the only allocation of the sample
 }
 
-void IntestineRunner::step(const ToolGeometry* tool, double dt, ContactTick& out) noexcept {
+void IntestineOrgan::step(const ToolGeometry* tool, double /*jaw*/, double dt, ContactTick& out) noexcept {
   intestine::Probe probe;
   if (tool != nullptr) {
     probe.active = true;
@@ -69,7 +72,7 @@ void IntestineRunner::step(const ToolGeometry* tool, double dt, ContactTick& out
   active_pairs_max_ = std::max(active_pairs_max_, r.detection.segment_pairs + r.detection.cell_pairs);
 }
 
-void IntestineRunner::publish(const msg::ContactFrame& frame) noexcept {
+void IntestineOrgan::publish(const msg::ContactFrame& frame) noexcept {
   if (writer_ == nullptr) return;
   sample_.seq(frame.seq());
   sample_.sim_time(frame.sim_time());
@@ -88,7 +91,7 @@ void IntestineRunner::publish(const msg::ContactFrame& frame) noexcept {
   ++published_;
 }
 
-nlohmann::json IntestineRunner::stats() const {
+nlohmann::json IntestineOrgan::stats() const {
   nlohmann::json j;
   j["nodes"] = model_.node_count();
   j["columns"] = model_.columns();
@@ -112,6 +115,22 @@ nlohmann::json IntestineRunner::stats() const {
   j["energy_j"] = intestine::energy(model_, state_);
   j["positions_finite"] = state_.x.allFinite();
   return j;
+}
+
+std::string IntestineOrgan::describe() const {
+  return std::to_string(model_.rows()) + " x " + std::to_string(model_.columns()) +
+         " masses (intestine and mesentery, mass-spring); ";
+}
+
+void IntestineOrgan::add_stats(nlohmann::json& j) const { j["intestine"] = stats(); }
+
+void IntestineOrgan::print_summary(std::ostream& out) const {
+  const nlohmann::json in = stats();
+  out << "haptic_node: intestine step p50 " << in["step_us"]["p50"].get<double>() << " us p99 "
+      << in["step_us"]["p99"].get<double>() << " us, " << in["faults"].get<std::uint64_t>() << " faults, "
+      << "self-contacts max " << in["self_contacts_max"].get<int>() << ", probe contacts max "
+      << in["probe_contacts_max"].get<int>() << ", " << in["body_states_published"].get<std::uint64_t>()
+      << " body states published\n";
 }
 
 }  // namespace surgsim

@@ -13,6 +13,7 @@
 #include "scene/scene.h"
 #include "liver/superposition.h"
 #include "tool/tool.h"
+#include "organ.h"
 
 namespace surgsim {
 
@@ -29,17 +30,6 @@ struct PointContact {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // outward unit normal of the rest triangle
 };
 
-struct ContactTick {
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();         // N, on the tool, after the non-linear law
-  Eigen::Vector3d device_force = Eigen::Vector3d::Zero();  // N, clamped to the device limit, always finite
-  Eigen::Vector3d direction = Eigen::Vector3d::Zero();     // unit mean imposed displacement (0 without contact)
-  bool saturated = false;
-  bool over_capacity = false;
-  bool nonfinite = false;      // a non-finite value was refused this tick (force zeroed)
-  bool grasp = false;
-  int points_in_contact = 0;
-  ContactStatus status = ContactStatus::kOk;
-};
 
 class LiverContacts {
  public:
@@ -56,6 +46,8 @@ class LiverContacts {
   void reset() noexcept;
 
   const ContactSolution& solution() const { return solution_; }
+  /// The constrained solve's status in the last step() (kOk when it had nothing to solve).
+  ContactStatus status() const { return status_; }
   const PointContact& point(int i) const { return points_[static_cast<std::size_t>(i)]; }
   const BucketGrid& grid() const { return grid_; }
   /// Corrected constraint u~_l = G_{k_l k_l} lambda_l of solution node l (m).
@@ -74,6 +66,7 @@ class LiverContacts {
   BucketGrid grid_;
   Superposition superposition_;
   ContactSolution solution_;
+  ContactStatus status_ = ContactStatus::kOk;
   std::array<PointContact, kMaxShaftPoints> points_{};
   std::array<Eigen::Vector3d, kMaxShaftPoints> previous_{};
   bool have_previous_ = false;

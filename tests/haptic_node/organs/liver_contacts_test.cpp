@@ -1,4 +1,4 @@
-#include "liver_contacts.h"
+#include "organs/liver_contacts.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // The intestine scene in the haptic node (DESIGN.md 4.3, issue 6): the mass-spring intestine and mesentery stepped
 // every tick with the tool tip as the probe, the probe force for the device, and the body's positions published as
-// BodyState for the visual node. A liver scene never builds one (HapticApp makes it for model "intestine" only), and
-// an intestine scene builds no mesh, tensors or bucket grid.
+// BodyState for the visual node. A liver scene never builds one (make_haptic_organ makes it for model "intestine"
+// only), and an intestine scene builds no mesh, tensors or bucket grid.
 //
 // Phases: the constructor and create_writer() allocate (model, state, step-time storage, the DDS writer and its
 // sample sized once to the body's node count); step() and publish() allocate nothing; stats() is for shutdown.
@@ -19,25 +19,36 @@
 
 namespace surgsim {
 
-class IntestineRunner {
+class IntestineOrgan final : public HapticOrgan {
  public:
   /// Init (allocates; throws surgsim::Error on bad parameters): the model and state of scene.intestine, room for
   /// `ticks` step times.
-  IntestineRunner(const Scene& scene, std::uint64_t ticks);
+  IntestineOrgan(const Scene& scene, std::uint64_t ticks);
+
+  const char* model_name() const override { return "intestine"; }
 
   /// Init: the BodyState writer (stream profile: best effort, keep last 1) and its preallocated sample.
-  void create_writer(dds::Participant& participant, std::uint64_t scene_hash);
+  void create_writers(dds::Participant& participant, std::uint64_t scene_hash) override;
 
   /// Run phase, noexcept, no allocation: one step of dt (s) with the probe at the tool tip (no probe when `tool` is
   /// null, e.g. while the device input is lost: the body keeps moving, the force is zero). Fills `out` as
   /// LiverContacts::step does: force (N, on the tool, before the device clamp), device_force (clamped to
   /// tool.force_limit, always finite), saturated, over_capacity (probe or self-contact capacity exceeded), nonfinite
   /// (the step was refused and the state restored: a fault), points_in_contact (elements the probe touches).
-  void step(const ToolGeometry* tool, double dt, ContactTick& out) noexcept;
+  void step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept override;
+  int contacts(const ContactTick& out) const noexcept override { return out.points_in_contact; }
 
   /// Run phase, no allocation: publishes the positions as BodyState with the seq, sim time, pose and tip of `frame`
-  /// (the ContactFrame of the same tick). Nothing when create_writer() was not called.
-  void publish(const msg::ContactFrame& frame) noexcept;
+  /// (the ContactFrame of the same tick). Nothing when create_writers() was not called.
+  void publish(const msg::ContactFrame& frame) noexcept override;
+
+  /// SceneInfo: the body's masses, and the intestine's points among them.
+  std::uint32_t node_count() const override { return static_cast<std::uint32_t>(model_.node_count()); }
+  std::uint32_t surface_node_count() const override { return static_cast<std::uint32_t>(model_.columns()); }
+  std::string describe() const override;
+  /// Shutdown: "intestine": stats() in the JSON, and the step-time summary line.
+  void add_stats(nlohmann::json& stats) const override;
+  void print_summary(std::ostream& out) const override;
 
   const intestine::IntestineModel& model() const { return model_; }
   const intestine::IntestineState& state() const { return state_; }

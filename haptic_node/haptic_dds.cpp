@@ -1,0 +1,199 @@
+#include "haptic_dds.h"
+
+#include <chrono>
+#include <mutex>
+#include <thread>
+
+#include "Surgsim.h"
+#include "SurgsimPubSubTypes.h"
+#include "core/clock.h"
+
+namespace surgsim {
+
+using eprosima::fastdds::dds::DataReader;
+using eprosima::fastdds::dds::DataReaderListener;
+using eprosima::fastdds::dds::DataWriter;
+using eprosima::fastdds::dds::SampleInfo;
+
+namespace {
+
+msg::Vec3 to_msg(const Eigen::Vector3d& v) {
+  msg::Vec3 m;
+  m.x(v.x());
+  m.y(v.y());
+  m.z(v.z());
+  return m;
+}
+
+msg::ToolPose to_msg(const Pose5& p) {
+  msg::ToolPose m;
+  m.pitch(p.pitch);
+  m.yaw(p.yaw);
+  m.insertion(p.insertion);
+  m.roll(p.roll);
+  m.jaw(p.jaw);
+  return m;
+}
+
+// Round-trip latency from VisualStatus echoes (runs on the DDS listener thread).
+class VisualStatusListener : public DataReaderListener {
+ public:
+  explicit VisualStatusListener(std::size_t capacity) : rtt_us_(capacity) {}
+  void on_data_available(DataReader* reader) override {
+    SampleInfo info;
+    while (reader->take_next_sample(&status_, &info) == eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data || status_.echoed_stamp_ns() == 0) continue;
+      const std::uint64_t now = monotonic_ns();
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (status_.echoed_stamp_ns() == last_echo_) continue;  // the same frame echoed again
+      last_echo_ = status_.echoed_stamp_ns();
+      rtt_us_.add(static_cast<double>(now - status_.echoed_stamp_ns()) * 1e-3);
+      ++received_;
+    }
+  }
+  Percentiles summary() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return rtt_us_.summary();
+  }
+  std::uint64_t received() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return received_;
+  }
+
+ private:
+  std::mutex mutex_;
+  msg::VisualStatus status_;
+  SampleRecorder rtt_us_;
+  std::uint64_t last_echo_ = 0;
+  std::uint64_t received_ = 0;
+};
+
+// Newest device command. The loop reads it with try_lock, so it never waits on the DDS thread.
+class ToolCommandListener : public DataReaderListener {
+ public:
+  void on_data_available(DataReader* reader) override {
+    SampleInfo info;
+    while (reader->take_next_sample(&incoming_, &info) == eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      std::lock_guard<std::mutex> lock(mutex_);
+      const auto& p = incoming_.pose();
+      pose_ = Pose5{p.pitch(), p.yaw(), p.insertion(), p.roll(), p.jaw()};
+      receive_ns_ = monotonic_ns();
+      ++received_;
+    }
+  }
+  /// Non-blocking: false when the slot is busy (the caller keeps its previous value).
+  bool try_get(Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) {
+    std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+    if (!lock.owns_lock()) return false;
+    pose = pose_;
+    receive_ns = receive_ns_;
+    received = received_;
+    return true;
+  }
+
+ private:
+  std::mutex mutex_;
+  msg::ToolCommand incoming_;
+  Pose5 pose_;
+  std::uint64_t receive_ns_ = 0;
+  std::uint64_t received_ = 0;
+};
+
+}  // namespace
+
+struct HapticDds::Impl {
+  explicit Impl(const dds::DdsOptions& o) : visual_status(1 << 16), participant(o) {}
+  // Listeners first: members are destroyed in reverse order, so the participant (and its readers, whose callbacks
+  // use the listeners) goes before them.
+  VisualStatusListener visual_status;
+  ToolCommandListener tool_commands;
+  dds::Participant participant;
+  DataWriter* contact_writer = nullptr;
+  DataWriter* force_writer = nullptr;
+  DataWriter* scene_writer = nullptr;
+  DataReader* status_reader = nullptr;
+  // Samples allocated once; the loop only overwrites their fields.
+  msg::ContactFrame frame;
+  msg::ForceFeedback force;
+};
+
+HapticDds::HapticDds(const dds::DdsOptions& options, bool live, std::uint64_t scene_hash)
+    : impl_(std::make_unique<Impl>(options)) {
+  Impl& d = *impl_;
+  auto& p = d.participant;
+  d.contact_writer = p.writer(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()), dds::kContactWriter);
+  d.force_writer = p.writer(p.topic(dds::kForceFeedbackTopic, new msg::ForceFeedbackPubSubType()), dds::kStreamWriter);
+  d.scene_writer = p.writer(p.topic(dds::kSceneInfoTopic, new msg::SceneInfoPubSubType()), dds::kLatchedWriter);
+  if (live) {
+    p.reader(p.topic(dds::kToolCommandTopic, new msg::ToolCommandPubSubType()), dds::kStreamReader, &d.tool_commands);
+  }
+  d.status_reader = p.reader(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()), dds::kStreamReader,
+                             &d.visual_status);
+  d.frame.contacts().reserve(msg::kMaxContacts);
+  d.frame.scene_hash(scene_hash);
+}
+
+HapticDds::~HapticDds() = default;
+
+dds::Participant& HapticDds::participant() { return impl_->participant; }
+
+void HapticDds::publish_scene_info(const msg::SceneInfo& info) {
+  msg::SceneInfo sample = info;
+  impl_->scene_writer->write(&sample);
+}
+
+void HapticDds::wait_for_reader(double seconds, const std::atomic<bool>& stop) {
+  const std::uint64_t until = monotonic_ns() + static_cast<std::uint64_t>(seconds * 1e9);
+  eprosima::fastdds::dds::PublicationMatchedStatus st;
+  while (monotonic_ns() < until && !stop.load(std::memory_order_relaxed)) {
+    impl_->contact_writer->get_publication_matched_status(st);
+    if (st.current_count > 0) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+void HapticDds::latest_command(Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) noexcept {
+  impl_->tool_commands.try_get(pose, receive_ns, received);
+}
+
+void HapticDds::publish(std::uint64_t k, double t, const Pose5& pose, const ToolGeometry& tool, HapticOrgan& organ,
+                        const ContactTick& result, std::uint32_t flags) noexcept {
+  auto& frame = impl_->frame;
+  frame.seq(k);
+  frame.sim_time(t);
+  frame.pose(to_msg(pose));
+  frame.tip(to_msg(tool.tip));
+  auto& entries = frame.contacts();
+  const int count = organ.contact_entries();
+  entries.resize(static_cast<std::size_t>(count));  // within the reserved capacity: no allocation
+  for (int l = 0; l < count; ++l) {
+    const ContactEntry c = organ.contact_entry(l);
+    auto& e = entries[static_cast<std::size_t>(l)];
+    e.node(static_cast<std::uint32_t>(c.node));
+    e.lambda(to_msg(c.lambda));
+    e.u_tilde(to_msg(c.u_tilde));
+  }
+  frame.direction(to_msg(result.direction));
+  frame.force(to_msg(result.force));
+  frame.contact_points(static_cast<std::uint32_t>(result.points_in_contact));
+  frame.flags(flags);
+  frame.stamp_ns(monotonic_ns());
+  impl_->contact_writer->write(&frame);
+
+  auto& ff = impl_->force;
+  ff.seq(k);
+  ff.stamp_ns(frame.stamp_ns());
+  ff.force(to_msg(result.device_force));
+  ff.saturated(result.saturated);
+  ff.flags(flags);
+  impl_->force_writer->write(&ff);
+  organ.publish(frame);  // the organ's own topics (the intestine's BodyState), this tick
+}
+
+Percentiles HapticDds::round_trip() const { return impl_->visual_status.summary(); }
+std::uint64_t HapticDds::visual_status_received() const { return impl_->visual_status.received(); }
+std::string HapticDds::profile() const { return impl_->participant.profile(); }
+std::string HapticDds::description() const { return impl_->participant.description(); }
+
+}  // namespace surgsim

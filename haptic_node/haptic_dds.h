@@ -1,0 +1,56 @@
+// The haptic node's DDS entities (DESIGN.md 5): the participant, the ContactFrame, ForceFeedback and SceneInfo
+// writers, the ToolCommand reader (live input) and the VisualStatus reader (round-trip echoes), with their samples
+// allocated once. Init allocates; publish() and latest_command() allocate nothing (the listeners run on DDS threads;
+// the loop only try-locks the newest command, it never waits on them).
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "core/stats.h"
+#include "dds_support.h"
+#include "organ.h"
+#include "tool/trajectory.h"
+
+namespace surgsim {
+
+namespace msg {
+class SceneInfo;
+}
+
+class HapticDds {
+ public:
+  /// Creates the participant and every endpoint; `live` adds the ToolCommand reader.
+  HapticDds(const dds::DdsOptions& options, bool live, std::uint64_t scene_hash);
+  ~HapticDds();
+  HapticDds(const HapticDds&) = delete;
+  HapticDds& operator=(const HapticDds&) = delete;
+
+  dds::Participant& participant();
+  /// Latched (transient local): a visual node that joins later still gets it.
+  void publish_scene_info(const msg::SceneInfo& info);
+  /// Waits up to `seconds` until a reader (a visual node) matches the ContactFrame writer, or `stop` is set.
+  void wait_for_reader(double seconds, const std::atomic<bool>& stop);
+
+  /// Run phase, no allocation: the newest device command, its arrival time (monotonic ns) and how many have
+  /// arrived; keeps the previous ones when the listener holds the slot this instant.
+  void latest_command(Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) noexcept;
+
+  /// Run phase, no allocation: tick k's ContactFrame (for the visual node), ForceFeedback (for the device) and the
+  /// organ's own topics.
+  void publish(std::uint64_t k, double t, const Pose5& pose, const ToolGeometry& tool, HapticOrgan& organ,
+               const ContactTick& result, std::uint32_t flags) noexcept;
+
+  /// Shutdown: round trips measured from VisualStatus echoes (us), echoes received, the participant profile.
+  Percentiles round_trip() const;
+  std::uint64_t visual_status_received() const;
+  std::string profile() const;
+  std::string description() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace surgsim

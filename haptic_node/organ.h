@@ -1,0 +1,91 @@
+// The haptic node's one organ interface (issue 13): what the loop needs from an organ, whatever its model. The liver
+// (precomputed FEM contacts, organs/liver_organ.h) and the intestine (mass-spring body, organs/intestine_organ.h) are
+// its two implementations; make_haptic_organ() is the only place that looks at the scene's model.
+//
+// Phases: the factory and the constructors allocate (mesh, tensors, bucket grid, body state, step-time storage);
+// create_writers() allocates its DDS entities and samples once; step(), contact_entry() and publish() allocate nothing
+// and never throw; stats and summaries are for shutdown.
+#pragma once
+#include <Eigen/Core>
+#include <cstdint>
+#include <iosfwd>
+#include <memory>
+#include <nlohmann/json_fwd.hpp>
+#include <string>
+
+#include "scene/scene.h"
+#include "tool/tool.h"
+
+namespace surgsim {
+
+namespace dds {
+class Participant;
+}
+namespace msg {
+class ContactFrame;
+}
+
+/// What one tick of an organ gives the loop.
+struct ContactTick {
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();         // N, on the tool, after the organ's force law
+  Eigen::Vector3d device_force = Eigen::Vector3d::Zero();  // N, clamped to the device limit, always finite
+  Eigen::Vector3d direction = Eigen::Vector3d::Zero();     // unit mean imposed displacement (0 without contact)
+  bool saturated = false;
+  bool over_capacity = false;
+  bool nonfinite = false;      // a non-finite value was refused this tick (force zeroed)
+  bool grasp = false;
+  int points_in_contact = 0;   // tool points (liver) or body elements (intestine) the tool touches
+};
+
+/// One contact entry of a ContactFrame (what the visual node needs to deform the organ).
+struct ContactEntry {
+  int node = 0;
+  Eigen::Vector3d lambda = Eigen::Vector3d::Zero();   // N, contact force on the node
+  Eigen::Vector3d u_tilde = Eigen::Vector3d::Zero();  // m, corrected constraint displacement
+};
+
+class HapticOrgan {
+ public:
+  virtual ~HapticOrgan() = default;
+
+  /// The model this organ implements ("liver", "intestine"): the stats key model_built.
+  virtual const char* model_name() const = 0;
+
+  /// Run phase, noexcept, no allocation: one tick of dt (s). `tool` is the tool's geometry with jaw opening `jaw`
+  /// (rad), or null while the device input is lost (the organ drops its contacts; a dynamic body keeps moving).
+  virtual void step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept = 0;
+
+  /// Contacts the log and the stats count this tick (liver: contact nodes; intestine: elements the probe touches).
+  virtual int contacts(const ContactTick& out) const noexcept = 0;
+  /// Contact entries the ContactFrame carries this tick (at most msg::kMaxContacts), and entry l of them.
+  virtual int contact_entries() const noexcept { return 0; }
+  virtual ContactEntry contact_entry(int l) const noexcept { return {}; }
+
+  /// Identity both nodes compare (SceneInfo): hash of the tetrahedral mesh (0 without one) and of the tensors.
+  virtual std::uint64_t mesh_hash() const { return 0; }
+  virtual std::uint64_t tensor_hash() const { return 0; }
+  /// SceneInfo sizes: all nodes (or masses), and the surface nodes (or the intestine's points).
+  virtual std::uint32_t node_count() const = 0;
+  virtual std::uint32_t surface_node_count() const = 0;
+  /// True when a quasi non-linear force law bends the linear force (stats nonlinear_law).
+  virtual bool nonlinear_law() const { return false; }
+
+  /// Init: the organ's own topics (the intestine's BodyState). Run phase: publishes them for the tick whose
+  /// ContactFrame is `frame` (no allocation).
+  virtual void create_writers(dds::Participant& participant, std::uint64_t scene_hash) {}
+  virtual void publish(const msg::ContactFrame& frame) noexcept {}
+
+  /// One line for the start banner: "1382 nodes, 5523 tets, 646 surface nodes; ".
+  virtual std::string describe() const = 0;
+  /// Shutdown: the organ's own entries in the stats JSON, and its summary line (nothing when it has none).
+  virtual void add_stats(nlohmann::json& stats) const {}
+  virtual void print_summary(std::ostream& out) const {}
+};
+
+/// Builds the organ the scene names. `cache_dir` holds generated meshes and tensors, `ticks` the run's length (for
+/// per-tick storage), `progress` receives mesh and precompute progress (null: silent). Throws surgsim::Error naming
+/// the scene file for a model this node does not build.
+std::unique_ptr<HapticOrgan> make_haptic_organ(const Scene& scene, const std::string& cache_dir, std::uint64_t ticks,
+                                               std::ostream* progress);
+
+}  // namespace surgsim
