@@ -1,7 +1,6 @@
 #include "visual_app.h"
 
 #include <chrono>
-#include <filesystem>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
