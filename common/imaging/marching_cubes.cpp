@@ -135,7 +135,7 @@ const std::int8_t* marching_cubes_case(int config) { return table().at(static_ca
 
 int marching_cubes_edge_corner(int edge, int end) { return edge_corner(edge, end); }
 
-TriMesh marching_cubes(const VoxelMask& mask) {
+TriSurface marching_cubes(const VoxelMask& mask) {
   const VoxelGrid& g = mask.grid;
   if (static_cast<std::int64_t>(mask.inside.size()) != g.voxel_count() || g.size.minCoeff() <= 0)
     throw_error(mask.source, ": marching cubes: the mask is empty or its size does not match its grid");
@@ -176,7 +176,7 @@ TriMesh marching_cubes(const VoxelMask& mask) {
       }
     }
   }
-  TriMesh mesh;
+  TriSurface mesh;
   mesh.vertices.resize(static_cast<Eigen::Index>(vertices.size()), 3);
   for (std::size_t v = 0; v < vertices.size(); ++v) mesh.vertices.row(static_cast<Eigen::Index>(v)) = vertices[v];
   mesh.tris.resize(static_cast<Eigen::Index>(tris.size()), 3);

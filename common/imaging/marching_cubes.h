@@ -14,7 +14,7 @@
 #pragma once
 #include <cstdint>
 
-#include "imaging/tri_mesh.h"
+#include "mesh/tri_surface.h"
 #include "imaging/volume.h"
 
 namespace surgsim {
@@ -23,7 +23,7 @@ namespace surgsim {
 /// 2-manifold and counter-clockwise seen from outside (the mask is treated as padded with outside voxels, so an
 /// organ touching the volume's border is closed there). One surface per 6-connected component (run clean_mask first
 /// for a single one). Vertices are numbered in scan order: deterministic.
-TriMesh marching_cubes(const VoxelMask& mask);
+TriSurface marching_cubes(const VoxelMask& mask);
 
 /// The generated table, for tests: for configuration `config` (bit c set when corner c, at (c & 1, c >> 1 & 1,
 /// c >> 2 & 1), is inside), up to 5 triangles as cube-edge triples, terminated by -1 (16 entries).

@@ -28,8 +28,8 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 }
 
 // Grid frame to world; reverses the triangles when the axes are left-handed so that they still face outward.
-TriMesh to_world(const TriMesh& grid_mesh, const VoxelGrid& grid) {
-  TriMesh out = grid_mesh;
+TriSurface to_world(const TriSurface& grid_mesh, const VoxelGrid& grid) {
+  TriSurface out = grid_mesh;
   for (Eigen::Index v = 0; v < out.vertices.rows(); ++v)
     out.vertices.row(v) = grid.to_world(grid_mesh.vertices.row(v).transpose()).transpose();
   if (grid.axes.determinant() < 0.0) out.tris.col(1).swap(out.tris.col(2));
@@ -114,7 +114,7 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
 
   // Marching cubes: the staircase surface's triangulation, the reference for the triangle counts.
   t0 = std::chrono::steady_clock::now();
-  TriMesh grid_surface = marching_cubes(mask);
+  TriSurface grid_surface = marching_cubes(mask);
   check_closed_surface(grid_surface, volume.source + ": marching cubes");
   report.mc_vertices = static_cast<int>(grid_surface.vertices.rows());
   report.mc_triangles = static_cast<int>(grid_surface.tris.rows());
@@ -152,7 +152,7 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   out.surface = to_world(grid_surface, grid);
   report.surface_volume = tri_mesh_volume(grid_surface);
   report.boundary_target = closed_surface_nodes(report.surface_volume, tri_mesh_area(grid_surface), options.target_nodes);
-  TriMesh mesh_surface = grid_surface;
+  TriSurface mesh_surface = grid_surface;
   if (report.boundary_target > 0 && mesh_surface.vertices.rows() > report.boundary_target) {
     DecimationOptions budget;
     budget.max_distance = options.max_distance * unit;
@@ -182,10 +182,9 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
     throw_error(volume.source, ": the surface cannot be reduced below ", mesh_surface.vertices.rows(),
                 " vertices within ", options.max_distance, " voxels of the voxel boundary, too many for ",
                 options.target_nodes, " nodes: ask for more nodes or allow a larger maximum distance");
-  const TriMesh world_boundary = to_world(mesh_surface, grid);
+  const TriSurface world_boundary = to_world(mesh_surface, grid);
   try {
-    out.mesh = mesh_closed_surface(world_boundary.vertices, world_boundary.tris, options.target_nodes, mesher_log,
-                                   &report.mesh);
+    out.mesh = mesh_closed_surface(world_boundary, options.target_nodes, mesher_log, &report.mesh);
   } catch (const Error& e) {
     throw_error(volume.source, ": tetrahedralization: ", e.what());
   }

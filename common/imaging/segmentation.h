@@ -20,10 +20,10 @@
 #include <vector>
 
 #include "mesh/mesh.h"
+#include "mesh/tri_surface.h"
 #include "mesher/organ_mesher.h"
 #include "imaging/surface_decimation.h"
 #include "imaging/surface_smoothing.h"
-#include "imaging/tri_mesh.h"
 #include "imaging/volume.h"
 
 namespace surgsim {
@@ -72,8 +72,8 @@ struct SegmentReport {
 
 /// Everything the pipeline made, in world coordinates (m).
 struct Segmentation {
-  TriMesh marching_cubes;  // plain marching cubes of the cleaned mask
-  TriMesh surface;         // smoothed and reduced (error-driven): the smooth, light surface
+  TriSurface marching_cubes;  // plain marching cubes of the cleaned mask
+  TriSurface surface;         // smoothed and reduced (error-driven): the smooth, light surface
   TetMesh mesh;            // the tetrahedral mesh (its boundary: `surface` reduced to the node budget)
   SegmentReport report;
   std::string source;      // the volume's file or folder

@@ -39,7 +39,7 @@ struct Entry {
 
 class Decimator {
  public:
-  Decimator(TriMesh& mesh, const VoxelBoundaryDistance* boundary, const DecimationOptions& options)
+  Decimator(TriSurface& mesh, const VoxelBoundaryDistance* boundary, const DecimationOptions& options)
       : mesh_(mesh), boundary_(boundary), options_(options) {
     const int nv = static_cast<int>(mesh.vertices.rows());
     const int nf = static_cast<int>(mesh.tris.rows());
@@ -286,7 +286,7 @@ class Decimator {
   }
 
   DecimationReport finish() {
-    TriMesh out;
+    TriSurface out;
     out.vertices.resize(static_cast<Eigen::Index>(pos_.size()), 3);
     for (std::size_t v = 0; v < pos_.size(); ++v) out.vertices.row(static_cast<Eigen::Index>(v)) = pos_[v].transpose();
     const auto live_faces = std::count(face_alive_.begin(), face_alive_.end(), 1);
@@ -301,7 +301,7 @@ class Decimator {
     return report_;
   }
 
-  TriMesh& mesh_;
+  TriSurface& mesh_;
   const VoxelBoundaryDistance* boundary_;
   DecimationOptions options_;
   double cos_turn_ = 0.0;
@@ -323,7 +323,7 @@ class Decimator {
 // Flips and relaxation on a closed manifold surface (see the header).
 class Improver {
  public:
-  Improver(TriMesh& mesh, const VoxelBoundaryDistance* boundary, const ImprovementOptions& options)
+  Improver(TriSurface& mesh, const VoxelBoundaryDistance* boundary, const ImprovementOptions& options)
       : mesh_(mesh), boundary_(boundary), options_(options) {
     cos_flip_ = std::cos(options.max_flip_angle_deg * kPi / 180.0);
     cos_turn_ = std::cos(options.max_normal_turn_deg * kPi / 180.0);
@@ -453,7 +453,7 @@ class Improver {
     return moves;
   }
 
-  TriMesh& mesh_;
+  TriSurface& mesh_;
   const VoxelBoundaryDistance* boundary_;
   ImprovementOptions options_;
   double cos_flip_ = 0.0, cos_turn_ = 0.0;
@@ -461,7 +461,7 @@ class Improver {
 
 }  // namespace
 
-ImprovementReport improve_surface(TriMesh& mesh, const VoxelBoundaryDistance* boundary,
+ImprovementReport improve_surface(TriSurface& mesh, const VoxelBoundaryDistance* boundary,
                                   const ImprovementOptions& options) {
   if (options.rounds < 0) throw_error("surface improvement: rounds must be >= 0");
   if (options.max_distance > 0.0 && boundary == nullptr)
@@ -470,7 +470,7 @@ ImprovementReport improve_surface(TriMesh& mesh, const VoxelBoundaryDistance* bo
   return improver.run();
 }
 
-DecimationReport decimate_surface(TriMesh& mesh, const VoxelBoundaryDistance* boundary,
+DecimationReport decimate_surface(TriSurface& mesh, const VoxelBoundaryDistance* boundary,
                                   const DecimationOptions& options) {
   if (options.target_vertices < 0) throw_error("surface reduction: the vertex target must be >= 0");
   if (options.max_error < 0.0) throw_error("surface reduction: the error bound must be >= 0");

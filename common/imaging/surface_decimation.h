@@ -21,7 +21,7 @@
 // min_quality, or put the new vertex, or the centroid or an edge midpoint of a new triangle, farther than
 // max_distance from the voxel boundary.
 #pragma once
-#include "imaging/tri_mesh.h"
+#include "mesh/tri_surface.h"
 #include "imaging/voxel_boundary.h"
 
 namespace surgsim {
@@ -65,13 +65,13 @@ struct ImprovementReport {
 };
 
 /// Improves the surface in place (grid frame, m). `boundary` may be null when max_distance is 0.
-ImprovementReport improve_surface(TriMesh& mesh, const VoxelBoundaryDistance* boundary,
+ImprovementReport improve_surface(TriSurface& mesh, const VoxelBoundaryDistance* boundary,
                                   const ImprovementOptions& options);
 
 /// Reduces the surface in place (grid frame, m); vertices are renumbered (compacted, order kept). `boundary` may be
 /// null when max_distance is 0. The input must be a closed 2-manifold (check_closed_surface). Deterministic.
 /// Throws surgsim::Error for bad options.
-DecimationReport decimate_surface(TriMesh& mesh, const VoxelBoundaryDistance* boundary,
+DecimationReport decimate_surface(TriSurface& mesh, const VoxelBoundaryDistance* boundary,
                                   const DecimationOptions& options);
 
 }  // namespace surgsim

@@ -32,7 +32,7 @@ Eigen::Vector3d closest_point_on_triangle(const Eigen::Vector3d& p, const Eigen:
   return a + ab * (vb / denom) + ac * (vc / denom);
 }
 
-TriangleTree::TriangleTree(const TriMesh& mesh) {
+TriangleTree::TriangleTree(const TriSurface& mesh) {
   const auto n = static_cast<std::size_t>(mesh.tris.rows());
   if (n == 0) throw_error("distance query: the surface has no triangles");
   tris_.resize(n);
@@ -113,7 +113,7 @@ double TriangleTree::distance(const Eigen::Vector3d& p, Eigen::Vector3d* closest
   return std::sqrt(best2);
 }
 
-void sample_surface(const TriMesh& mesh, double spacing, std::vector<Eigen::Vector3d>& points,
+void sample_surface(const TriSurface& mesh, double spacing, std::vector<Eigen::Vector3d>& points,
                     std::vector<double>& weights) {
   if (!(spacing > 0.0)) throw_error("surface sampling: the spacing must be positive");
   points.clear();
@@ -142,9 +142,9 @@ void sample_surface(const TriMesh& mesh, double spacing, std::vector<Eigen::Vect
   }
 }
 
-SurfaceDistance surface_distance(const TriMesh& a, const TriMesh& b, double sample_spacing) {
+SurfaceDistance surface_distance(const TriSurface& a, const TriSurface& b, double sample_spacing) {
   SurfaceDistance out;
-  auto one_way = [sample_spacing](const TriMesh& from, const TriangleTree& to, double& max_d, double& mean_d) {
+  auto one_way = [sample_spacing](const TriSurface& from, const TriangleTree& to, double& max_d, double& mean_d) {
     std::vector<Eigen::Vector3d> points;
     std::vector<double> weights;
     sample_surface(from, sample_spacing, points, weights);

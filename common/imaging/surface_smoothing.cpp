@@ -9,7 +9,7 @@
 
 namespace surgsim {
 
-std::vector<std::vector<int>> vertex_neighbours(const TriMesh& mesh) {
+std::vector<std::vector<int>> vertex_neighbours(const TriSurface& mesh) {
   std::vector<std::vector<int>> ring(static_cast<std::size_t>(mesh.vertices.rows()));
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f) {
     for (int k = 0; k < 3; ++k) {
@@ -24,7 +24,7 @@ std::vector<std::vector<int>> vertex_neighbours(const TriMesh& mesh) {
   return ring;
 }
 
-SmoothingReport smooth_surface(TriMesh& mesh, const VoxelBoundaryDistance& boundary, const SmoothingOptions& options) {
+SmoothingReport smooth_surface(TriSurface& mesh, const VoxelBoundaryDistance& boundary, const SmoothingOptions& options) {
   if (options.iterations < 0) throw_error("smoothing: iterations must be >= 0, got ", options.iterations);
   if (!(options.lambda > 0.0 && options.lambda < 1.0)) throw_error("smoothing: lambda must be in (0, 1)");
   if (!(options.mu < -options.lambda)) throw_error("smoothing: mu must be below -lambda");

@@ -3,7 +3,7 @@
 // the way plain Laplacian smoothing does, with every vertex clamped after each step to within `max_distance` of the
 // voxel boundary (projected back onto that distance along the direction to its nearest boundary point).
 #pragma once
-#include "imaging/tri_mesh.h"
+#include "mesh/tri_surface.h"
 #include "imaging/voxel_boundary.h"
 
 namespace surgsim {
@@ -24,9 +24,9 @@ struct SmoothingReport {
 
 /// Smooths the surface in place (grid frame, m; topology unchanged). Uniform umbrella weights, which also evens
 /// out marching cubes' triangle shapes. Throws surgsim::Error for bad options.
-SmoothingReport smooth_surface(TriMesh& mesh, const VoxelBoundaryDistance& boundary, const SmoothingOptions& options);
+SmoothingReport smooth_surface(TriSurface& mesh, const VoxelBoundaryDistance& boundary, const SmoothingOptions& options);
 
 /// Vertex neighbours (sorted, unique) of each vertex.
-std::vector<std::vector<int>> vertex_neighbours(const TriMesh& mesh);
+std::vector<std::vector<int>> vertex_neighbours(const TriSurface& mesh);
 
 }  // namespace surgsim

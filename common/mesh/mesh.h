@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "mesh/tri_surface.h"
+
 namespace surgsim {
 
 /// A linear (P1) tetrahedral mesh. Node indices are 0-based in file order (gaps in file ids are compacted).
@@ -17,7 +19,8 @@ struct TetMesh {
   std::vector<std::int64_t> tet_ids;  // #T, the element id used in the source file (for messages); may be empty
 };
 
-/// A triangle surface. tris index into `nodes` of the owning TetMesh (not compacted) unless stated otherwise.
+/// The boundary of a TetMesh as triangles indexing the tet mesh's own nodes (not compacted): it owns no vertices.
+/// Not TriSurface (mesh/tri_surface.h), which is a triangle surface with its own vertices (e.g. read from .obj).
 struct SurfaceMesh {
   Eigen::MatrixX3i tris;            // #F x 3, counter-clockwise seen from outside (outward normals)
   std::vector<int> nodes;           // sorted unique node indices used by tris (the surface nodes)
@@ -37,13 +40,6 @@ void write_vtk(const std::string& path, const TetMesh& mesh, const Eigen::Matrix
 /// Writes a triangle surface (e.g. the deformed visible surface) as a VTK legacy ASCII unstructured grid of
 /// triangles. points: #P x 3 (m); tris: #F x 3 indices into points. Throws surgsim::Error naming the path.
 void write_vtk_surface(const std::string& path, const Eigen::MatrixX3d& points, const Eigen::MatrixX3i& tris);
-/// A triangle surface with its own vertices (e.g. a finer visual surface).
-struct TriSurface {
-  Eigen::MatrixX3d vertices;  // #V x 3, m
-  Eigen::MatrixX3i tris;      // #F x 3, 0-based
-  std::string source;
-};
-
 /// Reads a Wavefront .obj surface (v and f lines; polygons are fanned into triangles; vt/vn/other lines ignored;
 /// negative (relative) indices accepted). Throws surgsim::Error "FILE:LINE: ..." on a bad number, an index out of
 /// range, non-finite coordinates, or a file without faces.

@@ -1,4 +1,5 @@
-#include "imaging/tri_mesh.h"
+// Measures and checks of a TriSurface: topology (edges, fans, components), enclosed volume, area, triangle quality.
+#include "mesh/tri_surface.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -22,7 +23,7 @@ int find_root(std::vector<int>& parent, int a) {
 
 }  // namespace
 
-TriMeshTopology tri_mesh_topology(const TriMesh& mesh) {
+TriMeshTopology tri_mesh_topology(const TriSurface& mesh) {
   TriMeshTopology t;
   const int nv = static_cast<int>(mesh.vertices.rows());
   const int nf = static_cast<int>(mesh.tris.rows());
@@ -87,7 +88,7 @@ TriMeshTopology tri_mesh_topology(const TriMesh& mesh) {
   return t;
 }
 
-double tri_mesh_volume(const TriMesh& mesh) {
+double tri_mesh_volume(const TriSurface& mesh) {
   double v = 0.0;
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f) {
     const Eigen::Vector3d a = mesh.vertices.row(mesh.tris(f, 0));
@@ -98,7 +99,7 @@ double tri_mesh_volume(const TriMesh& mesh) {
   return v;
 }
 
-double tri_mesh_area(const TriMesh& mesh) {
+double tri_mesh_area(const TriSurface& mesh) {
   double area = 0.0;
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f) {
     const Eigen::Vector3d a = mesh.vertices.row(mesh.tris(f, 0));
@@ -109,7 +110,7 @@ double tri_mesh_area(const TriMesh& mesh) {
   return area;
 }
 
-double tri_mesh_min_quality(const TriMesh& mesh) {
+double tri_mesh_min_quality(const TriSurface& mesh) {
   double worst = 1.0;
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f) {
     const Eigen::Vector3d a = mesh.vertices.row(mesh.tris(f, 0));
@@ -122,7 +123,7 @@ double tri_mesh_min_quality(const TriMesh& mesh) {
   return worst;
 }
 
-void compact_tri_mesh(TriMesh& mesh) {
+void compact_tri_mesh(TriSurface& mesh) {
   std::vector<int> remap(static_cast<std::size_t>(mesh.vertices.rows()), -1);
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f)
     for (int k = 0; k < 3; ++k) remap[static_cast<std::size_t>(mesh.tris(f, k))] = 0;
@@ -137,7 +138,7 @@ void compact_tri_mesh(TriMesh& mesh) {
   mesh.vertices = std::move(vertices);
 }
 
-void check_closed_surface(const TriMesh& mesh, const std::string& what) {
+void check_closed_surface(const TriSurface& mesh, const std::string& what) {
   if (mesh.tris.rows() == 0) throw_error(what, ": the surface has no triangles");
   if (!mesh.vertices.allFinite()) throw_error(what, ": the surface has non-finite coordinates");
   const TriMeshTopology t = tri_mesh_topology(mesh);

@@ -1,14 +1,17 @@
-// A triangle surface with its own vertices (the imaging pipeline's surfaces, before they become a TetMesh's
-// boundary), and the checks and measures the pipeline reports on it.
+// A triangle surface with its own vertices (a visual surface read from .obj, the imaging pipeline's surfaces before
+// they become a TetMesh's boundary, the mesher's sampled organ surfaces), and the checks and measures reported on it.
+// Not SurfaceMesh (mesh.h): that one indexes the nodes of a TetMesh (its boundary) and owns no vertices.
 #pragma once
 #include <Eigen/Core>
 #include <string>
 
 namespace surgsim {
 
-struct TriMesh {
+/// A triangle surface with its own vertices.
+struct TriSurface {
   Eigen::MatrixX3d vertices;  // #V x 3, m
-  Eigen::MatrixX3i tris;      // #F x 3, indices into vertices, counter-clockwise seen from outside
+  Eigen::MatrixX3i tris;      // #F x 3, 0-based indices into vertices, counter-clockwise seen from outside
+  std::string source;         // where it came from (a file, a pipeline step; "" when built in memory), for messages
 };
 
 /// Topology of a triangle surface.
@@ -22,20 +25,20 @@ struct TriMeshTopology {
   int euler = 0;             // V - E + F
   bool closed_manifold() const { return boundary_edges == 0 && nonmanifold_edges == 0 && nonmanifold_vertices == 0; }
 };
-TriMeshTopology tri_mesh_topology(const TriMesh& mesh);
+TriMeshTopology tri_mesh_topology(const TriSurface& mesh);
 
 /// Enclosed volume by the divergence theorem (m^3; positive when the triangles face outward) and area (m^2).
-double tri_mesh_volume(const TriMesh& mesh);
-double tri_mesh_area(const TriMesh& mesh);
+double tri_mesh_volume(const TriSurface& mesh);
+double tri_mesh_area(const TriSurface& mesh);
 
 /// Smallest triangle quality 4 sqrt(3) A / (l1^2 + l2^2 + l3^2) (1 equilateral, 0 degenerate).
-double tri_mesh_min_quality(const TriMesh& mesh);
+double tri_mesh_min_quality(const TriSurface& mesh);
 
 /// Drops vertices no triangle uses and renumbers (order kept).
-void compact_tri_mesh(TriMesh& mesh);
+void compact_tri_mesh(TriSurface& mesh);
 
 /// Throws surgsim::Error "<what>: ..." unless the surface is closed, 2-manifold, consistently oriented and
 /// connected, with finite coordinates and a positive enclosed volume.
-void check_closed_surface(const TriMesh& mesh, const std::string& what);
+void check_closed_surface(const TriSurface& mesh, const std::string& what);
 
 }  // namespace surgsim

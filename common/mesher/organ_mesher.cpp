@@ -19,6 +19,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "mesh/tri_surface.h"
 
 namespace surgsim {
 namespace {
@@ -88,14 +89,12 @@ double liver_field(double x, double y, double z) {
   return f - kLiverIso;
 }
 
-// A closed triangle surface handed to Gmsh as discrete entities; the liver's is split into an upper and a lower
-// disk along a closed loop of edges (side and loop stay empty for a surface kept whole).
-// (Not TriSurface: mesh.h has a public type of that name.)
-struct DiscreteSurface {
-  std::vector<double> xyz;  // #V x 3 row-major, m
-  std::vector<int> tris;    // #F x 3, 0-based, counter-clockwise seen from outside
-  std::vector<int> side;    // #V: +1 upper disk, -1 lower disk, 0 on the loop between them
-  std::vector<int> loop;    // the loop's vertices in order (closed: the last connects back to the first)
+// The liver's closed triangle surface, handed to Gmsh as discrete entities split into an upper and a lower disk
+// along a closed loop of edges.
+struct SplitSurface {
+  TriSurface surface;     // counter-clockwise seen from outside
+  std::vector<int> side;  // #V: +1 upper disk, -1 lower disk, 0 on the loop between them
+  std::vector<int> loop;  // the loop's vertices in order (closed: the last connects back to the first)
 };
 
 // The liver's boundary sampled on a cube-sphere: each face of a cube is an n x n grid (equal-angle, so cells are
@@ -104,8 +103,10 @@ struct DiscreteSurface {
 // and lower), each nearly a graph over the xy-plane, which Gmsh reparametrizes robustly. (Letting Gmsh split the
 // closed surface itself, classifySurfaces(forReparametrization), gave patches on which Frontal-Delaunay failed at
 // some sizes and fell back to MeshAdapt, taking a minute.)
-DiscreteSurface liver_surface(int n) {
-  DiscreteSurface s;
+SplitSurface liver_surface(int n) {
+  SplitSurface s;
+  std::vector<double> xyz;  // #V x 3 row-major, m
+  std::vector<int> tris;    // #F x 3
   std::map<std::array<int, 3>, int> index;  // integer cube coordinates in [-n/2, n/2]^3 -> vertex
   const int half = n / 2;
   auto vertex = [&](int i, int j, int k) {
@@ -145,7 +146,7 @@ DiscreteSurface liver_surface(int n) {
     for (double t = hi + kStep; t <= kMaxReach; t += 4 * kStep) {
       if (f(t) > 0.0) throw_error("liver surface: not star-shaped from its centre (internal error)");
     }
-    for (int c = 0; c < 3; ++c) s.xyz.push_back(kLiverCentre[c] + r * d[c]);
+    for (int c = 0; c < 3; ++c) xyz.push_back(kLiverCentre[c] + r * d[c]);
     s.side.push_back(k > 0 ? 1 : (k < 0 ? -1 : 0));
     return id;
   };
@@ -163,9 +164,9 @@ DiscreteSurface liver_surface(int n) {
           };
           const int a = at(u, v), b = at(u + 1, v), c = at(u + 1, v + 1), d = at(u, v + 1);
           if (sg > 0) {
-            s.tris.insert(s.tris.end(), {a, b, c, a, c, d});
+            tris.insert(tris.end(), {a, b, c, a, c, d});
           } else {
-            s.tris.insert(s.tris.end(), {a, c, b, a, d, c});
+            tris.insert(tris.end(), {a, c, b, a, d, c});
           }
         }
       }
@@ -177,6 +178,11 @@ DiscreteSurface liver_surface(int n) {
   for (int j = half; j > -half; --j) s.loop.push_back(vertex(-half, j, 0));
   for (int i = -half; i < half; ++i) s.loop.push_back(vertex(i, -half, 0));
   for (int j = -half; j < 0; ++j) s.loop.push_back(vertex(half, j, 0));
+  s.surface.vertices = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+      xyz.data(), static_cast<Eigen::Index>(xyz.size() / 3), 3);
+  s.surface.tris = Eigen::Map<const Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+      tris.data(), static_cast<Eigen::Index>(tris.size() / 3), 3);
+  s.surface.source = "generated liver surface";
   return s;
 }
 
@@ -188,12 +194,14 @@ int liver_cells(double h) {
 }
 
 // Volume (divergence theorem) and area of a closed outward triangle surface.
-std::pair<double, double> volume_and_area(const DiscreteSurface& s) {
+// (Not tri_mesh_volume and tri_mesh_area: their arithmetic differs in the last bits, and these numbers choose the
+// mesh size, hence the generated meshes.)
+std::pair<double, double> volume_and_area(const TriSurface& s) {
   double volume = 0.0, area = 0.0;
-  for (std::size_t f = 0; f < s.tris.size(); f += 3) {
-    const double* a = &s.xyz[3 * s.tris[f]];
-    const double* b = &s.xyz[3 * s.tris[f + 1]];
-    const double* c = &s.xyz[3 * s.tris[f + 2]];
+  for (Eigen::Index f = 0; f < s.tris.rows(); ++f) {
+    const Eigen::Vector3d a = s.vertices.row(s.tris(f, 0));
+    const Eigen::Vector3d b = s.vertices.row(s.tris(f, 1));
+    const Eigen::Vector3d c = s.vertices.row(s.tris(f, 2));
     const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
     const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
     const double nrm[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
@@ -280,36 +288,36 @@ void mesh_bottom_differently(double z) {
   for (const auto& face : faces) gmsh::model::mesh::setAlgorithm(2, face.second, 5);  // Delaunay
 }
 
-// Gmsh node tag of a DiscreteSurface vertex (0-based), and the coordinates of a list of node tags.
+// Gmsh node tag of a surface vertex (0-based), and the coordinates of a list of node tags.
 std::size_t tag_of(int vertex) { return static_cast<std::size_t>(vertex) + 1; }
 
-std::vector<double> node_coords(const DiscreteSurface& s, const std::vector<std::size_t>& tags) {
+std::vector<double> node_coords(const TriSurface& s, const std::vector<std::size_t>& tags) {
   std::vector<double> xyz;
   xyz.reserve(3 * tags.size());
   for (std::size_t t : tags)
-    for (std::size_t k = 0; k < 3; ++k) xyz.push_back(s.xyz[3 * (t - 1) + k]);
+    for (int k = 0; k < 3; ++k) xyz.push_back(s.vertices(static_cast<Eigen::Index>(t - 1), k));
   return xyz;
 }
 
 // Puts on discrete surface `surface` the vertices of `s` for which has_node(vertex) holds (the nodes classified on
 // it) and the triangles for which has_triangle(triangle) holds, numbering elements from element_tag on.
-void add_discrete_triangles(int surface, const DiscreteSurface& s, const std::function<bool(std::size_t)>& has_node,
+void add_discrete_triangles(int surface, const TriSurface& s, const std::function<bool(std::size_t)>& has_node,
                             const std::function<bool(std::size_t)>& has_triangle, std::size_t& element_tag) {
   std::vector<std::size_t> nodes, tri_tags, tri_nodes;
-  const std::size_t vertex_count = s.xyz.size() / 3;
+  const auto vertex_count = static_cast<std::size_t>(s.vertices.rows());
   for (std::size_t i = 0; i < vertex_count; ++i)
     if (has_node(i)) nodes.push_back(tag_of(static_cast<int>(i)));
   gmsh::model::mesh::addNodes(2, surface, nodes, node_coords(s, nodes));
-  for (std::size_t f = 0; f < s.tris.size() / 3; ++f) {
+  for (std::size_t f = 0; f < static_cast<std::size_t>(s.tris.rows()); ++f) {
     if (!has_triangle(f)) continue;
     tri_tags.push_back(element_tag++);
-    for (std::size_t k = 0; k < 3; ++k) tri_nodes.push_back(tag_of(s.tris[3 * f + k]));
+    for (int k = 0; k < 3; ++k) tri_nodes.push_back(tag_of(s.tris(static_cast<Eigen::Index>(f), k)));
   }
   gmsh::model::mesh::addElementsByType(surface, 2, tri_tags, tri_nodes);
 }
 
 // Builds the shape's geometry in a fresh Gmsh model (`liver` is used for "liver" only).
-void build_geometry(const std::string& shape, const DiscreteSurface& liver) {
+void build_geometry(const std::string& shape, const SplitSurface& liver) {
   gmsh::model::add(shape);
   if (shape == "plate") {
     gmsh::model::occ::addBox(-kPlateSide / 2, -kPlateSide / 2, -kPlateThickness / 2, kPlateSide, kPlateSide,
@@ -329,7 +337,7 @@ void build_geometry(const std::string& shape, const DiscreteSurface& liver) {
   // disks so that Gmsh can remesh them at size h. (Gmsh's createTopology would find the same curve, but starts it
   // at a node that varies from call to call within a process, which changed the mesh.)
   std::size_t element_tag = 1;
-  auto coords_of = [&liver](const std::vector<std::size_t>& tags) { return node_coords(liver, tags); };
+  auto coords_of = [&liver](const std::vector<std::size_t>& tags) { return node_coords(liver.surface, tags); };
 
   const int point = gmsh::model::addDiscreteEntity(0);
   const std::vector<std::size_t> point_node = {tag_of(liver.loop.front())};
@@ -353,10 +361,10 @@ void build_geometry(const std::string& shape, const DiscreteSurface& liver) {
     surfaces.push_back(surface);
     // A triangle belongs to the side of its off-loop vertices (at most two of its vertices are on the loop).
     add_discrete_triangles(
-        surface, liver, [&liver, sg](std::size_t v) { return liver.side[v] == sg; },
+        surface, liver.surface, [&liver, sg](std::size_t v) { return liver.side[v] == sg; },
         [&liver, sg](std::size_t f) {
-          return (liver.side[liver.tris[3 * f]] + liver.side[liver.tris[3 * f + 1]] + liver.side[liver.tris[3 * f + 2]]) *
-                     sg > 0;
+          const auto tri = liver.surface.tris.row(static_cast<Eigen::Index>(f));
+          return (liver.side[tri(0)] + liver.side[tri(1)] + liver.side[tri(2)]) * sg > 0;
         },
         element_tag);
   }
@@ -529,7 +537,7 @@ TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress, OrganMeshR
 
   // Volume and area give the first characteristic length. The liver's are those of its sampled surface, first
   // sampled coarsely to estimate h, then at the resolution that h asks for (fixed across re-meshes).
-  DiscreteSurface liver;
+  SplitSurface liver;
   NodeModel model;
   if (spec.shape == "plate") {
     model.volume = kPlateSide * kPlateSide * kPlateThickness;
@@ -539,11 +547,11 @@ TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress, OrganMeshR
     model.area = 2 * kPi * kCylinderRadius * (kCylinderRadius + kCylinderHeight);
   } else {
     liver = liver_surface(kLiverMinCells);
-    std::tie(model.volume, model.area) = volume_and_area(liver);
+    std::tie(model.volume, model.area) = volume_and_area(liver.surface);
     const int cells = liver_cells(solve_mesh_size(model, target, 1.0));
     if (cells != kLiverMinCells) {
       liver = liver_surface(cells);
-      std::tie(model.volume, model.area) = volume_and_area(liver);
+      std::tie(model.volume, model.area) = volume_and_area(liver.surface);
     }
   }
 
@@ -568,8 +576,10 @@ int closed_surface_nodes(double volume, double area, int target_nodes) {
   return static_cast<int>(std::lround(kNodesPerArea * area / (h * h)));
 }
 
-TetMesh mesh_closed_surface(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tris, int target_nodes,
-                            std::ostream* progress, OrganMeshReport* report) {
+TetMesh mesh_closed_surface(const TriSurface& surface, int target_nodes, std::ostream* progress,
+                            OrganMeshReport* report) {
+  const Eigen::MatrixX3d& vertices = surface.vertices;
+  const Eigen::MatrixX3i& tris = surface.tris;
   const auto start = std::chrono::steady_clock::now();
   const std::string context = "closed surface (" + std::to_string(vertices.rows()) + " vertices, " +
                               std::to_string(target_nodes) + " nodes wanted)";
@@ -579,18 +589,11 @@ TetMesh mesh_closed_surface(const Eigen::MatrixX3d& vertices, const Eigen::Matri
   if (!vertices.allFinite()) throw_error(context, ": non-finite vertex coordinates");
   if (tris.minCoeff() < 0 || tris.maxCoeff() >= vertices.rows()) throw_error(context, ": triangle index out of range");
   // The surface's own numbers: volume and area by the divergence theorem, vertices used.
-  DiscreteSurface surface;
-  surface.xyz.resize(static_cast<std::size_t>(3 * vertices.rows()));
-  for (Eigen::Index v = 0; v < vertices.rows(); ++v)
-    for (int c = 0; c < 3; ++c) surface.xyz[static_cast<std::size_t>(3 * v + c)] = vertices(v, c);
-  surface.tris.resize(static_cast<std::size_t>(3 * tris.rows()));
-  for (Eigen::Index f = 0; f < tris.rows(); ++f)
-    for (int c = 0; c < 3; ++c) surface.tris[static_cast<std::size_t>(3 * f + c)] = tris(f, c);
   NodeModel model;
   double area = 0.0;
   std::tie(model.volume, area) = volume_and_area(surface);
   if (!(model.volume > 0.0)) throw_error(context, ": the surface encloses no volume or faces inward");
-  std::vector<int> used(surface.tris);
+  std::vector<int> used(surface.tris.data(), surface.tris.data() + surface.tris.size());
   std::sort(used.begin(), used.end());
   model.fixed = static_cast<double>(std::unique(used.begin(), used.end()) - used.begin());
   if (model.fixed >= target_nodes)
@@ -603,8 +606,9 @@ TetMesh mesh_closed_surface(const Eigen::MatrixX3d& vertices, const Eigen::Matri
     gmsh::model::add("closed_surface");
     const int surface_tag = gmsh::model::addDiscreteEntity(2);
     std::size_t element_tag = 1;
-    std::vector<char> used_vertex(surface.xyz.size() / 3, 0);
-    for (int v : surface.tris) used_vertex[static_cast<std::size_t>(v)] = 1;
+    std::vector<char> used_vertex(static_cast<std::size_t>(surface.vertices.rows()), 0);
+    for (Eigen::Index i = 0; i < surface.tris.size(); ++i)
+      used_vertex[static_cast<std::size_t>(surface.tris.data()[i])] = 1;
     add_discrete_triangles(
         surface_tag, surface, [&used_vertex](std::size_t v) { return used_vertex[v] != 0; },
         [](std::size_t) { return true; }, element_tag);

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "mesh/mesh.h"
+#include "mesh/tri_surface.h"
 
 namespace surgsim {
 
@@ -56,13 +57,13 @@ TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress = nullptr, 
 /// Tetrahedralizes the solid a closed triangle surface bounds, keeping the surface's triangles as the mesh boundary
 /// (Gmsh 3D Delaunay inside a discrete surface; no remeshing of the surface), with about `target_nodes` nodes: the
 /// surface's vertices plus interior nodes at a characteristic length chosen, and corrected by up to two re-meshes,
-/// like generate_organ's. `vertices` #V x 3 (m), `tris` #F x 3 counter-clockwise seen from outside; the surface
-/// must be closed, 2-manifold and free of self-intersections, and have fewer vertices than target_nodes
+/// like generate_organ's. The surface's triangles face outward (counter-clockwise seen from outside); it must be
+/// closed, 2-manifold and free of self-intersections, and have fewer vertices than target_nodes
 /// (closed_surface_nodes gives a good vertex count to reduce it to). The result has been through validate_mesh and
-/// its boundary is exactly `tris` (nodes renumbered). Deterministic. Throws surgsim::Error when Gmsh fails or the
-/// input is unusable. Takes the process-wide Gmsh lock (see the file comment).
-TetMesh mesh_closed_surface(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& tris, int target_nodes,
-                            std::ostream* progress = nullptr, OrganMeshReport* report = nullptr);
+/// its boundary is exactly `surface.tris` (nodes renumbered). Deterministic. Throws surgsim::Error when Gmsh fails or
+/// the input is unusable. Takes the process-wide Gmsh lock (see the file comment).
+TetMesh mesh_closed_surface(const TriSurface& surface, int target_nodes, std::ostream* progress = nullptr,
+                            OrganMeshReport* report = nullptr);
 
 /// Surface vertices of a quasi-uniform tetrahedral mesh with `target_nodes` nodes of a solid with this volume (m^3)
 /// and area (m^2), by generate_organ's node-count model: the size to reduce a surface to before

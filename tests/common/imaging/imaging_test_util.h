@@ -12,15 +12,15 @@
 #include "mesher/organ_mesher.h"
 #include "imaging/segmentation.h"
 #include "imaging/surface_distance.h"
-#include "imaging/tri_mesh.h"
+#include "mesh/tri_surface.h"
 #include "imaging/volume.h"
 
 namespace surgsim::test {
 
 /// A tetrahedral mesh's boundary as a compact triangle surface (outward).
-inline TriMesh boundary_tri_mesh(const TetMesh& mesh) {
+inline TriSurface boundary_tri_mesh(const TetMesh& mesh) {
   const SurfaceMesh s = boundary_surface(mesh);
-  TriMesh out;
+  TriSurface out;
   out.vertices = mesh.nodes;
   out.tris = s.tris;
   compact_tri_mesh(out);
@@ -36,7 +36,7 @@ inline double tets_volume(const TetMesh& mesh) {
 /// The original organ: the generated liver (generate_organ) and its boundary.
 struct ReferenceOrgan {
   TetMesh mesh;
-  TriMesh surface;
+  TriSurface surface;
   double volume = 0.0;  // m^3
 };
 
@@ -70,7 +70,7 @@ inline RoundTrip round_trip(const ReferenceOrgan& reference, const Segmentation&
   RoundTrip r;
   const double step = 0.25 * spacing;  // sampling of the surfaces for the distances
   const SurfaceDistance ds = surface_distance(s.surface, reference.surface, step);
-  const TriMesh boundary = boundary_tri_mesh(s.mesh);
+  const TriSurface boundary = boundary_tri_mesh(s.mesh);
   const SurfaceDistance dm = surface_distance(boundary, reference.surface, step);
   const SurfaceDistance dc = surface_distance(s.marching_cubes, reference.surface, step);
   r.surface_hausdorff = ds.hausdorff / spacing;

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <random>
 
-#include "imaging/tri_mesh.h"
+#include "mesh/tri_surface.h"
 #include "imaging/voxel_boundary.h"
 
 namespace surgsim {
@@ -57,7 +57,7 @@ TEST(MarchingCubes, EveryCubeConfigurationGivesAClosedOutwardSurface) {
     VoxelMask m = mask_of(2, 2, 2);
     for (int c = 0; c < 8; ++c)
       if ((config >> c) & 1) set(m, c & 1, (c >> 1) & 1, (c >> 2) & 1);
-    const TriMesh s = marching_cubes(m);
+    const TriSurface s = marching_cubes(m);
     const TriMeshTopology t = tri_mesh_topology(s);
     ASSERT_TRUE(t.closed_manifold()) << "case " << config;
     EXPECT_GT(tri_mesh_volume(s), 0.0) << "case " << config;
@@ -72,7 +72,7 @@ TEST(MarchingCubes, RandomVolumesGiveClosedOutwardSurfacesOnTheVoxelBoundary) {
     std::bernoulli_distribution inside(density);
     for (auto& v : m.inside) v = inside(rng) ? 1 : 0;
     if (m.count() == 0) continue;
-    const TriMesh s = marching_cubes(m);
+    const TriSurface s = marching_cubes(m);
     const TriMeshTopology t = tri_mesh_topology(s);
     ASSERT_TRUE(t.closed_manifold()) << "trial " << trial << ": " << t.boundary_edges << " open, "
                                      << t.nonmanifold_edges << " non-manifold edges, " << t.nonmanifold_vertices
@@ -88,7 +88,7 @@ TEST(MarchingCubes, RandomVolumesGiveClosedOutwardSurfacesOnTheVoxelBoundary) {
 TEST(MarchingCubes, SingleVoxelIsAnOctahedronAndABoxLosesItsCorners) {
   VoxelMask one = mask_of(1, 1, 1, 2.0);
   set(one, 0, 0, 0);
-  const TriMesh octa = marching_cubes(one);
+  const TriSurface octa = marching_cubes(one);
   EXPECT_EQ(octa.tris.rows(), 8);
   EXPECT_EQ(octa.vertices.rows(), 6);
   EXPECT_NEAR(tri_mesh_volume(octa), 8.0 / 6.0, 1e-12);  // (4/3) (s/2)^3 for s = 2
@@ -97,7 +97,7 @@ TEST(MarchingCubes, SingleVoxelIsAnOctahedronAndABoxLosesItsCorners) {
   for (int k = 0; k < 4; ++k)
     for (int j = 0; j < 5; ++j)
       for (int i = 0; i < 6; ++i) set(box, i, j, k);
-  const TriMesh s = marching_cubes(box);
+  const TriSurface s = marching_cubes(box);
   const TriMeshTopology t = tri_mesh_topology(s);
   EXPECT_TRUE(t.closed_manifold());
   EXPECT_EQ(t.euler, 2);
@@ -116,7 +116,7 @@ TEST(MarchingCubes, SphereHasItsVolumeAndIsSphereLike) {
     for (int j = 0; j < n; ++j)
       for (int i = 0; i < n; ++i)
         if ((i - c) * (i - c) + (j - c) * (j - c) + (k - c) * (k - c) <= r * r) set(m, i, j, k);
-  const TriMesh s = marching_cubes(m);
+  const TriSurface s = marching_cubes(m);
   const TriMeshTopology t = tri_mesh_topology(s);
   EXPECT_TRUE(t.closed_manifold());
   EXPECT_EQ(t.euler, 2);

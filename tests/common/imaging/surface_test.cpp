@@ -7,11 +7,11 @@
 #include <cmath>
 #include <random>
 
+#include "mesh/tri_surface.h"
 #include "imaging/marching_cubes.h"
 #include "imaging/surface_decimation.h"
 #include "imaging/surface_distance.h"
 #include "imaging/surface_smoothing.h"
-#include "imaging/tri_mesh.h"
 #include "imaging/voxel_boundary.h"
 
 namespace surgsim {
@@ -37,7 +37,7 @@ VoxelMask ellipsoid(double a, double b, double c) {
 }
 
 // Signed radial error of each vertex against the sphere of radius r (m) centred in the mask's grid.
-double rms_sphere_error(const TriMesh& s, const VoxelMask& m, double r) {
+double rms_sphere_error(const TriSurface& s, const VoxelMask& m, double r) {
   const Eigen::Vector3d centre = (m.grid.size.cast<double>() - Eigen::Vector3d::Ones()) / 2.0 * kVoxel;
   double sum = 0.0;
   for (Eigen::Index v = 0; v < s.vertices.rows(); ++v) {
@@ -64,7 +64,7 @@ TEST(SurfaceDistance, ClosestPointOnTriangleMatchesBruteForce) {
 
 TEST(SurfaceDistance, TreeAndHausdorffOnSpheres) {
   VoxelMask m = ellipsoid(8, 8, 8);
-  const TriMesh s = marching_cubes(m);
+  const TriSurface s = marching_cubes(m);
   const TriangleTree tree(s);
   std::mt19937 rng(2);
   std::uniform_real_distribution<double> u(-0.02, 0.03);
@@ -78,7 +78,7 @@ TEST(SurfaceDistance, TreeAndHausdorffOnSpheres) {
   }
   // The same surface: 0. The surface moved by 1 mm: Hausdorff and mean 1 mm.
   EXPECT_NEAR(surface_distance(s, s, 0.0005).hausdorff, 0.0, 1e-12);
-  TriMesh moved = s;
+  TriSurface moved = s;
   moved.vertices.col(0).array() += 0.001;
   const SurfaceDistance d = surface_distance(s, moved, 0.0003);
   EXPECT_NEAR(d.hausdorff, 0.001, 1e-4);
@@ -89,7 +89,7 @@ TEST(SurfaceDistance, TreeAndHausdorffOnSpheres) {
 TEST(VoxelBoundary, DistanceMatchesTheVoxelFaces) {
   VoxelMask m = ellipsoid(4, 3, 3);
   const VoxelBoundaryDistance boundary(m);
-  const TriMesh mc = marching_cubes(m);
+  const TriSurface mc = marching_cubes(m);
   EXPECT_GT(boundary.face_count(), 0);
   // Brute force over every boundary face (faces between inside and outside voxels, outside the grid = outside).
   auto inside = [&m](int i, int j, int k) {
@@ -126,7 +126,7 @@ TEST(SurfaceSmoothing, RemovesTheStaircaseWithinTheBound) {
   const double r = 10.0;
   VoxelMask m = ellipsoid(r, r, r);
   const VoxelBoundaryDistance boundary(m);
-  TriMesh s = marching_cubes(m);
+  TriSurface s = marching_cubes(m);
   const double before = rms_sphere_error(s, m, r * kVoxel);
   SmoothingOptions o;
   o.max_distance = 1.0 * kVoxel;
@@ -138,7 +138,7 @@ TEST(SurfaceSmoothing, RemovesTheStaircaseWithinTheBound) {
 
   // A tighter bound than the smoothing wants (it moved vertices up to rep.max_distance): the clamp engages and
   // holds.
-  TriMesh t = marching_cubes(m);
+  TriSurface t = marching_cubes(m);
   o.max_distance = 0.5 * rep.max_distance;
   const SmoothingReport tight = smooth_surface(t, boundary, o);
   EXPECT_GT(tight.clamped, 0);
@@ -149,7 +149,7 @@ TEST(SurfaceDecimation, ReducesAdaptivelyWithinTheBound) {
   // An elongated ellipsoid: strongly curved at its tips, flat-ish along its middle.
   VoxelMask m = ellipsoid(24, 7, 7);
   const VoxelBoundaryDistance boundary(m);
-  TriMesh s = marching_cubes(m);
+  TriSurface s = marching_cubes(m);
   const int mc = static_cast<int>(s.tris.rows());
   SmoothingOptions so;
   so.max_distance = kVoxel;
@@ -167,7 +167,7 @@ TEST(SurfaceDecimation, ReducesAdaptivelyWithinTheBound) {
   // Adaptive: vertices per unit area near the tips (|x| > 80 % of the half-length) against the middle (|x| < 40 %),
   // compared with the same reduction under a uniform curvature (a floor far above the ellipsoid's curvatures).
   const double cx = (m.grid.size.x() - 1) / 2.0 * kVoxel, half = 24 * kVoxel;
-  auto tip_over_middle = [&](const TriMesh& r) {
+  auto tip_over_middle = [&](const TriSurface& r) {
     double tip_area = 0, mid_area = 0;
     int tip_vertices = 0, mid_vertices = 0;
     for (Eigen::Index f = 0; f < r.tris.rows(); ++f) {
@@ -185,7 +185,7 @@ TEST(SurfaceDecimation, ReducesAdaptivelyWithinTheBound) {
     }
     return (tip_vertices / tip_area) / (mid_vertices / mid_area);
   };
-  TriMesh uniform = marching_cubes(m);
+  TriSurface uniform = marching_cubes(m);
   smooth_surface(uniform, boundary, so);
   DecimationOptions flat = o;
   flat.min_curvature = 1e4;  // 1/m
@@ -195,7 +195,7 @@ TEST(SurfaceDecimation, ReducesAdaptivelyWithinTheBound) {
   EXPECT_GT(adaptive_ratio, 1.25 * uniform_ratio) << adaptive_ratio << " vs " << uniform_ratio;
 
   // Count-driven: down to a target.
-  TriMesh c = s;
+  TriSurface c = s;
   DecimationOptions count;
   count.max_distance = kVoxel;
   count.target_vertices = 150;
@@ -219,7 +219,7 @@ TEST(SurfaceDecimation, IsDeterministic) {
   DecimationOptions o;
   o.max_distance = kVoxel;
   o.max_error = 0.3 * kVoxel;
-  TriMesh a = marching_cubes(m), b = marching_cubes(m);
+  TriSurface a = marching_cubes(m), b = marching_cubes(m);
   decimate_surface(a, &boundary, o);
   decimate_surface(b, &boundary, o);
   EXPECT_EQ(a.tris, b.tris);
