@@ -1,7 +1,7 @@
 #include "organ_view.h"
 
-#include "organs/intestine_view.h"
-#include "organs/liver_view.h"
+#include "views/intestine_view.h"
+#include "views/liver_view.h"
 
 namespace surgsim {
 

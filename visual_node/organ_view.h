@@ -1,11 +1,11 @@
 // What the visual node draws for one organ (issue 13: one organ interface per node). The app (visual_app.h) knows
 // only this interface: it receives contact frames, paces the loop, draws the tool and writes the outputs; everything
 // that depends on the organ model is behind an OrganView. make_organ_view() is the only place that looks at
-// scene.model: adding an organ is one implementation (visual_node/organs/) and one line there.
+// scene.model: adding an organ is one implementation (visual_node/views/) and one line there.
 //
-// Implementations: LiverView (organs/liver_view.h: the visual rows of the precomputed tensors, the non-linear law,
+// Implementations: LiverView (views/liver_view.h: the visual rows of the precomputed tensors, the non-linear law,
 // the deformed boundary or an embedded finer surface, contact markers) and IntestineOrganView
-// (organs/intestine_view.h: the newest BodyState as tube and mesentery, LOD by the frame-rate controller).
+// (views/intestine_view.h: the newest BodyState as tube and mesentery, LOD by the frame-rate controller).
 //
 // Phases as in the app: construction and the init hooks (attach, subscribe, print_init) may allocate and throw
 // surgsim::Error; update, draw, draw_markers, frame_done run every frame and allocate nothing; the rest is for the

@@ -1,7 +1,7 @@
 // intestine_error_bench: the intestine's error against run time (issue 8). A plain program run by hand
 // (build/bench/intestine_error_bench --out DIR); readable tables on stdout, progress on stderr, and with --out one
 // CSV per table (csv_out.h) for the report scripts. --smoke is the tiny configuration its ctest runs.
-//   1. time step against a fine-step reference: the scripted probe run (tests/common/intestine_test_util.h) at
+//   1. time step against a fine-step reference: the scripted probe run (tests/support/intestine_test_util.h) at
 //      dt = 0.25 .. 33 ms against dt = 0.1 ms, with and without self-collisions: distance of the intestine's masses
 //      to the reference every 10 ms (where the step lands on it) and at the end, probe force error, CPU time per
 //      step and per simulated second (intestine_timestep.csv; with --series also the error at each compared time,
@@ -31,7 +31,7 @@
 #include "intestine/intestine_model.h"
 #include "intestine_run.h"
 #include "support/intestine_test_util.h"
-#include "organs/intestine_view.h"
+#include "views/intestine_view.h"
 #include "render/renderer.h"
 #include "scene/scene.h"
 #include "intestine/tube_geometry.h"

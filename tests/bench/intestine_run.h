@@ -1,5 +1,5 @@
 // intestine_run.h: the intestine benchmarks' scripted run (intestine_bench, intestine_error_bench): the default
-// model stepped along the scripted probe (tests/common/intestine_test_util.h), each phase of the step timed, the
+// model stepped along the scripted probe (tests/support/intestine_test_util.h), each phase of the step timed, the
 // stochastic detector compared with the brute-force reference on the same positions.
 #pragma once
 #include <algorithm>

@@ -26,7 +26,7 @@
 //   3. Non-linear: the same punch at 5 .. 30 % of the organ's height (z extent), linear tensors, quasi non-linear
 //      (tensors + the law as the nodes apply it: Q on the tool force along the mean imposed displacement, as
 //      haptic_node/liver_contacts.cpp; P on every visible row along the direction of the summed contact rows, as
-//      visual_node/surface_deformer.cpp) against the neo-Hookean Newton reference (common/hyperelastic.h).
+//      visual_node/views/surface_deformer.cpp) against the neo-Hookean Newton reference (common/liver/hyperelastic.h).
 //
 // Errors: disp = |u - u_ref|_2 / |u_ref|_2 over the visible (boundary) nodes (stacked x, y, z); force =
 // |F - F_ref| / |F_ref| of the total contact force (vectors). In the summary a method's error is its worst frame.

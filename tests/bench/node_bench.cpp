@@ -21,7 +21,7 @@
 #include "scene/scene.h"
 #include "mesher/scene_mesh.h"
 #include "core/stats.h"
-#include "organs/surface_deformer.h"
+#include "views/surface_deformer.h"
 
 using namespace surgsim;
 

@@ -10,8 +10,8 @@
 #include <sstream>
 
 #include "Surgsim.h"
-#include "organs/intestine_view.h"
-#include "organs/liver_view.h"
+#include "views/intestine_view.h"
+#include "views/liver_view.h"
 #include "render/renderer.h"
 
 namespace surgsim {

@@ -1,4 +1,4 @@
-#include "organs/liver_view.h"
+#include "views/liver_view.h"
 
 #include <algorithm>
 #include <nlohmann/json.hpp>

@@ -1,5 +1,5 @@
 // IntestineView without DDS or GL: body states in, tube and mesentery drawn on the null renderer, LOD control.
-#include "organs/intestine_view.h"
+#include "views/intestine_view.h"
 
 #include <gtest/gtest.h>
 

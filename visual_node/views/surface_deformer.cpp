@@ -1,4 +1,4 @@
-#include "organs/surface_deformer.h"
+#include "views/surface_deformer.h"
 
 #include <Eigen/Geometry>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "organs/intestine_view.h"
+#include "views/intestine_view.h"
 
 #include <algorithm>
 #include <cmath>

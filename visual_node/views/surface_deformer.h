@@ -41,8 +41,11 @@ class SurfaceDeformer {
   const Eigen::MatrixX3f& rest() const { return rest_; }            // #visible x 3, m
   const Eigen::MatrixX3i& tris() const { return tris_; }            // #F x 3 into positions
   const std::vector<int>& visible_nodes() const { return visible_nodes_; }  // vertex v -> mesh node
-  /// Vertex of a mesh node, or -1 when the node is not visible.
-  int vertex_of(int node) const { return vertex_of_node_[static_cast<std::size_t>(node)]; }
+  /// Vertex of a mesh node, or -1 when the node is not visible or not a node of this mesh (a bad contact frame).
+  int vertex_of(int node) const {
+    return node >= 0 && static_cast<std::size_t>(node) < vertex_of_node_.size()
+               ? vertex_of_node_[static_cast<std::size_t>(node)] : -1;
+  }
   /// Largest displacement of any visible vertex in the current shape (m).
   double max_displacement() const { return max_displacement_; }
   bool has_tensors() const { return superposition_ != nullptr; }

@@ -1,5 +1,5 @@
 // The visual node's deformation equals the reference solve, and a rendered dent changes pixels near the contact only.
-#include "organs/surface_deformer.h"
+#include "views/surface_deformer.h"
 
 #include <gtest/gtest.h>
 
@@ -114,6 +114,17 @@ TEST_F(SurfaceDeformerTest, BadFrameKeepsTheLastShape) {
   const Eigen::Vector3d nan(std::nan(""), 0, 0);
   EXPECT_NE(deformer.apply(&node, &nan, 1), ContactStatus::kOk);
   EXPECT_EQ(deformer.positions(), before);
+}
+
+// A contact frame may name nodes this mesh does not have (another scene, a corrupt sample): the marker lookup the
+// visual node makes for each contact node says "not visible" instead of reading past the table.
+TEST_F(SurfaceDeformerTest, VertexOfANodeOutsideTheMeshIsNone) {
+  SurfaceDeformer deformer(*mesh_, *surface_, tensors_);
+  const int nodes = static_cast<int>(mesh_->nodes.rows());
+  EXPECT_EQ(deformer.vertex_of(-1), -1);
+  EXPECT_EQ(deformer.vertex_of(nodes), -1);
+  EXPECT_EQ(deformer.vertex_of(1 << 30), -1);
+  EXPECT_GE(deformer.vertex_of(top_node(0, 0)), 0);
 }
 
 TEST_F(SurfaceDeformerTest, RenderedDentChangesPixelsNearTheContactOnly) {

@@ -13,7 +13,7 @@
 #include "liver/superposition.h"
 #include "mesh/mesh.h"
 #include "organ_view.h"
-#include "organs/surface_deformer.h"
+#include "views/surface_deformer.h"
 
 namespace surgsim {
 
