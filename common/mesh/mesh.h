@@ -1,5 +1,6 @@
 // Tetrahedral meshes: reading (Gmsh .msh v1/v2/v4 ASCII, VTK legacy unstructured grid), writing VTK,
-// boundary extraction and validation. Pure: no DDS, no GL.
+// boundary extraction and validation. Pure: no DDS, no GL. Defined in mesh.cpp (read_mesh, boundary, volumes,
+// quality, hash), validate.cpp, and one file per format: format_msh.cpp, format_vtk.cpp, format_obj.cpp.
 #pragma once
 #include <Eigen/Core>
 #include <cstdint>
