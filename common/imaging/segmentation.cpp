@@ -118,9 +118,9 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   check_closed_surface(grid_surface, volume.source + ": marching cubes");
   report.mc_vertices = static_cast<int>(grid_surface.vertices.rows());
   report.mc_triangles = static_cast<int>(grid_surface.tris.rows());
-  report.genus = (2 - tri_mesh_topology(grid_surface).euler) / 2;
+  report.genus = (2 - tri_surface_topology(grid_surface).euler) / 2;
   out.marching_cubes = to_world(grid_surface, grid);
-  report.mc_volume = tri_mesh_volume(grid_surface);
+  report.mc_volume = tri_surface_volume(grid_surface);
   stage_done("marching cubes", t0,
              std::to_string(report.mc_triangles) + " triangles, " + std::to_string(report.mc_vertices) +
                  " vertices, genus " + std::to_string(report.genus));
@@ -150,8 +150,8 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   improve_surface(grid_surface, &boundary, improve);
   check_closed_surface(grid_surface, volume.source + ": reduced surface");
   out.surface = to_world(grid_surface, grid);
-  report.surface_volume = tri_mesh_volume(grid_surface);
-  report.boundary_target = closed_surface_nodes(report.surface_volume, tri_mesh_area(grid_surface), options.target_nodes);
+  report.surface_volume = tri_surface_volume(grid_surface);
+  report.boundary_target = closed_surface_nodes(report.surface_volume, tri_surface_area(grid_surface), options.target_nodes);
   TriSurface mesh_surface = grid_surface;
   if (report.boundary_target > 0 && mesh_surface.vertices.rows() > report.boundary_target) {
     DecimationOptions budget;

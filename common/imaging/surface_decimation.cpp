@@ -294,7 +294,7 @@ class Decimator {
     Eigen::Index n = 0;
     for (std::size_t f = 0; f < faces_.size(); ++f)
       if (face_alive_[f]) out.tris.row(n++) = faces_[f].transpose();
-    compact_tri_mesh(out);
+    compact_tri_surface(out);
     mesh_ = std::move(out);
     report_.vertices = static_cast<int>(mesh_.vertices.rows());
     report_.triangles = static_cast<int>(mesh_.tris.rows());
@@ -331,7 +331,7 @@ class Improver {
 
   ImprovementReport run() {
     ImprovementReport report;
-    report.min_quality_before = tri_mesh_min_quality(mesh_);
+    report.min_quality_before = tri_surface_min_quality(mesh_);
     for (int round = 0; round < options_.rounds; ++round) {
       const int flips = flip_pass();
       const int moves = relax_pass();
@@ -339,7 +339,7 @@ class Improver {
       report.moves += moves;
       if (flips == 0 && moves == 0) break;
     }
-    report.min_quality_after = tri_mesh_min_quality(mesh_);
+    report.min_quality_after = tri_surface_min_quality(mesh_);
     return report;
   }
 

@@ -23,8 +23,8 @@ int find_root(std::vector<int>& parent, int a) {
 
 }  // namespace
 
-TriMeshTopology tri_mesh_topology(const TriSurface& mesh) {
-  TriMeshTopology t;
+TriSurfaceTopology tri_surface_topology(const TriSurface& mesh) {
+  TriSurfaceTopology t;
   const int nv = static_cast<int>(mesh.vertices.rows());
   const int nf = static_cast<int>(mesh.tris.rows());
   // Directed half-edges (from, to, face), sorted by undirected edge.
@@ -88,7 +88,7 @@ TriMeshTopology tri_mesh_topology(const TriSurface& mesh) {
   return t;
 }
 
-double tri_mesh_volume(const TriSurface& mesh) {
+double tri_surface_volume(const TriSurface& mesh) {
   double v = 0.0;
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f) {
     const Eigen::Vector3d a = mesh.vertices.row(mesh.tris(f, 0));
@@ -99,7 +99,7 @@ double tri_mesh_volume(const TriSurface& mesh) {
   return v;
 }
 
-double tri_mesh_area(const TriSurface& mesh) {
+double tri_surface_area(const TriSurface& mesh) {
   double area = 0.0;
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f) {
     const Eigen::Vector3d a = mesh.vertices.row(mesh.tris(f, 0));
@@ -110,7 +110,7 @@ double tri_mesh_area(const TriSurface& mesh) {
   return area;
 }
 
-double tri_mesh_min_quality(const TriSurface& mesh) {
+double tri_surface_min_quality(const TriSurface& mesh) {
   double worst = 1.0;
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f) {
     const Eigen::Vector3d a = mesh.vertices.row(mesh.tris(f, 0));
@@ -123,7 +123,7 @@ double tri_mesh_min_quality(const TriSurface& mesh) {
   return worst;
 }
 
-void compact_tri_mesh(TriSurface& mesh) {
+void compact_tri_surface(TriSurface& mesh) {
   std::vector<int> remap(static_cast<std::size_t>(mesh.vertices.rows()), -1);
   for (Eigen::Index f = 0; f < mesh.tris.rows(); ++f)
     for (int k = 0; k < 3; ++k) remap[static_cast<std::size_t>(mesh.tris(f, k))] = 0;
@@ -141,13 +141,13 @@ void compact_tri_mesh(TriSurface& mesh) {
 void check_closed_surface(const TriSurface& mesh, const std::string& what) {
   if (mesh.tris.rows() == 0) throw_error(what, ": the surface has no triangles");
   if (!mesh.vertices.allFinite()) throw_error(what, ": the surface has non-finite coordinates");
-  const TriMeshTopology t = tri_mesh_topology(mesh);
+  const TriSurfaceTopology t = tri_surface_topology(mesh);
   if (!t.closed_manifold())
     throw_error(what, ": the surface is not a closed 2-manifold (", t.boundary_edges, " open edges, ",
                 t.nonmanifold_edges, " non-manifold or inconsistently oriented edges, ", t.nonmanifold_vertices,
                 " pinched vertices)");
   if (t.components != 1) throw_error(what, ": the surface has ", t.components, " separate parts (expected one)");
-  if (!(tri_mesh_volume(mesh) > 0.0)) throw_error(what, ": the surface encloses no positive volume (faces inward?)");
+  if (!(tri_surface_volume(mesh) > 0.0)) throw_error(what, ": the surface encloses no positive volume (faces inward?)");
 }
 
 }  // namespace surgsim

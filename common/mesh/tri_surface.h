@@ -15,7 +15,7 @@ struct TriSurface {
 };
 
 /// Topology of a triangle surface.
-struct TriMeshTopology {
+struct TriSurfaceTopology {
   int vertices = 0;          // referenced vertices
   int edges = 0;             // undirected edges
   int boundary_edges = 0;    // edges used by one triangle (0 when closed)
@@ -25,17 +25,17 @@ struct TriMeshTopology {
   int euler = 0;             // V - E + F
   bool closed_manifold() const { return boundary_edges == 0 && nonmanifold_edges == 0 && nonmanifold_vertices == 0; }
 };
-TriMeshTopology tri_mesh_topology(const TriSurface& mesh);
+TriSurfaceTopology tri_surface_topology(const TriSurface& mesh);
 
 /// Enclosed volume by the divergence theorem (m^3; positive when the triangles face outward) and area (m^2).
-double tri_mesh_volume(const TriSurface& mesh);
-double tri_mesh_area(const TriSurface& mesh);
+double tri_surface_volume(const TriSurface& mesh);
+double tri_surface_area(const TriSurface& mesh);
 
 /// Smallest triangle quality 4 sqrt(3) A / (l1^2 + l2^2 + l3^2) (1 equilateral, 0 degenerate).
-double tri_mesh_min_quality(const TriSurface& mesh);
+double tri_surface_min_quality(const TriSurface& mesh);
 
 /// Drops vertices no triangle uses and renumbers (order kept).
-void compact_tri_mesh(TriSurface& mesh);
+void compact_tri_surface(TriSurface& mesh);
 
 /// Throws surgsim::Error "<what>: ..." unless the surface is closed, 2-manifold, consistently oriented and
 /// connected, with finite coordinates and a positive enclosed volume.

@@ -194,7 +194,7 @@ int liver_cells(double h) {
 }
 
 // Volume (divergence theorem) and area of a closed outward triangle surface.
-// (Not tri_mesh_volume and tri_mesh_area: their arithmetic differs in the last bits, and these numbers choose the
+// (Not tri_surface_volume and tri_surface_area: their arithmetic differs in the last bits, and these numbers choose the
 // mesh size, hence the generated meshes.)
 std::pair<double, double> volume_and_area(const TriSurface& s) {
   double volume = 0.0, area = 0.0;

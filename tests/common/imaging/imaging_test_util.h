@@ -18,12 +18,12 @@
 namespace surgsim::test {
 
 /// A tetrahedral mesh's boundary as a compact triangle surface (outward).
-inline TriSurface boundary_tri_mesh(const TetMesh& mesh) {
+inline TriSurface boundary_tri_surface(const TetMesh& mesh) {
   const SurfaceMesh s = boundary_surface(mesh);
   TriSurface out;
   out.vertices = mesh.nodes;
   out.tris = s.tris;
-  compact_tri_mesh(out);
+  compact_tri_surface(out);
   return out;
 }
 
@@ -43,7 +43,7 @@ struct ReferenceOrgan {
 inline ReferenceOrgan reference_liver(int nodes) {
   ReferenceOrgan r;
   r.mesh = generate_organ(OrganSpec{"liver", nodes});
-  r.surface = boundary_tri_mesh(r.mesh);
+  r.surface = boundary_tri_surface(r.mesh);
   r.volume = tets_volume(r.mesh);
   return r;
 }
@@ -70,7 +70,7 @@ inline RoundTrip round_trip(const ReferenceOrgan& reference, const Segmentation&
   RoundTrip r;
   const double step = 0.25 * spacing;  // sampling of the surfaces for the distances
   const SurfaceDistance ds = surface_distance(s.surface, reference.surface, step);
-  const TriSurface boundary = boundary_tri_mesh(s.mesh);
+  const TriSurface boundary = boundary_tri_surface(s.mesh);
   const SurfaceDistance dm = surface_distance(boundary, reference.surface, step);
   const SurfaceDistance dc = surface_distance(s.marching_cubes, reference.surface, step);
   r.surface_hausdorff = ds.hausdorff / spacing;
@@ -82,8 +82,8 @@ inline RoundTrip round_trip(const ReferenceOrgan& reference, const Segmentation&
   r.mc_triangles = static_cast<int>(s.marching_cubes.tris.rows());
   r.surface_triangles = static_cast<int>(s.surface.tris.rows());
   r.mesh_triangles = static_cast<int>(boundary.tris.rows());
-  r.mc_volume_error = tri_mesh_volume(s.marching_cubes) / reference.volume - 1.0;
-  r.surface_volume_error = tri_mesh_volume(s.surface) / reference.volume - 1.0;
+  r.mc_volume_error = tri_surface_volume(s.marching_cubes) / reference.volume - 1.0;
+  r.surface_volume_error = tri_surface_volume(s.surface) / reference.volume - 1.0;
   r.mesh_volume_error = tets_volume(s.mesh) / reference.volume - 1.0;
   return r;
 }

@@ -58,9 +58,9 @@ TEST(MarchingCubes, EveryCubeConfigurationGivesAClosedOutwardSurface) {
     for (int c = 0; c < 8; ++c)
       if ((config >> c) & 1) set(m, c & 1, (c >> 1) & 1, (c >> 2) & 1);
     const TriSurface s = marching_cubes(m);
-    const TriMeshTopology t = tri_mesh_topology(s);
+    const TriSurfaceTopology t = tri_surface_topology(s);
     ASSERT_TRUE(t.closed_manifold()) << "case " << config;
-    EXPECT_GT(tri_mesh_volume(s), 0.0) << "case " << config;
+    EXPECT_GT(tri_surface_volume(s), 0.0) << "case " << config;
   }
 }
 
@@ -73,11 +73,11 @@ TEST(MarchingCubes, RandomVolumesGiveClosedOutwardSurfacesOnTheVoxelBoundary) {
     for (auto& v : m.inside) v = inside(rng) ? 1 : 0;
     if (m.count() == 0) continue;
     const TriSurface s = marching_cubes(m);
-    const TriMeshTopology t = tri_mesh_topology(s);
+    const TriSurfaceTopology t = tri_surface_topology(s);
     ASSERT_TRUE(t.closed_manifold()) << "trial " << trial << ": " << t.boundary_edges << " open, "
                                      << t.nonmanifold_edges << " non-manifold edges, " << t.nonmanifold_vertices
                                      << " pinched vertices";
-    EXPECT_GT(tri_mesh_volume(s), 0.0);
+    EXPECT_GT(tri_surface_volume(s), 0.0);
     // Binary input: every vertex is the centre of a boundary voxel face.
     const VoxelBoundaryDistance boundary(m);
     for (Eigen::Index v = 0; v < s.vertices.rows(); ++v)
@@ -91,19 +91,19 @@ TEST(MarchingCubes, SingleVoxelIsAnOctahedronAndABoxLosesItsCorners) {
   const TriSurface octa = marching_cubes(one);
   EXPECT_EQ(octa.tris.rows(), 8);
   EXPECT_EQ(octa.vertices.rows(), 6);
-  EXPECT_NEAR(tri_mesh_volume(octa), 8.0 / 6.0, 1e-12);  // (4/3) (s/2)^3 for s = 2
+  EXPECT_NEAR(tri_surface_volume(octa), 8.0 / 6.0, 1e-12);  // (4/3) (s/2)^3 for s = 2
 
   VoxelMask box = mask_of(6, 5, 4);
   for (int k = 0; k < 4; ++k)
     for (int j = 0; j < 5; ++j)
       for (int i = 0; i < 6; ++i) set(box, i, j, k);
   const TriSurface s = marching_cubes(box);
-  const TriMeshTopology t = tri_mesh_topology(s);
+  const TriSurfaceTopology t = tri_surface_topology(s);
   EXPECT_TRUE(t.closed_manifold());
   EXPECT_EQ(t.euler, 2);
   EXPECT_EQ(t.components, 1);
   // Faces at the voxel faces, edges and corners chamfered: between the centres' box and the voxels' box.
-  const double v = tri_mesh_volume(s);
+  const double v = tri_surface_volume(s);
   EXPECT_GT(v, 6.0 * 5.0 * 4.0 * 0.8);
   EXPECT_LT(v, 6.0 * 5.0 * 4.0);
 }
@@ -117,11 +117,11 @@ TEST(MarchingCubes, SphereHasItsVolumeAndIsSphereLike) {
       for (int i = 0; i < n; ++i)
         if ((i - c) * (i - c) + (j - c) * (j - c) + (k - c) * (k - c) <= r * r) set(m, i, j, k);
   const TriSurface s = marching_cubes(m);
-  const TriMeshTopology t = tri_mesh_topology(s);
+  const TriSurfaceTopology t = tri_surface_topology(s);
   EXPECT_TRUE(t.closed_manifold());
   EXPECT_EQ(t.euler, 2);
   const double exact = 4.0 / 3.0 * kPi * std::pow(r * 0.001, 3);
-  EXPECT_NEAR(tri_mesh_volume(s), exact, 0.05 * exact);
+  EXPECT_NEAR(tri_surface_volume(s), exact, 0.05 * exact);
 }
 
 }  // namespace

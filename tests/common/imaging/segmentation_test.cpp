@@ -135,7 +135,7 @@ TEST_P(SegmentationRoundTrip, RebuildsTheLiverCloseLightAndValid) {
   strict.fix_orientation = false;
   EXPECT_NO_THROW(validate_mesh(copy, strict));
   EXPECT_GT(r.mesh.min_quality, 0.05);
-  const TriMeshTopology t = tri_mesh_topology(test::boundary_tri_mesh(c.result.mesh));
+  const TriSurfaceTopology t = tri_surface_topology(test::boundary_tri_surface(c.result.mesh));
   EXPECT_TRUE(t.closed_manifold());
   EXPECT_EQ(t.euler, 2);
   // The noise filtered out (on the clean volume the filter only rounds a few corners): one sphere-like surface.
@@ -203,7 +203,7 @@ TEST(Segmentation, SelectsAnOrganByLabelAndKeepsMirroredAxesOutward) {
   o.label = 3;
   const Segmentation s = segment_volume(v, o);
   EXPECT_EQ(s.report.label, 3);
-  EXPECT_GT(tri_mesh_volume(s.surface), 0.0);
+  EXPECT_GT(tri_surface_volume(s.surface), 0.0);
   EXPECT_NEAR(s.report.mesh_volume, s.report.voxel_volume, 0.05 * s.report.voxel_volume);
   // Mirrored: the mesh lies on the other side of y = origin.
   EXPECT_LT(s.mesh.nodes.col(1).maxCoeff(), v.grid.origin.y() + 1e-9);

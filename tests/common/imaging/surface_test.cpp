@@ -134,7 +134,7 @@ TEST(SurfaceSmoothing, RemovesTheStaircaseWithinTheBound) {
   EXPECT_EQ(rep.steps, 2 * o.iterations);
   EXPECT_LE(rep.max_distance, o.max_distance);
   EXPECT_LT(rms_sphere_error(s, m, r * kVoxel), 0.5 * before);
-  EXPECT_TRUE(tri_mesh_topology(s).closed_manifold());
+  EXPECT_TRUE(tri_surface_topology(s).closed_manifold());
 
   // A tighter bound than the smoothing wants (it moved vertices up to rep.max_distance): the clamp engages and
   // holds.
@@ -160,7 +160,7 @@ TEST(SurfaceDecimation, ReducesAdaptivelyWithinTheBound) {
   const DecimationReport rep = decimate_surface(s, &boundary, o);
   EXPECT_EQ(rep.triangles, s.tris.rows());
   EXPECT_LT(rep.triangles, mc / 4) << mc << " -> " << rep.triangles;
-  const TriMeshTopology t = tri_mesh_topology(s);
+  const TriSurfaceTopology t = tri_surface_topology(s);
   EXPECT_TRUE(t.closed_manifold());
   EXPECT_EQ(t.euler, 2);
   for (Eigen::Index v = 0; v < s.vertices.rows(); ++v) EXPECT_TRUE(boundary.within(s.vertices.row(v).transpose(), kVoxel));
@@ -201,16 +201,16 @@ TEST(SurfaceDecimation, ReducesAdaptivelyWithinTheBound) {
   count.target_vertices = 150;
   const DecimationReport cr = decimate_surface(c, &boundary, count);
   EXPECT_EQ(cr.vertices, 150);
-  EXPECT_TRUE(tri_mesh_topology(c).closed_manifold());
+  EXPECT_TRUE(tri_surface_topology(c).closed_manifold());
 
   // Improvement keeps the surface closed and does not lower its worst triangle.
   ImprovementOptions io;
   io.max_distance = kVoxel;
-  const double q0 = tri_mesh_min_quality(c);
+  const double q0 = tri_surface_min_quality(c);
   const ImprovementReport ir = improve_surface(c, &boundary, io);
   EXPECT_GE(ir.min_quality_after, q0 - 1e-12);
-  EXPECT_TRUE(tri_mesh_topology(c).closed_manifold());
-  EXPECT_EQ(tri_mesh_topology(c).euler, 2);
+  EXPECT_TRUE(tri_surface_topology(c).closed_manifold());
+  EXPECT_EQ(tri_surface_topology(c).euler, 2);
 }
 
 TEST(SurfaceDecimation, IsDeterministic) {

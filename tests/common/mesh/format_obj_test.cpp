@@ -1,9 +1,10 @@
 // Tests for common/mesh/format_obj.cpp: Wavefront .obj surfaces (relative indices, texture and normal indices
-// skipped, polygons fanned) and every refusal naming FILE:LINE. (tests/visual_node has the quad-fan test too.)
+// skipped, polygons fanned) and every refusal naming FILE:LINE.
 #include "mesh/mesh.h"
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <string>
 
 #include "core/error.h"
@@ -53,6 +54,30 @@ TEST(ReadObj, ErrorsNameTheFileAndLine) {
   expect_error([] { read_obj(write_file("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n")); },
                {"points.obj: no faces (f lines): not a surface"});
   expect_error([] { read_obj(test_dir() + "/missing.obj"); }, {"missing.obj: cannot open the surface file"});
+}
+
+TEST(ReadObj, PolygonsAreFannedAndErrorsNameTheLine) {
+  const std::string ok = ::testing::TempDir() + "/quad.obj";
+  {
+    std::FILE* f = std::fopen(ok.c_str(), "w");
+    std::fprintf(f, "# a quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\n");
+    std::fclose(f);
+  }
+  const TriSurface s = read_obj(ok);
+  EXPECT_EQ(s.vertices.rows(), 4);
+  EXPECT_EQ(s.tris.rows(), 2);
+  const std::string bad = ::testing::TempDir() + "/bad.obj";
+  {
+    std::FILE* f = std::fopen(bad.c_str(), "w");
+    std::fprintf(f, "v 0 0 0\nv 1 0 0\nf 1 2 7\n");
+    std::fclose(f);
+  }
+  try {
+    read_obj(bad);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.obj:3: face index 7"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

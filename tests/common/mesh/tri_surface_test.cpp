@@ -48,7 +48,7 @@ std::string closed_surface_error(const TriSurface& s) {
 
 TEST(TriSurface, CubeIsAClosedManifoldOfVolumeOneAndAreaSix) {
   const TriSurface s = unit_cube();
-  const TriMeshTopology t = tri_mesh_topology(s);
+  const TriSurfaceTopology t = tri_surface_topology(s);
   EXPECT_EQ(t.vertices, 8);
   EXPECT_EQ(t.edges, 18);
   EXPECT_EQ(t.boundary_edges, 0);
@@ -57,20 +57,20 @@ TEST(TriSurface, CubeIsAClosedManifoldOfVolumeOneAndAreaSix) {
   EXPECT_EQ(t.components, 1);
   EXPECT_EQ(t.euler, 2);
   EXPECT_TRUE(t.closed_manifold());
-  EXPECT_NEAR(tri_mesh_volume(s), 1.0, 1e-15);
-  EXPECT_NEAR(tri_mesh_area(s), 6.0, 1e-15);
+  EXPECT_NEAR(tri_surface_volume(s), 1.0, 1e-15);
+  EXPECT_NEAR(tri_surface_area(s), 6.0, 1e-15);
   // Right isosceles triangles: 4 sqrt(3) (1/2) / (1 + 1 + 2).
-  EXPECT_NEAR(tri_mesh_min_quality(s), std::sqrt(3.0) / 2.0, 1e-15);
+  EXPECT_NEAR(tri_surface_min_quality(s), std::sqrt(3.0) / 2.0, 1e-15);
   EXPECT_NO_THROW(check_closed_surface(s, "cube"));
 }
 
 TEST(TriSurface, VolumeDoesNotDependOnTheOriginAndChangesSignWhenFacingInward) {
   TriSurface s = unit_cube(Eigen::Vector3d(5.0, -3.0, 2.0));
-  EXPECT_NEAR(tri_mesh_volume(s), 1.0, 1e-12);
+  EXPECT_NEAR(tri_surface_volume(s), 1.0, 1e-12);
   s.tris.col(1).swap(s.tris.col(2));
-  EXPECT_NEAR(tri_mesh_volume(s), -1.0, 1e-12);
-  EXPECT_NEAR(tri_mesh_area(s), 6.0, 1e-12);
-  EXPECT_TRUE(tri_mesh_topology(s).closed_manifold());
+  EXPECT_NEAR(tri_surface_volume(s), -1.0, 1e-12);
+  EXPECT_NEAR(tri_surface_area(s), 6.0, 1e-12);
+  EXPECT_TRUE(tri_surface_topology(s).closed_manifold());
   EXPECT_NE(closed_surface_error(s).find("cube: the surface encloses no positive volume (faces inward?)"),
             std::string::npos);
 }
@@ -81,16 +81,16 @@ TEST(TriSurface, EquilateralTriangleHasQualityOneAndAFlatOneZero) {
   s.vertices << 0, 0, 0, 1, 0, 0, 0.5, std::sqrt(3.0) / 2.0, 0, 2, 0, 0;
   s.tris.resize(1, 3);
   s.tris << 0, 1, 2;
-  EXPECT_NEAR(tri_mesh_min_quality(s), 1.0, 1e-15);
+  EXPECT_NEAR(tri_surface_min_quality(s), 1.0, 1e-15);
   s.tris.conservativeResize(2, 3);
   s.tris.row(1) << 0, 1, 3;  // three points on a line
-  EXPECT_EQ(tri_mesh_min_quality(s), 0.0);
+  EXPECT_EQ(tri_surface_min_quality(s), 0.0);
 }
 
 TEST(TriSurface, OpenSurfaceCountsItsBoundaryEdges) {
   TriSurface s = unit_cube();
   s.tris.conservativeResize(11, 3);  // one triangle missing: a hole of three edges
-  const TriMeshTopology t = tri_mesh_topology(s);
+  const TriSurfaceTopology t = tri_surface_topology(s);
   EXPECT_EQ(t.boundary_edges, 3);
   EXPECT_FALSE(t.closed_manifold());
   EXPECT_NE(closed_surface_error(s).find("cube: the surface is not a closed 2-manifold (3 open edges, 0 non-manifold "
@@ -101,7 +101,7 @@ TEST(TriSurface, OpenSurfaceCountsItsBoundaryEdges) {
 TEST(TriSurface, InconsistentOrientationIsANonManifoldEdge) {
   TriSurface s = unit_cube();
   std::swap(s.tris(0, 1), s.tris(0, 2));  // one triangle flipped: its three edges run the same way as a neighbour's
-  const TriMeshTopology t = tri_mesh_topology(s);
+  const TriSurfaceTopology t = tri_surface_topology(s);
   EXPECT_EQ(t.boundary_edges, 0);
   EXPECT_EQ(t.nonmanifold_edges, 3);
   EXPECT_FALSE(t.closed_manifold());
@@ -109,7 +109,7 @@ TEST(TriSurface, InconsistentOrientationIsANonManifoldEdge) {
 
 TEST(TriSurface, TwoCubesAreTwoPartsAndACornerSharedIsPinched) {
   const TriSurface apart = join(unit_cube(), unit_cube(Eigen::Vector3d(3, 0, 0)));
-  const TriMeshTopology t = tri_mesh_topology(apart);
+  const TriSurfaceTopology t = tri_surface_topology(apart);
   EXPECT_TRUE(t.closed_manifold());
   EXPECT_EQ(t.components, 2);
   EXPECT_EQ(t.euler, 4);
@@ -121,7 +121,7 @@ TEST(TriSurface, TwoCubesAreTwoPartsAndACornerSharedIsPinched) {
   for (Eigen::Index f = 12; f < touching.tris.rows(); ++f)
     for (int k = 0; k < 3; ++k)
       if (touching.tris(f, k) == 8) touching.tris(f, k) = 7;  // the second cube's corner 0 is the first's 7
-  const TriMeshTopology p = tri_mesh_topology(touching);
+  const TriSurfaceTopology p = tri_surface_topology(touching);
   EXPECT_EQ(p.vertices, 15);
   EXPECT_EQ(p.nonmanifold_vertices, 1);
   EXPECT_EQ(p.boundary_edges, 0);
@@ -141,7 +141,7 @@ TEST(TriSurface, CompactDropsUnusedVerticesAndKeepsTheOrder) {
   s.tris = cube.tris;
   for (Eigen::Index f = 0; f < s.tris.rows(); ++f)
     for (int k = 0; k < 3; ++k) s.tris(f, k) += s.tris(f, k) < 4 ? 1 : 2;
-  compact_tri_mesh(s);
+  compact_tri_surface(s);
   EXPECT_TRUE(s.vertices == cube.vertices);
   EXPECT_TRUE(s.tris == cube.tris);
 }

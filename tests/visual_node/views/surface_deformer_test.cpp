@@ -236,29 +236,5 @@ TEST_F(SurfaceDeformerTest, SurfaceFarFromTheOrganIsRefused) {
   }
 }
 
-TEST(ReadObj, PolygonsAreFannedAndErrorsNameTheLine) {
-  const std::string ok = ::testing::TempDir() + "/quad.obj";
-  {
-    std::FILE* f = std::fopen(ok.c_str(), "w");
-    std::fprintf(f, "# a quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\n");
-    std::fclose(f);
-  }
-  const TriSurface s = read_obj(ok);
-  EXPECT_EQ(s.vertices.rows(), 4);
-  EXPECT_EQ(s.tris.rows(), 2);
-  const std::string bad = ::testing::TempDir() + "/bad.obj";
-  {
-    std::FILE* f = std::fopen(bad.c_str(), "w");
-    std::fprintf(f, "v 0 0 0\nv 1 0 0\nf 1 2 7\n");
-    std::fclose(f);
-  }
-  try {
-    read_obj(bad);
-    FAIL();
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("bad.obj:3: face index 7"), std::string::npos) << e.what();
-  }
-}
-
 }  // namespace
 }  // namespace surgsim
