@@ -54,7 +54,11 @@ struct ContactSolution {
   int merged_duplicates = 0;        // input contacts folded into an earlier one with the same node
   double duplicate_spread = 0;      // m, largest distance between a merged request and the mean it was merged into
   int bad_input = -1;               // index of the offending input contact when status != kOk (else -1)
-  double rcond = 1;                 // (min/max Cholesky diagonal of G_CC)^2, a cheap lower bound on 1/cond(G_CC)
+  // Reciprocal condition number of G_CC in the 1-norm, 1 / (||G_CC||_1 est||G_CC^-1||_1), estimated from its
+  // Cholesky factor as LAPACK's dpocon (Hager / Higham, a few O(m^2) solves, no allocation). The estimate of
+  // ||G_CC^-1||_1 is a lower bound, so rcond is never below the exact value and in practice within a factor of 3
+  // of it. 1 with no contact, 0 when the factorization fails.
+  double rcond = 1;
 };
 
 /// Units: displacements in m, forces in N, G in m/N. solve() writes this object's workspace: use one Superposition

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
+
 #include <random>
 
 #include "support/alloc_counter.h"
@@ -293,6 +295,133 @@ TEST(SuperpositionFloat, FloatTensorsAgreeToStoragePrecision) {
   for (const auto& x : c) im.push_back({x.node, x.displacement, 7});
   const StaticSolution r = ref.solve(im);
   EXPECT_LT(test::rel_error(sol.tool_force, Eigen::Vector3d(-r.total_reaction)), 1e-4);
+}
+
+
+// --- The near-singular guard (issue 14, part 7): rcond is a real estimate of 1 / cond_1(G_CC). ---
+
+// Tensors whose "haptic" block is the given symmetric 3N x 3N matrix, every node a contact node and a row.
+Tensors synthetic_tensors(const Eigen::MatrixXd& g) {
+  const int n = static_cast<int>(g.rows() / 3);
+  Tensors t;
+  t.node_count = n;
+  t.contact_nodes = all_nodes(n);
+  t.column_of_node = all_nodes(n);
+  t.fixed_mask.assign(static_cast<std::size_t>(n), 0);
+  TensorBlock b;
+  b.name = "haptic";
+  b.row_nodes = all_nodes(n);
+  b.row_of_node = all_nodes(n);
+  b.g = g;
+  t.blocks.push_back(b);
+  return t;
+}
+
+// The exact reciprocal condition number in the 1-norm, 1 / (||A||_1 ||A^-1||_1).
+double exact_rcond1(const Eigen::MatrixXd& a) {
+  const Eigen::MatrixXd inv = a.inverse();
+  return 1.0 / (a.cwiseAbs().colwise().sum().maxCoeff() * inv.cwiseAbs().colwise().sum().maxCoeff());
+}
+
+// min / max of the Cholesky diagonal, squared: the old guard's number.
+double cholesky_diagonal_ratio_sq(const Eigen::MatrixXd& a) {
+  const Eigen::VectorXd d = a.llt().matrixL().toDenseMatrix().diagonal();
+  const double r = d.minCoeff() / d.maxCoeff();
+  return r * r;
+}
+
+TEST(SuperpositionNearSingular, IllConditionedGccWithAnEvenCholeskyDiagonalIsFlagged) {
+  // G_CC = L L^T with L unit lower triangular and -1 below the diagonal: every Cholesky pivot is 1 (so the old
+  // (min/max diagonal)^2 was exactly 1 and the guard never fired), while cond(L) grows like 2^n: for 6 contacts
+  // (18 x 18) cond_1(G_CC) is above 1e12. Scaled to liver-like compliances (m/N); rcond does not depend on scale.
+  const int n = 18;
+  Eigen::MatrixXd l = Eigen::MatrixXd::Identity(n, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < i; ++j) l(i, j) = -1;
+  const Eigen::MatrixXd g = 1e-4 * l * l.transpose();
+  ASSERT_GT(cholesky_diagonal_ratio_sq(g), 0.99) << "the construction: an even Cholesky diagonal";
+  const double exact = exact_rcond1(g);
+  ASSERT_LT(exact, 1e-12) << "the construction: ill-conditioned beyond the default threshold";
+
+  const Tensors t = synthetic_tensors(g);
+  std::vector<Contact> c;
+  for (int k = 0; k < n / 3; ++k) c.push_back({k, Eigen::Vector3d(0, 0, -1e-3)});
+  ContactSolution sol;
+  Superposition s(t, "haptic");  // the default threshold, 1e-12
+  EXPECT_EQ(s.solve(c.data(), static_cast<int>(c.size()), sol), ContactStatus::kNearSingular) << "rcond " << sol.rcond;
+  EXPECT_LT(sol.rcond, 1e-12);
+  // The estimate of ||G_CC^-1||_1 is a lower bound (Hager / Higham), so rcond is never below the exact value and
+  // in practice within a small factor of it.
+  EXPECT_GE(sol.rcond, exact * (1 - 1e-6));
+  EXPECT_LE(sol.rcond, 10 * exact);
+  EXPECT_EQ(sol.count, 0);
+  EXPECT_EQ(sol.tool_force, Eigen::Vector3d::Zero());
+
+  // A milder version of the same construction (-0.3 below the diagonal, cond_1 about 1e3): flagged by a strict
+  // threshold, solved under the default one.
+  Eigen::MatrixXd lm = Eigen::MatrixXd::Identity(n, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < i; ++j) lm(i, j) = -0.3;
+  const Eigen::MatrixXd gm = 1e-4 * lm * lm.transpose();
+  const double exact_m = exact_rcond1(gm);
+  ASSERT_GT(cholesky_diagonal_ratio_sq(gm), 0.99);
+  ASSERT_GT(exact_m, 1e-6);
+  ASSERT_LT(exact_m, 1e-2);
+  const Tensors tm = synthetic_tensors(gm);
+  Superposition normal(tm, "haptic");
+  ASSERT_EQ(normal.solve(c.data(), static_cast<int>(c.size()), sol), ContactStatus::kOk);
+  EXPECT_GE(sol.rcond, exact_m * (1 - 1e-6));
+  EXPECT_LE(sol.rcond, 10 * exact_m);
+  Superposition strict(tm, "haptic", kMaxContacts, /*near_singular_rcond=*/10 * exact_m);
+  EXPECT_EQ(strict.solve(c.data(), static_cast<int>(c.size()), sol), ContactStatus::kNearSingular);
+}
+
+TEST(SuperpositionNearSingular, WellConditionedGccIsSolvedWithItsConditionReported) {
+  // A diagonally dominant G_CC: cond_1 below 3; solved even under a strict threshold, rcond close to the exact one.
+  const int n = 12;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> d(-1, 1);
+  Eigen::MatrixXd g = Eigen::MatrixXd::Identity(n, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < i; ++j) g(i, j) = g(j, i) = 0.05 * d(rng);
+  g *= 2e-4;
+  const double exact = exact_rcond1(g);
+  ASSERT_GT(exact, 0.3);
+  const Tensors t = synthetic_tensors(g);
+  std::vector<Contact> c;
+  for (int k = 0; k < n / 3; ++k) c.push_back({k, Eigen::Vector3d(1e-3, 0, -2e-3)});
+  ContactSolution sol;
+  Superposition s(t, "haptic", kMaxContacts, /*near_singular_rcond=*/0.1);
+  ASSERT_EQ(s.solve(c.data(), static_cast<int>(c.size()), sol), ContactStatus::kOk);
+  EXPECT_GE(sol.rcond, exact * (1 - 1e-9));
+  EXPECT_LE(sol.rcond, 3 * exact);
+  EXPECT_LE(sol.rcond, 1 + 1e-12);
+}
+
+TEST_F(SuperpositionTest, RcondEstimatesTheExactConditionOfRealContacts) {
+  // G_CC of random contacts on the box organ's real tensors: rcond against the exact 1-norm value of the same G_CC.
+  std::mt19937 rng(11);
+  const TensorBlock& h = *tensors_->find("haptic");
+  Superposition haptic(*tensors_, "haptic");
+  ContactSolution sol;
+  for (int m : {1, 2, 3, 5, 10, 20}) {
+    for (int trial = 0; trial < 3; ++trial) {
+      const auto contacts = random_contacts(m, rng);
+      ASSERT_EQ(haptic.solve(contacts.data(), m, sol), ContactStatus::kOk);
+      Eigen::MatrixXd gcc(3 * m, 3 * m);
+      for (int a = 0; a < m; ++a)
+        for (int b = 0; b < m; ++b) {
+          const int ra = h.row_of_node[static_cast<std::size_t>(sol.nodes[static_cast<std::size_t>(a)])];
+          const int cb = tensors_->column_of_node[static_cast<std::size_t>(sol.nodes[static_cast<std::size_t>(b)])];
+          for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) gcc(3 * a + i, 3 * b + j) = h.at(3 * ra + i, 3 * cb + j);
+        }
+      const Eigen::MatrixXd sym = 0.5 * (gcc + gcc.transpose());
+      const double exact = exact_rcond1(sym);
+      EXPECT_GE(sol.rcond, exact * (1 - 1e-6)) << m;
+      EXPECT_LE(sol.rcond, 3 * exact) << m;
+    }
+  }
 }
 
 }  // namespace
