@@ -75,7 +75,7 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
   dopt.profiles_file = options_.dds_profiles.empty() ? config_dir() + "/dds/profiles.xml" : options_.dds_profiles;
   dopt.participant_profile = options_.dds_participant;
   dopt.name = "surgsim_visual";
-  dds_ = std::make_unique<VisualDds>(dopt, watch_);
+  dds_ = std::make_unique<VisualDds>(dopt, watch_, scene_hash_);
   watch_.mark_dds_ready(monotonic_ns());
   organ_->subscribe(dds_->participant());  // e.g. the intestine's BodyState
   dds_priority.reset();  // this thread renders at its previous scheduling
@@ -103,6 +103,8 @@ void VisualApp::check_scene_identity() {
   const bool scene_ok = info.scene_hash() == scene_hash_;
   const bool tensors_ok = info.tensor_hash() == organ_->tensor_hash();
   hash_ok_ = scene_ok && tensors_ok;
+  scene_confirmed_ = hash_ok_;
+  frames_before_scene_info_ = dds_->frames_accepted();
   if (!scene_ok) {
     std::cerr << "visual_node: the haptic node runs scene '" << info.scene_name() << "' (hash " << info.scene_hash()
               << ", mesh hash " << info.mesh_hash() << ") but this node loaded '" << scene_.name << "' (hash "
@@ -112,6 +114,16 @@ void VisualApp::check_scene_identity() {
               << "node's (hash " << organ_->tensor_hash() << ") for the same scene: both must use the same tensor "
               << "settings; contact frames are ignored\n";
   }
+}
+
+void VisualApp::report_wrong_scene() {
+  std::uint64_t hash = 0;
+  const std::uint64_t count = dds_->frames_wrong_scene(hash);
+  if (count == 0 || hash == wrong_scene_reported_hash_) return;
+  wrong_scene_reported_hash_ = hash;
+  std::cerr << "visual_node: contact frame with scene hash " << hash << " ignored: this node's scene '" << scene_.name
+            << "' has hash " << scene_hash_ << " (frames of another scene are dropped and counted in stats "
+            << "frames_wrong_scene, " << count << " so far)\n";
 }
 
 void VisualApp::render_frame(const msg::ContactFrame& frame, bool have_frame, bool fresh) {
@@ -151,14 +163,21 @@ int VisualApp::run() {
       break;
     }
     check_scene_identity();
+    report_wrong_scene();
 
+    // Frames are taken only once SceneInfo confirmed the scene (until then the newest one waits in VisualDds), and
+    // only frames carrying this node's scene_hash are ever kept there.
     std::uint64_t received = 0;
-    const bool fresh = dds_->newest_frame(frame, received) && hash_ok_;
-    if (fresh) have_frame = true;
+    const bool fresh = scene_confirmed_ && dds_->newest_frame(frame, received);
+    if (fresh) {
+      have_frame = true;
+      ++frames_shown_;
+    }
     render_frame(frame, have_frame, fresh);
+    frame_rate_.add(monotonic_ns());
 
-    // Echo the newest haptic stamp so the haptic node measures the round trip on its own clock.
-    dds_->publish_status(rate_hz_, organ_->lod(), have_frame ? frame.seq() : 0, frames_rendered_);
+    // The measured frame rate (not the configured one); the frame shown.
+    dds_->publish_status(frame_rate_.fps(), organ_->lod(), have_frame ? frame.seq() : 0, frames_rendered_);
 
     next += period;
     const auto now = clock::now();
@@ -182,11 +201,17 @@ void VisualApp::shutdown() {
   j["renderer"] = renderer_->name();
   j["frames_received"] = dds_->frames_received();
   j["frames_rendered"] = frames_rendered_;
+  std::uint64_t wrong_hash = 0;
+  j["frames_wrong_scene"] = dds_->frames_wrong_scene(wrong_hash);  // dropped: another scene_hash
+  j["frames_before_scene_info"] = scene_confirmed_ ? frames_before_scene_info_ : dds_->frames_accepted();
+  j["frames_shown"] = frames_shown_;                               // fresh frames drawn
+  j["scene_confirmed"] = scene_confirmed_;
   output_->add_stats(j);  // pngs_written, png_errors, vtk_written, video, out, first_png, last_png
   j["deform_errors"] = organ_->deform_errors();
   j["visible_nodes"] = 0;  // the organ's own keys below (model_built; visible_nodes, tensor_rows, ... when it has them)
   j["tensor_rows"] = 0;
   j["fps"] = wall_seconds_ > 0 ? static_cast<double>(frames_rendered_) / wall_seconds_ : 0.0;
+  j["fps_configured"] = rate_hz_;
   j["wall_seconds"] = wall_seconds_;
   j["deform_us"] = to_json(deform);
   j["render_ms"] = to_json(render);

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/stats.h"
+#include "frame_rate.h"
 #include "haptic_watch.h"
 #include "render/image.h"
 #include "scene/scene.h"
@@ -54,8 +55,10 @@ class VisualApp {
 
  private:
   /// Once the haptic side's SceneInfo is known: whether it runs this scene with the same tensors (else frames are
-  /// ignored and run() returns 3).
+  /// ignored and run() returns 3). Until it is known no contact frame is taken: the newest one waits in VisualDds.
   void check_scene_identity();
+  /// One stderr line per foreign scene hash seen on contact frames (those frames are dropped by VisualDds).
+  void report_wrong_scene();
   /// Deformation, drawing and the PNG of one frame: `frame` is the newest frame taken (shown when `have_frame`),
   /// `fresh` when it arrived since the last one.
   void render_frame(const msg::ContactFrame& frame, bool have_frame, bool fresh);
@@ -74,7 +77,12 @@ class VisualApp {
   double rate_hz_ = 50;
   bool hash_checked_ = false;
   bool hash_ok_ = true;
+  bool scene_confirmed_ = false;                 // SceneInfo received and matching: frames may be drawn
+  std::uint64_t frames_before_scene_info_ = 0;   // frames of this scene received before the confirmation
+  std::uint64_t frames_shown_ = 0;               // fresh frames handed to the organ
+  std::uint64_t wrong_scene_reported_hash_ = 0;  // the foreign hash last named on stderr
   std::uint64_t frames_rendered_ = 0;
+  FrameRateMeter frame_rate_;                    // measured rate, sent as VisualStatus.fps
   Image image_;  // read-back buffer, reused every frame
   double wall_seconds_ = 0;
   SampleRecorder deform_us_{1 << 18};

@@ -16,9 +16,11 @@ using eprosima::fastrtps::types::ReturnCode_t;
 
 namespace {
 
-// Keeps the newest ContactFrame and the one-way latency of each (same-host clocks).
+// Keeps the newest ContactFrame of this node's scene and the one-way latency of each (same-host clocks). A frame
+// whose scene_hash is not this node's is counted (with its hash) and never kept: it cannot be drawn.
 class ContactFrameListener : public DataReaderListener {
  public:
+  void set_scene_hash(std::uint64_t hash) { scene_hash_ = hash; }
   /// Every received frame's stamp is echoed at once on `echo` (VisualStatus), so the haptic node measures the
   /// network round trip on its own clock, independent of the frame rate.
   void set_echo(DataWriter* echo) { echo_ = echo; }
@@ -44,19 +46,34 @@ class ContactFrameListener : public DataReaderListener {
       }
       std::lock_guard<std::mutex> lock(mutex_);
       latency_us_.add(static_cast<double>(now - incoming_.stamp_ns()) * 1e-3);
-      newest_ = incoming_;
       ++received_;
       last_receive_ns_ = now;
+      if (incoming_.scene_hash() != scene_hash_) {
+        ++wrong_scene_;
+        last_wrong_hash_ = incoming_.scene_hash();
+        continue;
+      }
+      newest_ = incoming_;
+      ++accepted_;
     }
   }
-  /// Copies the newest frame if it is newer than the last one taken; returns true then.
+  /// Copies the newest frame of this scene if it is newer than the last one taken; returns true then.
   bool newest(msg::ContactFrame& out, std::uint64_t& count) {
     std::lock_guard<std::mutex> lock(mutex_);
     count = received_;
-    if (received_ == taken_) return false;
-    taken_ = received_;
+    if (accepted_ == taken_) return false;
+    taken_ = accepted_;
     out = newest_;
     return true;
+  }
+  std::uint64_t accepted() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return accepted_;
+  }
+  std::uint64_t wrong_scene(std::uint64_t& last_hash) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    last_hash = last_wrong_hash_;
+    return wrong_scene_;
   }
   std::uint64_t received() {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -79,8 +96,12 @@ class ContactFrameListener : public DataReaderListener {
   msg::ContactFrame incoming_;
   msg::ContactFrame newest_;
   SampleRecorder latency_us_{1 << 20};
-  std::uint64_t received_ = 0;
-  std::uint64_t taken_ = 0;
+  std::uint64_t scene_hash_ = 0;   // this node's scene identity (set before the reader exists)
+  std::uint64_t received_ = 0;     // every valid frame
+  std::uint64_t accepted_ = 0;     // frames of this scene
+  std::uint64_t taken_ = 0;        // accepted_ at the last newest() that returned a frame
+  std::uint64_t wrong_scene_ = 0;  // frames of another scene (never kept)
+  std::uint64_t last_wrong_hash_ = 0;
   std::uint64_t last_receive_ns_ = 0;
 };
 
@@ -123,8 +144,10 @@ struct VisualDds::State {
   msg::VisualStatus status;
 };
 
-VisualDds::VisualDds(const dds::DdsOptions& options, HapticWatch& watch) : s_(std::make_unique<State>(options)) {
+VisualDds::VisualDds(const dds::DdsOptions& options, HapticWatch& watch, std::uint64_t scene_hash)
+    : s_(std::make_unique<State>(options)) {
   auto& p = s_->participant;
+  s_->frames.set_scene_hash(scene_hash);
   s_->scene_reader = p.reader(p.topic(dds::kSceneInfoTopic, new msg::SceneInfoPubSubType()), dds::kLatchedReader,
                               &s_->scene_info);
   s_->frames.set_watch(&watch);
@@ -141,6 +164,10 @@ dds::Participant& VisualDds::participant() { return s_->participant; }
 bool VisualDds::newest_frame(msg::ContactFrame& out, std::uint64_t& received) { return s_->frames.newest(out, received); }
 
 std::uint64_t VisualDds::frames_received() { return s_->frames.received(); }
+
+std::uint64_t VisualDds::frames_accepted() { return s_->frames.accepted(); }
+
+std::uint64_t VisualDds::frames_wrong_scene(std::uint64_t& last_hash) { return s_->frames.wrong_scene(last_hash); }
 
 std::uint64_t VisualDds::last_receive_ns() { return s_->frames.last_receive_ns(); }
 

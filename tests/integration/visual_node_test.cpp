@@ -1,0 +1,289 @@
+// The real visual_node process driven by this test's own DDS participant (issue 14, part 7): the test stands in for
+// the haptic node, publishing SceneInfo and ContactFrames with the generated types, and reads the node's
+// VisualStatus back.
+//  - VisualStatus.fps is the measured frame rate, not the configured one: with a --rate the OSMesa renderer cannot
+//    keep up with, the fps the node sends matches frames_rendered / time as seen in the status samples themselves.
+//  - Contact frames are not drawn before SceneInfo confirmed the scene, and a frame whose scene_hash is not the
+//    node's is never drawn, but counted (stats frames_wrong_scene) with one stderr line naming both hashes.
+// The frame the node draws is VisualStatus.last_seq_shown of its per-frame status (echoed_stamp_ns == 0; the echo
+// the node sends on each frame's arrival has echoed_stamp_ns != 0 and proves the frame arrived).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "Surgsim.h"
+#include "SurgsimPubSubTypes.h"
+#include "core/clock.h"
+#include "dds_support.h"
+#include "node_test.h"
+#include "organ_view.h"
+#include "process.h"
+#include "scene/scene.h"
+#include "views/liver_view.h"
+
+namespace surgsim {
+namespace {
+
+using eprosima::fastdds::dds::DataReader;
+using eprosima::fastdds::dds::DataReaderListener;
+using eprosima::fastdds::dds::DataWriter;
+using eprosima::fastdds::dds::SampleInfo;
+using eprosima::fastrtps::types::ReturnCode_t;
+using testing::Process;
+
+struct StatusSeen {
+  std::uint64_t stamp_ns;
+  double fps;
+  std::uint64_t last_seq_shown;
+  std::uint64_t echoed_stamp_ns;
+  std::uint64_t frames_rendered;
+};
+
+// Every VisualStatus the node sends, as received here (DDS listener thread).
+class StatusRecorder : public DataReaderListener {
+ public:
+  void on_data_available(DataReader* reader) override {
+    SampleInfo info;
+    while (reader->take_next_sample(&sample_, &info) == ReturnCode_t::RETCODE_OK) {
+      if (!info.valid_data) continue;
+      std::lock_guard<std::mutex> lock(mutex);
+      seen.push_back({sample_.stamp_ns(), sample_.fps(), sample_.last_seq_shown(), sample_.echoed_stamp_ns(),
+                      sample_.frames_rendered()});
+    }
+  }
+  /// Per-frame statuses (not echoes).
+  std::vector<StatusSeen> frames() {
+    std::lock_guard<std::mutex> lock(mutex);
+    std::vector<StatusSeen> out;
+    for (const auto& s : seen)
+      if (s.echoed_stamp_ns == 0) out.push_back(s);
+    return out;
+  }
+  /// Echoed sequence numbers (frames that reached the node).
+  std::vector<std::uint64_t> echoed() {
+    std::lock_guard<std::mutex> lock(mutex);
+    std::vector<std::uint64_t> out;
+    for (const auto& s : seen)
+      if (s.echoed_stamp_ns != 0) out.push_back(s.last_seq_shown);
+    return out;
+  }
+  std::uint64_t max_frames_rendered() {
+    std::lock_guard<std::mutex> lock(mutex);
+    std::uint64_t m = 0;
+    for (const auto& s : seen) m = std::max(m, s.frames_rendered);
+    return m;
+  }
+  std::mutex mutex;
+  std::vector<StatusSeen> seen;
+
+ private:
+  msg::VisualStatus sample_;
+};
+
+// Polls `done` every 10 ms until it holds (true) or `timeout_s` passes (false).
+bool wait_until(const std::function<bool()>& done, double timeout_s) {
+  const std::uint64_t until = testing::now_ns() + static_cast<std::uint64_t>(timeout_s * 1e9);
+  while (testing::now_ns() < until) {
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return done();
+}
+
+class VisualNode : public testing::NodeTest {
+ protected:
+  void SetUp() override {
+    prepare("visual_node", 29);
+    dds::DdsOptions o;
+    o.domain = domain_;
+    o.profiles_file = std::string(SURGSIM_TEST_CONFIG_DIR) + "/dds/profiles.xml";
+    o.name = "surgsim_test_fake_haptic";
+    participant_ = std::make_unique<dds::Participant>(o);
+    auto& p = *participant_;
+    p.reader(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()), dds::kStreamReader, &status_);
+    frame_writer_ = p.writer(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()), dds::kContactWriter);
+    scene_writer_ = p.writer(p.topic(dds::kSceneInfoTopic, new msg::SceneInfoPubSubType()), dds::kLatchedWriter);
+  }
+  void TearDown() override {
+    participant_.reset();
+    NodeTest::TearDown();
+  }
+
+  /// Until the node's status arrives and its contact reader matched the test's writer.
+  bool node_ready(double timeout_s) {
+    return wait_until(
+        [&] {
+          eprosima::fastdds::dds::PublicationMatchedStatus st;
+          frame_writer_->get_publication_matched_status(st);
+          return st.current_count > 0 && status_.max_frames_rendered() > 0;
+        },
+        timeout_s);
+  }
+  /// Until the node has rendered `n` more frames than now (so it has looked at what arrived by now).
+  bool frames_pass(std::uint64_t n, double timeout_s) {
+    const std::uint64_t from = status_.max_frames_rendered();
+    return wait_until([&] { return status_.max_frames_rendered() >= from + n; }, timeout_s);
+  }
+
+  std::unique_ptr<dds::Participant> participant_;
+  StatusRecorder status_;
+  DataWriter* frame_writer_ = nullptr;
+  DataWriter* scene_writer_ = nullptr;
+};
+
+TEST_F(VisualNode, SendsTheMeasuredFrameRateNotTheConfiguredOne) {
+  // OSMesa at a rate no renderer reaches (one frame per 10 us): the loop renders back to back, as fast as it can.
+  const double configured = 100000;
+  Process visual(bin("visual_node"),
+                 {"--scene", "liver", "--rate", std::to_string(configured), "--png-every", "0", "--out",
+                  path("frames"), "--stats", path("visual.json")},
+                 env_, path("visual.log"));
+  ASSERT_TRUE(node_ready(120)) << testing::read_file(path("visual.log"));
+  // At least 2 s of the node's own statuses (its rate window is 1 s) and 20 frames.
+  ASSERT_TRUE(wait_until(
+      [&] {
+        const auto f = status_.frames();
+        return f.size() >= 20 && f.back().stamp_ns - f.front().stamp_ns > 2'000'000'000ull;
+      },
+      120))
+      << testing::read_file(path("visual.log"));
+  visual.signal(SIGINT);
+  ASSERT_EQ(visual.wait(60), 0) << testing::read_file(path("visual.log"));
+
+  // The rate in the samples themselves: frames_rendered over the node's stamps, over the last second before each
+  // sample; the fps the node sent with that sample must match it (the same window, up to a status' few us).
+  const auto f = status_.frames();
+  ASSERT_GE(f.size(), 20u);
+  int compared = 0, mismatched = 0;
+  std::string first_mismatch;
+  for (std::size_t b = 0; b < f.size(); ++b) {
+    if (f[b].stamp_ns - f.front().stamp_ns < 1'200'000'000ull) continue;  // a full window behind it
+    std::size_t a = b;
+    while (a > 0 && f[b].stamp_ns - f[a - 1].stamp_ns <= 1'000'000'000ull) --a;
+    if (a == b || f[b].frames_rendered - f[a].frames_rendered < 5) continue;  // too few frames seen in the window
+    const double seen = static_cast<double>(f[b].frames_rendered - f[a].frames_rendered) /
+                        (static_cast<double>(f[b].stamp_ns - f[a].stamp_ns) * 1e-9);
+    ++compared;
+    if (std::abs(f[b].fps - seen) > 0.15 * seen + 1.0 && mismatched++ == 0) {
+      first_mismatch = "status of frame " + std::to_string(f[b].frames_rendered) + ": sent " +
+                       std::to_string(f[b].fps) + " fps, rendered " + std::to_string(seen) + " fps, configured " +
+                       std::to_string(configured);
+    }
+  }
+  EXPECT_GT(compared, 0) << "no status with a full window of frames before it";
+  EXPECT_EQ(mismatched, 0) << mismatched << " of " << compared << " statuses sent another rate than rendered; first: "
+                           << first_mismatch;
+
+  // And the run's average from the stats: the same order as the rate sent (whatever the machine's speed).
+  const auto v = json(path("visual.json"));
+  const double average = v["fps"].get<double>();
+  EXPECT_EQ(v["fps_configured"].get<double>(), configured);
+  ASSERT_GT(average, 0);
+  EXPECT_LT(f.back().fps, 3 * average + 1) << "sent " << f.back().fps << ", run average " << average;
+  EXPECT_GT(f.back().fps, average / 3 - 1) << "sent " << f.back().fps << ", run average " << average;
+}
+
+TEST_F(VisualNode, DrawsOnlyFramesOfTheConfirmedScene) {
+  // The liver as the node will load it: its scene identity, tensors and a visible node to press.
+  const Scene scene = load_scene(std::string(SURGSIM_TEST_CONFIG_DIR) + "/liver.yaml");
+  OrganViewOptions vo;
+  vo.cache_dir = SURGSIM_TEST_CACHE_DIR;
+  const auto view = make_organ_view(scene, vo);
+  const std::uint64_t hash = visual_scene_hash(scene, view->mesh_hash());
+  const std::uint64_t wrong_hash = hash ^ 0x5a5a5a5aull;
+  const auto* liver = dynamic_cast<const LiverView*>(view.get());
+  ASSERT_NE(liver, nullptr);
+  const int node = liver->deformer().visible_nodes()[liver->deformer().visible_nodes().size() / 2];
+
+  Process visual(bin("visual_node"), {"--scene", "liver", "--headless", "--stats", path("visual.json")}, env_,
+                 path("visual.log"));
+  ASSERT_TRUE(node_ready(120)) << testing::read_file(path("visual.log"));
+
+  msg::ContactFrame frame;
+  frame.contacts().resize(1);
+  frame.contacts()[0].node(static_cast<std::uint32_t>(node));
+  frame.contacts()[0].lambda().z(-0.5);
+  frame.direction().z(-1);
+  // Writes frames seq first..last (100 Hz) with `scene_hash`; true once the node echoed one of them.
+  const auto publish = [&](std::uint64_t first, std::uint64_t last, std::uint64_t scene_hash) {
+    for (std::uint64_t seq = first; seq <= last; ++seq) {
+      frame.seq(seq);
+      frame.stamp_ns(monotonic_ns());
+      frame.scene_hash(scene_hash);
+      frame.sim_time(static_cast<double>(seq) * 1e-3);
+      frame_writer_->write(&frame);
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return wait_until(
+        [&] {
+          const auto e = status_.echoed();
+          return std::any_of(e.begin(), e.end(), [&](std::uint64_t s) { return s >= first && s <= last; });
+        },
+        30);
+  };
+  const auto shown_in = [&](std::uint64_t first, std::uint64_t last) {
+    long n = 0;
+    for (const auto& s : status_.frames()) n += s.last_seq_shown >= first && s.last_seq_shown <= last;
+    return n;
+  };
+
+  // 1. Frames of the right scene but no SceneInfo yet: they arrive, none is drawn.
+  ASSERT_TRUE(publish(1, 60, hash)) << "the node never received a frame\n" << testing::read_file(path("visual.log"));
+  ASSERT_TRUE(frames_pass(5, 60));
+  EXPECT_EQ(shown_in(1, 1000000), 0) << "a frame was drawn before SceneInfo confirmed the scene";
+
+  // 2. SceneInfo confirms the scene: the newest frame waiting is drawn.
+  msg::SceneInfo info;
+  info.scene_name(scene.name);
+  info.scene_hash(hash);
+  info.mesh_hash(view->mesh_hash());
+  info.tensor_hash(view->tensor_hash());
+  info.start_stamp_ns(monotonic_ns());
+  scene_writer_->write(&info);
+  EXPECT_TRUE(wait_until([&] { return shown_in(1, 60) > 0; }, 60))
+      << "the waiting frame was not drawn after SceneInfo\n" << testing::read_file(path("visual.log"));
+
+  // 3. Frames of another scene: they arrive, none is drawn.
+  ASSERT_TRUE(publish(1001, 1060, wrong_hash));
+  ASSERT_TRUE(frames_pass(5, 60));
+  EXPECT_EQ(shown_in(1001, 1060), 0) << "a frame of another scene (scene_hash) was drawn";
+
+  // 4. Frames of this scene again: drawn.
+  ASSERT_TRUE(publish(2001, 2060, hash));
+  EXPECT_TRUE(wait_until([&] { return shown_in(2001, 2060) > 0; }, 60)) << testing::read_file(path("visual.log"));
+
+  visual.signal(SIGINT);
+  ASSERT_EQ(visual.wait(60), 0) << testing::read_file(path("visual.log"));
+  const std::string log = testing::read_file(path("visual.log"));
+  const auto v = json(path("visual.json"));
+  long wrong_echoed = 0;
+  for (std::uint64_t s : status_.echoed()) wrong_echoed += s >= 1001 && s <= 1060;
+  EXPECT_GE(v.value("frames_wrong_scene", -1L), std::max(1L, wrong_echoed)) << v.dump();
+  EXPECT_LE(v.value("frames_wrong_scene", -1L), 60L);
+  EXPECT_GE(v.value("frames_before_scene_info", -1L), 1L) << v.dump();
+  EXPECT_LE(v.value("frames_before_scene_info", -1L), 60L);
+  EXPECT_TRUE(v.value("scene_confirmed", false));
+  // Deformation ran only for the frames drawn (the waiting one and phase 4's).
+  EXPECT_GE(v.value("frames_shown", -1L), 2L);
+  EXPECT_EQ(v["deform_us"]["count"].get<long>(), v.value("frames_shown", -1L));
+  EXPECT_EQ(v["deform_errors"].get<long>(), 0);
+  // One stderr line naming both hashes.
+  const std::string line = "contact frame with scene hash " + std::to_string(wrong_hash);
+  const auto at = log.find(line);
+  ASSERT_NE(at, std::string::npos) << log;
+  EXPECT_NE(log.substr(at, log.find('\n', at) - at).find(std::to_string(hash)), std::string::npos) << log;
+  EXPECT_EQ(log.find(line, at + 1), std::string::npos) << "one line per foreign hash\n" << log;
+}
+
+}  // namespace
+}  // namespace surgsim
