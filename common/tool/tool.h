@@ -9,6 +9,12 @@ namespace surgsim {
 
 constexpr int kMaxShaftPoints = 32;
 
+/// How a liver contact is imposed on the organ (issue 14): `patch` (default) spreads one constraint along the surface
+/// normal (frictionless) or a sticking 3-D constraint (friction, grasp) over every free surface node within
+/// tip_radius of the contact point with smooth weights; `triangle` is the paper's distribution of the contact
+/// displacement over the three vertices of the touched triangle (alpha_v d, all three components imposed).
+enum class ContactModel : int { kPatch = 0, kTriangle = 1 };
+
 /// Laparoscopic tool through a trocar (5 DOF: pitch, yaw, insertion, roll, jaw).
 struct ToolSpec {
   Eigen::Vector3d trocar = Eigen::Vector3d(0, 0, 0.2);   // m, fulcrum in world coordinates
@@ -20,6 +26,9 @@ struct ToolSpec {
   double jaw_length = 0.015;     // m
   double force_limit = 8.0;      // N, device force clamp
   int contact_capacity = 20;     // simultaneous contact nodes, 1..64 (ContactFrame bound)
+  ContactModel contact_model = ContactModel::kPatch;
+  double tip_radius = 0;         // m, radius of the patch contact; 0: 2.5 x the organ's mean surface edge
+  double friction = 0;           // Coulomb coefficient mu >= 0 between tip and tissue (0: frictionless)
 };
 
 /// World-space geometry of the tool for one pose. Plain data, no allocation.

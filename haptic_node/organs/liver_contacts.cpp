@@ -1,6 +1,7 @@
 #include "organs/liver_contacts.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 #include "core/error.h"
@@ -24,10 +25,20 @@ LiverContacts::LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, co
       tool_(tool),
       law_(law),
       grid_(mesh, surface),
-      superposition_(tensors, "haptic", tool.contact_capacity) {}
+      superposition_(tensors, "haptic", tool.contact_capacity) {
+  if (tool_.contact_model != ContactModel::kPatch) return;
+  std::vector<std::uint8_t> free(static_cast<std::size_t>(mesh.nodes.rows()), 0);
+  for (std::size_t n = 0; n < free.size(); ++n)
+    free[n] = tensors.column_of_node[n] >= 0 && haptic_.row_of_node[n] >= 0 && tensors.fixed_mask[n] == 0 ? 1 : 0;
+  radius_ = tool_.tip_radius > 0 ? tool_.tip_radius : kTipRadiusEdges * ContactSurface::mean_edge(mesh, surface);
+  surface_ = std::make_unique<ContactSurface>(mesh, surface, free, radius_);
+  patch_solver_ = std::make_unique<PatchSolver>(tensors, "haptic");
+  constraints_ = std::make_unique<PatchConstraints>();
+}
 
 void LiverContacts::reset() noexcept {
   for (auto& p : points_) p = PointContact{};
+  for (auto& p : patches_) p.count = 0;
   have_previous_ = false;
   solution_ = ContactSolution{};
 }
@@ -51,19 +62,29 @@ Eigen::Vector3d LiverContacts::corrected(int l) const noexcept {
   return haptic_.block3(r, c) * solution_.lambda[static_cast<std::size_t>(l)];
 }
 
-void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& out) noexcept {
+void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& out, double dt) noexcept {
   out = ContactTick{};
   status_ = ContactStatus::kOk;
   const int n_points = geometry.point_count;
 
   // A non-finite tool pose never reaches the physics: drop contacts, zero force, report.
-  bool finite = std::isfinite(jaw);
-  for (int i = 0; i < n_points; ++i) finite = finite && geometry.points[static_cast<std::size_t>(i)].allFinite();
+  bool finite = std::isfinite(jaw) && n_points >= 0 && n_points <= kMaxShaftPoints;
+  for (int i = 0; i < n_points && finite; ++i) finite = geometry.points[static_cast<std::size_t>(i)].allFinite();
+  if (tool_.contact_model == ContactModel::kPatch) finite = finite && geometry.trocar.allFinite();
   if (!finite) {
     reset();
     out.nonfinite = true;
     return;
   }
+  if (tool_.contact_model == ContactModel::kPatch) {
+    step_patch(geometry, jaw, std::isfinite(dt) && dt > 0 && dt < 1 ? dt : kDefaultDt, out);
+  } else {
+    step_triangle(geometry, jaw, out);
+  }
+}
+
+void LiverContacts::step_triangle(const ToolGeometry& geometry, double jaw, ContactTick& out) noexcept {
+  const int n_points = geometry.point_count;
 
   // --- detection and contact update, per tool point (tip first) ---
   for (int i = 0; i < n_points; ++i) {
@@ -171,7 +192,10 @@ void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& 
     solution_ = ContactSolution{};
     return;
   }
-  Eigen::Vector3d force = solution_.tool_force;
+  finish(solution_.tool_force, dir_sum, out);
+}
+
+void LiverContacts::finish(Eigen::Vector3d force, const Eigen::Vector3d& dir_sum, ContactTick& out) noexcept {
   const double dn = dir_sum.norm();
   out.direction = dn > 0 ? Eigen::Vector3d(dir_sum / dn) : Eigen::Vector3d::Zero();
   if (!force.allFinite()) {
@@ -195,6 +219,403 @@ void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& 
     force *= tool_.force_limit / norm;
   }
   out.device_force = force;
+}
+
+namespace {
+// 0 -> 1, C1 (the onset ramp and the release fade).
+double smooth01(double t) {
+  t = std::clamp(t, 0.0, 1.0);
+  return t * t * (3 - 2 * t);
+}
+// Two unit vectors completing n to an orthonormal basis.
+void tangents(const Eigen::Vector3d& n, Eigen::Vector3d& t1, Eigen::Vector3d& t2) {
+  const Eigen::Vector3d a = std::abs(n.x()) < 0.6 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  t1 = (a - a.dot(n) * n).normalized();
+  t2 = n.cross(t1);
+}
+enum Kind : int { kNone = 0, kSlide = 1, kStick = 2, kGrasp = 3, kFading = 4 };
+}  // namespace
+
+// Follows tool point i's closest point of the rest surface, or finds it: through the segment it moved along since
+// the last tick, or (resume: first tick after a reset) along the shaft from the trocar, then the closest point.
+void LiverContacts::track(const ToolGeometry& geometry, int i, bool resume) noexcept {
+  const auto si = static_cast<std::size_t>(i);
+  const Eigen::Vector3d& p = geometry.points[si];
+  PointContact& c = points_[si];
+  const auto take = [&](const RestPoint& rp) {
+    c.triangle = rp.triangle;
+    for (int v = 0; v < 3; ++v) c.nodes[static_cast<std::size_t>(v)] = surface_->surface().tris(rp.triangle, v);
+    c.bary = rp.bary;
+    c.anchor = rp.point;
+    c.normal = rp.normal;
+    c.depth = (rp.point - p).dot(rp.normal);
+  };
+  if (c.tracked) {
+    take(surface_->closest_local(p, c.triangle, &c.facing));
+    if (!(c.depth > 0)) c.tracked = false;
+    return;
+  }
+  c.resumed = false;
+  const SurfaceHit hit = grid_.segment_query(resume ? geometry.trocar : previous_[si], p);
+  RestPoint rp;
+  if (hit.hit) rp = surface_->closest_local(p, hit.triangle);
+  if (resume && (!rp.found || !((rp.point - p).dot(rp.normal) > 0))) {
+    // The shaft crossed no surface before this point (or left it again): the closest rest point, any face.
+    const SurfaceProjection proj = grid_.project_rest(p, 3);
+    if (proj.found) rp = surface_->closest_local(p, proj.triangle);
+  }
+  if (!rp.found) return;
+  if ((rp.point - p).dot(rp.normal) > 0) {
+    take(rp);
+    c.facing = rp.face_normal;
+    c.tracked = true;
+    c.resumed = resume;
+  }
+}
+
+void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double dt, ContactTick& out) noexcept {
+  const int n_points = geometry.point_count;
+  const bool resume = !have_previous_;
+  const double mu = tool_.friction;
+  const int capacity = std::min(tool_.contact_capacity, kMaxContacts);
+
+  // --- 1. where each point is relative to the rest surface; grasps closing and opening ---
+  for (int i = 0; i < n_points; ++i) {
+    const auto si = static_cast<std::size_t>(i);
+    PointContact& c = points_[si];
+    track(geometry, i, resume);
+    if (c.grasp && jaw > kGraspOpenJaw) {
+      c.grasp = false;
+      if (c.tracked) {
+        // Released inside the tissue: keep the tangential hold as a friction cone that shrinks to mu.
+        c.sticking = true;
+        c.stick_anchor = c.grasp_anchor;
+        c.stick_triangle = c.grasp_triangle;
+        const double fn = c.force.dot(c.normal);
+        const double ft = (c.force - fn * c.normal).norm();
+        c.cone_boost = fn > 0 ? ft / fn + 0.05 : 0.0;
+        c.release_age = 0;
+        c.release_offset = c.offset;
+        c.active = true;
+      } else {
+        // Released out of the tissue: the hold fades over kReleaseFade.
+        c.release_age = 0;
+        c.release_offset = c.offset;
+        c.active = false;
+      }
+    }
+    if (!c.grasp && !c.tracked) {
+      c.active = false;
+      c.sticking = false;
+      c.cone_boost = 0;
+      if (c.release_age >= 0 && c.release_age >= kReleaseFade) c.release_age = -1;
+    }
+    if (c.tracked && c.release_age >= 0 && c.cone_boost == 0 && !c.active) c.release_age = -1;  // pressed again
+    if (i == 0 && c.active && !c.grasp && jaw <= kGraspCloseJaw) {
+      c.grasp = true;
+      c.grasp_anchor = c.sticking ? c.stick_anchor : c.anchor;
+      c.grasp_triangle = c.sticking ? c.stick_triangle : c.triangle;
+      c.release_age = -1;
+      c.cone_boost = 0;
+    }
+  }
+  previous_ = geometry.points;
+  have_previous_ = true;
+
+  // --- 2. one patch per contact (or candidate), its rows and their imposed values ---
+  PatchConstraints& k = *constraints_;
+  k.clear();
+  int dropped = 0;
+  for (int i = 0; i < n_points; ++i) {
+    const auto si = static_cast<std::size_t>(i);
+    PointContact& c = points_[si];
+    PointPatch& pp = patches_[si];
+    pp.count = 0;
+    patch_of_point_[si] = -1;
+    kind_[si] = kNone;
+    c.slipping = false;
+    const Eigen::Vector3d& p = geometry.points[si];
+    int kind = kNone;
+    if (c.grasp) {
+      kind = kGrasp;
+    } else if (c.release_age >= 0 && !c.tracked) {
+      kind = kFading;
+    } else if (c.tracked) {
+      kind = (mu > 0 || c.cone_boost > 0) ? kStick : kSlide;
+    }
+    if (kind == kNone) continue;
+    // The patch: around the grasped or stuck material point, or the point's own closest rest point.
+    int tri = c.triangle;
+    Eigen::Vector3d centre = c.anchor;
+    if (kind == kGrasp || kind == kFading) {
+      tri = c.grasp_triangle;
+      centre = c.grasp_anchor;
+    } else if (kind == kStick) {
+      if (!c.sticking) {  // a new sticking contact sticks where it is
+        c.stick_anchor = c.anchor;
+        c.stick_triangle = c.triangle;
+      }
+      tri = c.stick_triangle;
+      centre = c.stick_anchor;
+    }
+    const RestPoint at = surface_->on_triangle(centre, tri);
+    int fixed = 0, out_of_patch = 0;
+    pp.count = surface_->patch(centre, tri, at.normal, kMaxContacts, pp.nodes.data(), pp.weights.data(), &out_of_patch,
+                               &fixed);
+    pp.fixed = fixed;
+    pp.dropped = out_of_patch;
+    pp.centre = centre;
+    if (pp.count == 0) continue;  // only fixed nodes under the tip: nothing to constrain
+    pp.normal = surface_->patch_normal(pp.nodes.data(), pp.weights.data(), pp.count);
+    const Eigen::Vector3d& n = pp.normal;
+    const double depth = (c.anchor - p).dot(n);
+    c.depth = depth;
+    if ((kind == kSlide || kind == kStick) && !c.active) {
+      // A new contact: only when the point penetrates the patch as the current solution deforms it.
+      double gap = depth;
+      if (solution_.count > 0) {
+        Eigen::Vector3d mean = Eigen::Vector3d::Zero(), u;
+        for (int e = 0; e < pp.count; ++e)
+          if (superposition_.displacement(pp.nodes[static_cast<std::size_t>(e)], solution_, u))
+            mean += pp.weights[static_cast<std::size_t>(e)] * u;
+        gap += n.dot(mean);
+      }
+      if (!(gap > 0)) continue;
+      c.onset_gap = c.resumed ? 0.0 : std::min(gap, depth);
+      c.age = 0;
+    }
+    if (kind == kSlide || kind == kStick) c.age += dt;  // this tick counts: a new contact pushes at once
+    // Into the union of nodes, within the tick's contact capacity (largest weights first; the rest renormalized).
+    const int p_index = k.patch_count;
+    int start = k.patch_start[static_cast<std::size_t>(p_index)];
+    int kept = 0;
+    double sum = 0;
+    for (int e = 0; e < pp.count; ++e) {
+      const int node = pp.nodes[static_cast<std::size_t>(e)];
+      int u = 0;
+      while (u < k.node_count && k.nodes[static_cast<std::size_t>(u)] != node) ++u;
+      if (u == k.node_count) {
+        if (k.node_count == capacity) {
+          ++dropped;
+          continue;
+        }
+        k.nodes[static_cast<std::size_t>(k.node_count++)] = node;
+      }
+      pp.nodes[static_cast<std::size_t>(kept)] = node;
+      pp.weights[static_cast<std::size_t>(kept)] = pp.weights[static_cast<std::size_t>(e)];
+      sum += pp.weights[static_cast<std::size_t>(kept)];
+      k.entry_node[static_cast<std::size_t>(start + kept)] = u;
+      ++kept;
+    }
+    pp.dropped += pp.count - kept;
+    pp.count = kept;
+    if (kept == 0) continue;
+    for (int e = 0; e < kept; ++e) {
+      pp.weights[static_cast<std::size_t>(e)] /= sum;
+      k.entry_weight[static_cast<std::size_t>(start + e)] = pp.weights[static_cast<std::size_t>(e)];
+    }
+    k.patch_start[static_cast<std::size_t>(p_index + 1)] = start + kept;
+    k.patch_count = p_index + 1;
+    patch_of_point_[si] = p_index;
+    kind_[si] = kind;
+    // Rows: the normal first, then two tangents for the 3-D constraints.
+    Eigen::Vector3d t1, t2;
+    tangents(n, t1, t2);
+    Eigen::Vector3d offset;
+    if (kind == kGrasp) {
+      offset = p - centre;
+    } else if (kind == kFading) {
+      offset = (1 - smooth01(c.release_age / kReleaseFade)) * c.release_offset;
+    } else {
+      const double ramp = smooth01(c.age / kOnsetRamp);
+      const double effective = depth - c.onset_gap * (1 - ramp);
+      offset = -effective * n;
+      if (kind == kStick) {
+        const Eigen::Vector3d d = p - centre;
+        offset += d - d.dot(n) * n;
+      }
+    }
+    c.offset = offset;
+    const int rows = kind == kSlide ? 1 : 3;
+    const Eigen::Vector3d dirs[3] = {n, t1, t2};
+    for (int r = 0; r < rows; ++r) {
+      const auto kr = static_cast<std::size_t>(k.row_count);
+      k.row_patch[kr] = p_index;
+      k.row_direction[kr] = dirs[r];
+      b_[kr] = dirs[r].dot(offset);
+      enabled_[kr] = 1;
+      ++k.row_count;
+    }
+  }
+  if (dropped > 0) {
+    out.over_capacity = true;
+    dropped_nodes_ += dropped;
+  }
+
+  // --- 3. the solve, with an active set for the unilateral contacts and the friction cone for sticking ones ---
+  for (int i = 0; i < n_points; ++i) points_[static_cast<std::size_t>(i)].force.setZero();
+  if (k.row_count == 0) {
+    for (int i = 0; i < n_points; ++i) {
+      PointContact& c = points_[static_cast<std::size_t>(i)];
+      if (c.release_age >= 0) c.release_age += dt;
+      if (!c.grasp) c.active = false;
+    }
+    solution_ = ContactSolution{};
+    return;
+  }
+  status_ = patch_solver_->prepare(k);
+  if (status_ != ContactStatus::kOk) {
+    if (status_ == ContactStatus::kNonFinite) out.nonfinite = true;
+    solution_ = ContactSolution{};
+    return;
+  }
+  const auto patch_force = [&](int p_index) {  // force on the ORGAN from patch p (N)
+    Eigen::Vector3d f = Eigen::Vector3d::Zero();
+    for (int r = 0; r < k.row_count; ++r)
+      if (k.row_patch[static_cast<std::size_t>(r)] == p_index)
+        f += mu_[static_cast<std::size_t>(r)] * k.row_direction[static_cast<std::size_t>(r)];
+    return f;
+  };
+  const auto disable = [&](int p_index) {
+    for (int r = 0; r < k.row_count; ++r)
+      if (k.row_patch[static_cast<std::size_t>(r)] == p_index) enabled_[static_cast<std::size_t>(r)] = 0;
+  };
+  bool solved = false;
+  for (int iteration = 0; iteration <= k.patch_count; ++iteration) {
+    status_ = patch_solver_->factor(k, enabled_.data());
+    if (status_ == ContactStatus::kNearSingular && patch_solver_->dependent_row() >= 0) {
+      // A patch whose rows depend on earlier ones (two points on the same spot): the first (deeper-first order
+      // does not matter: their constraints coincide) holds it.
+      const int p_dep = k.row_patch[static_cast<std::size_t>(patch_solver_->dependent_row())];
+      bool bilateral = false;
+      for (int i = 0; i < n_points; ++i)
+        if (patch_of_point_[static_cast<std::size_t>(i)] == p_dep)
+          bilateral = kind_[static_cast<std::size_t>(i)] == kGrasp || kind_[static_cast<std::size_t>(i)] == kFading;
+      if (bilateral) break;
+      disable(p_dep);
+      continue;
+    }
+    if (status_ != ContactStatus::kOk) break;
+    patch_solver_->solve(b_.data(), mu_.data());
+    // Unilateral: a contact that would pull the tool in lets go (the most pulling one first).
+    int worst = -1;
+    double worst_fn = 0;
+    for (int i = 0; i < n_points; ++i) {
+      const auto si = static_cast<std::size_t>(i);
+      if (kind_[si] != kSlide && kind_[si] != kStick) continue;
+      const int pi = patch_of_point_[si];
+      bool on = false;
+      for (int r = 0; r < k.row_count; ++r)
+        if (k.row_patch[static_cast<std::size_t>(r)] == pi && enabled_[static_cast<std::size_t>(r)]) on = true;
+      if (!on) continue;
+      const double fn = -patch_force(pi).dot(patches_[si].normal);  // push on the tool along n
+      if (fn < worst_fn) {
+        worst_fn = fn;
+        worst = pi;
+      }
+    }
+    if (worst >= 0) {
+      disable(worst);
+      continue;
+    }
+    solved = true;
+    break;
+  }
+  if (!solved) {
+    if (status_ == ContactStatus::kOk) status_ = ContactStatus::kNearSingular;
+    solution_ = ContactSolution{};
+    return;
+  }
+  // Coulomb: a sticking patch whose tangential force exceeds mu_eff F_n slides: its tangential offset shrinks until
+  // |F_t| = mu_eff F_n (a few fixed-point steps on the factored system: the normal-tangential coupling is weak).
+  for (int iteration = 0; iteration < 4; ++iteration) {
+    bool changed = false;
+    for (int i = 0; i < n_points; ++i) {
+      const auto si = static_cast<std::size_t>(i);
+      if (kind_[si] != kStick) continue;
+      PointContact& c = points_[si];
+      const int pi = patch_of_point_[si];
+      const Eigen::Vector3d& n = patches_[si].normal;
+      const Eigen::Vector3d f = -patch_force(pi);  // on the tool
+      const double fn = f.dot(n);
+      const double ft = (f - fn * n).norm();
+      const double mu_eff = mu + c.cone_boost * (1 - smooth01(c.release_age / kReleaseFade));
+      if (!(fn > 0) || ft <= mu_eff * fn * (1 + 1e-9)) continue;
+      const double beta = mu_eff * fn / ft;
+      for (int r = 0; r < k.row_count; ++r)
+        if (k.row_patch[static_cast<std::size_t>(r)] == pi && r > 0 && k.row_patch[static_cast<std::size_t>(r - 1)] == pi)
+          b_[static_cast<std::size_t>(r)] *= beta;  // the tangential rows (the normal row comes first)
+      c.slipping = true;
+      changed = true;
+    }
+    if (!changed) break;
+    patch_solver_->solve(b_.data(), mu_.data());
+  }
+
+  // --- 4. node forces (the ContactFrame entries), per-point forces and states ---
+  patch_solver_->node_forces(k, mu_.data(), lambda_.data());
+  ContactSolution& s = solution_;
+  s = ContactSolution{};
+  int count = 0;
+  for (int u = 0; u < k.node_count; ++u) {
+    if (lambda_[static_cast<std::size_t>(u)].isZero(0)) continue;
+    const auto l = static_cast<std::size_t>(count++);
+    s.nodes[l] = k.nodes[static_cast<std::size_t>(u)];
+    s.lambda[l] = lambda_[static_cast<std::size_t>(u)];
+    s.displacement[l] = patch_solver_->union_displacement(u, lambda_.data(), k.node_count);
+    s.corrected[l] = patch_solver_->g(u, u) * s.lambda[l];
+    s.tool_force -= s.lambda[l];
+  }
+  s.count = count;
+  s.status = ContactStatus::kOk;
+  s.rcond = 1;
+  Eigen::Vector3d dir_sum = Eigen::Vector3d::Zero();
+  for (int i = 0; i < n_points; ++i) {
+    const auto si = static_cast<std::size_t>(i);
+    PointContact& c = points_[si];
+    const int pi = patch_of_point_[si];
+    bool on = false;
+    if (pi >= 0)
+      for (int r = 0; r < k.row_count; ++r)
+        if (k.row_patch[static_cast<std::size_t>(r)] == pi && enabled_[static_cast<std::size_t>(r)]) on = true;
+    if (c.release_age >= 0) c.release_age += dt;
+    if (c.cone_boost > 0 && c.release_age >= kReleaseFade) {
+      c.cone_boost = 0;
+      c.release_age = -1;
+      c.sticking = mu > 0;
+    }
+    if (!on) {
+      if (kind_[si] == kSlide || kind_[si] == kStick) {
+        c.active = false;
+        c.sticking = false;
+      }
+      continue;
+    }
+    c.force = -patch_force(pi);
+    if (kind_[si] == kFading) continue;  // a fading hold is not a contact
+    dir_sum += c.offset;
+    ++out.points_in_contact;
+    out.grasp = out.grasp || c.grasp;
+    if (kind_[si] == kSlide || kind_[si] == kStick) c.active = true;
+    if (kind_[si] == kStick) {
+      c.sticking = true;
+      if (c.slipping) {
+        // The stuck material point moves to where the reduced tangential offset puts it, on the rest surface.
+        const Eigen::Vector3d& n = patches_[si].normal;
+        Eigen::Vector3d t_off = Eigen::Vector3d::Zero();
+        for (int r = 0; r < k.row_count; ++r)
+          if (k.row_patch[static_cast<std::size_t>(r)] == pi && r > 0 && k.row_patch[static_cast<std::size_t>(r - 1)] == pi)
+            t_off += b_[static_cast<std::size_t>(r)] * k.row_direction[static_cast<std::size_t>(r)];
+        const Eigen::Vector3d target = geometry.points[si] - t_off + c.depth * n;
+        const RestPoint rp = surface_->closest_local(target, c.stick_triangle);
+        if (rp.found) {
+          c.stick_anchor = rp.point;
+          c.stick_triangle = rp.triangle;
+        }
+      }
+    }
+  }
+  finish(s.tool_force, dir_sum, out);
 }
 
 }  // namespace surgsim

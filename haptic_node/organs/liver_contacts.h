@@ -1,14 +1,36 @@
-// Tool-organ contacts for the liver (paper sections 4-5, DESIGN.md 4.1-4.2): continuous detection of each tool point
-// against the deformed surface (bucket grid), unilateral contacts that slide without friction and release when the
-// point leaves the rest surface, grasps (jaw closed) that hold their anchor and can pull, barycentric distribution of
-// each contact displacement over its triangle, lambda = G_CC^-1 u* through the precomputed tensors, the quasi
-// non-linear force law, the device clamp. step() allocates nothing and never returns a non-finite force.
+// Tool-organ contacts for the liver (paper sections 4-5, DESIGN.md 4.1-4.2; issue 14): the quasi non-linear force
+// law and the device clamp over one of two contact models (ToolSpec::contact_model).
+//
+// patch (default, issue 14): a tool point is a tip of radius r (tool.tip_radius). While it is below the REST surface
+// (found by a continuous segment query, or after a reset from the trocar along the shaft, so a tool already inside
+// is found again at once) its closest rest point is followed by a local walk (liver/contact_surface.h): a straight
+// press keeps its anchor and its depth grows monotonically. Its contact is one scalar constraint along the patch
+// normal n over the free surface nodes within r (smooth Wendland weights, sum 1):  sum_i w_i n.u_i = -depth,
+// solved through the precomputed tensors (liver/patch_solve.h) with the other points' constraints; unilateral (a
+// constraint that would pull is dropped, active set) and frictionless, or with Coulomb friction (tool.friction = mu)
+// a sticking 3-D constraint of its patch while |F_t| <= mu F_n that slides along the surface when it would exceed it
+// (the stick anchor is moved so that |F_t| = mu F_n). A grasp (jaw closed on a contact) is a bilateral 3-D
+// constraint of the patch at its anchor. Continuity in time: a new contact's initial penetration of the (smoothed)
+// deformed surface is blended in over kOnsetRamp s (at 0.1 m/s and 1 kHz that is at most 0.1 mm, so slow contacts
+// are unchanged; a fast stab no longer jumps to the device limit); a grasp released out of the tissue lets go of
+// its hold over kReleaseFade s, one released inside keeps its tangential hold as a friction cone shrinking over the
+// same time. The ContactFrame carries one entry per patch node, lambda_i = w_i n lambda (the visual node is
+// unchanged); when the union of the patches has more nodes than tool.contact_capacity the smallest weights are left
+// out, the rest renormalized, and the tick says over_capacity.
+//
+// triangle (the paper's model): continuous detection against the deformed surface, each contact displacement
+// distributed over the three vertices of its triangle (alpha_v d, all three components), lambda = G_CC^-1 u*.
+//
+// step() allocates nothing and never returns a non-finite force.
 #pragma once
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <memory>
 
 #include "liver/bucket_grid.h"
+#include "liver/contact_surface.h"
+#include "liver/patch_solve.h"
 #include "mesh/mesh.h"
 #include "scene/scene.h"
 #include "liver/superposition.h"
@@ -21,13 +43,44 @@ class NonlinearLaw;
 
 /// One tool point's contact (fixed capacity, plain data).
 struct PointContact {
-  bool active = false;
+  bool active = false;   // pushing (or holding) this tick
   bool grasp = false;
   int triangle = -1;
   std::array<int, 3> nodes{{-1, -1, -1}};
   Eigen::Vector3d bary = Eigen::Vector3d::Zero();
-  Eigen::Vector3d anchor = Eigen::Vector3d::Zero();  // m, point of the REST surface the tool point drags
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // outward unit normal of the rest triangle
+  Eigen::Vector3d anchor = Eigen::Vector3d::Zero();  // m, point of the REST surface the tool point drags (patch:
+                                                     // the closest rest point of the tool point)
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // outward unit normal there (patch: interpolated vertex normal)
+  // --- patch model ---
+  bool tracked = false;      // the point is below the rest surface (depth > 0)
+  bool resumed = false;      // tracked again after a reset with the tool inside: no onset ramp
+  double depth = 0;          // m below the rest surface along the patch normal
+  Eigen::Vector3d facing = Eigen::Vector3d::UnitZ();  // normal where the point entered: the walk keeps to faces
+                                                      // within 60 degrees of it
+  bool sticking = false;     // friction or a released grasp's fading hold: 3-D constraint at stick_anchor
+  int stick_triangle = -1;
+  Eigen::Vector3d stick_anchor = Eigen::Vector3d::Zero();
+  int grasp_triangle = -1;
+  Eigen::Vector3d grasp_anchor = Eigen::Vector3d::Zero();
+  double onset_gap = 0;      // m, penetration of the deformed patch when the contact began (blended in)
+  double age = 0;            // s since the contact began
+  double release_age = -1;   // s since a grasp let go (>= 0 while its hold fades)
+  Eigen::Vector3d release_offset = Eigen::Vector3d::Zero();  // m, the grasp's imposed patch displacement then
+  double cone_boost = 0;     // extra friction coefficient of a grasp released inside, fading to 0
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // m, imposed patch displacement this tick
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();   // N, on the tool from this point (before the law and clamp)
+  bool slipping = false;     // a sticking contact slid this tick (|F_t| = mu F_n)
+};
+
+/// The patch of one tool point this tick (patch model).
+struct PointPatch {
+  int count = 0;
+  std::array<int, kMaxContacts> nodes{};
+  std::array<double, kMaxContacts> weights{};
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  int dropped = 0;   // nodes inside the radius left out (patch capacity or the tick's contact capacity)
+  int fixed = 0;     // nodes inside the radius without a constraint (fixed)
 };
 
 
@@ -35,13 +88,17 @@ class LiverContacts {
  public:
   static constexpr double kGraspCloseJaw = 0.05;  // rad: at or below, a touching jaw grasps
   static constexpr double kGraspOpenJaw = 0.15;   // rad: above, a grasp lets go (hysteresis)
+  static constexpr double kOnsetRamp = 0.02;      // s, a new contact's initial penetration blended in
+  static constexpr double kReleaseFade = 0.05;    // s, a released grasp's hold fades out
+  static constexpr double kTipRadiusEdges = 2.5;  // tip_radius 0: this many mean surface edges
+  static constexpr double kDefaultDt = 1e-3;      // s, tick length when the caller gives none
 
   /// Init (allocates). `tensors` must hold the "haptic" block; all references must outlive this object.
   LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors& tensors, const ToolSpec& tool,
                 const NonlinearLaw* law = nullptr);
 
-  /// One haptic tick for the tool at `geometry` with jaw opening `jaw` (rad). noexcept, no allocation.
-  void step(const ToolGeometry& geometry, double jaw, ContactTick& out) noexcept;
+  /// One haptic tick of `dt` s for the tool at `geometry` with jaw opening `jaw` (rad). noexcept, no allocation.
+  void step(const ToolGeometry& geometry, double jaw, ContactTick& out, double dt = kDefaultDt) noexcept;
   /// Drops every contact (e.g. input lost) and forgets the previous tool position.
   void reset() noexcept;
 
@@ -49,6 +106,13 @@ class LiverContacts {
   /// The constrained solve's status in the last step() (kOk when it had nothing to solve).
   ContactStatus status() const { return status_; }
   const PointContact& point(int i) const { return points_[static_cast<std::size_t>(i)]; }
+  /// Patch of tool point i in the last step (patch model; count 0 without one).
+  const PointPatch& patch(int i) const { return patches_[static_cast<std::size_t>(i)]; }
+  /// Tip radius in use (m; patch model).
+  double tip_radius() const { return radius_; }
+  const ToolSpec& tool() const { return tool_; }
+  /// Patch nodes left out for the contact capacity since construction.
+  long dropped_nodes() const { return dropped_nodes_; }
   const BucketGrid& grid() const { return grid_; }
   /// Corrected constraint u~_l = G_{k_l k_l} lambda_l of solution node l (m).
   Eigen::Vector3d corrected(int l) const noexcept;
@@ -57,6 +121,10 @@ class LiverContacts {
 
  private:
   static void deformed_cb(const void* self, int node, Eigen::Vector3d& out);
+  void step_triangle(const ToolGeometry& geometry, double jaw, ContactTick& out) noexcept;
+  void step_patch(const ToolGeometry& geometry, double jaw, double dt, ContactTick& out) noexcept;
+  void track(const ToolGeometry& geometry, int i, bool resume) noexcept;
+  void finish(Eigen::Vector3d force, const Eigen::Vector3d& dir_sum, ContactTick& out) noexcept;
 
   const TetMesh& mesh_;
   const Tensors& tensors_;
@@ -71,6 +139,18 @@ class LiverContacts {
   std::array<Eigen::Vector3d, kMaxShaftPoints> previous_{};
   bool have_previous_ = false;
   std::array<Contact, 3 * kMaxShaftPoints> requests_{};
+  // --- patch model ---
+  double radius_ = 0;
+  std::unique_ptr<ContactSurface> surface_;
+  std::unique_ptr<PatchSolver> patch_solver_;
+  std::unique_ptr<PatchConstraints> constraints_;
+  std::array<PointPatch, kMaxShaftPoints> patches_{};
+  std::array<int, kMaxShaftPoints> patch_of_point_{};  // index in constraints_ (-1: none)
+  std::array<int, kMaxShaftPoints> kind_{};            // 0 none, 1 slide, 2 stick, 3 grasp, 4 fading grasp
+  std::array<double, kMaxPatchRows> b_{}, mu_{};
+  std::array<unsigned char, kMaxPatchRows> enabled_{};
+  std::array<Eigen::Vector3d, kMaxContacts> lambda_{};
+  long dropped_nodes_ = 0;
 };
 
 }  // namespace surgsim

@@ -21,7 +21,7 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
 
 void LiverOrgan::step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept {
   if (tool != nullptr) {
-    contacts_->step(*tool, jaw, out);
+    contacts_->step(*tool, jaw, out, dt);
   } else {
     contacts_->reset();  // input lost: every contact dropped, the force zero
   }

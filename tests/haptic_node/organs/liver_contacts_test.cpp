@@ -74,11 +74,15 @@ TEST_F(LiverContactsTest, PokePushesBackAndReleases) {
     EXPECT_LT(std::abs(t.force.x()) + std::abs(t.force.y()), 0.2 * t.force.z());
     previous = t.force.z();
   }
-  // The imposed displacement holds at the contact point: the deformed triangle passes through the tip.
-  const PointContact& pc = c.point(0);
-  Eigen::Vector3d x = Eigen::Vector3d::Zero();
-  for (int v = 0; v < 3; ++v) x += pc.bary[v] * c.deformed(pc.nodes[static_cast<std::size_t>(v)]);
-  EXPECT_NEAR(x.z(), 0.04 - 0.008, 1e-9);
+  // The imposed displacement holds once the onset ramp is over (issue 14: the patch contact): the weighted mean of
+  // the patch's deformed nodes is at the tip's depth along the patch normal.
+  for (int k = 0; k < 30; ++k) step(c, pose_at_depth(0.008));
+  const PointPatch& pp = c.patch(0);
+  ASSERT_GT(pp.count, 3);
+  EXPECT_NEAR(pp.normal.z(), 1.0, 1e-12);
+  double z = 0;
+  for (int e = 0; e < pp.count; ++e) z += pp.weights[static_cast<std::size_t>(e)] * c.deformed(pp.nodes[static_cast<std::size_t>(e)]).z();
+  EXPECT_NEAR(z, 0.04 - 0.008, 1e-9);
   // Back out: released, no force.
   const ContactTick out = step(c, pose_at_depth(-0.002));
   EXPECT_EQ(out.points_in_contact, 0);
@@ -166,7 +170,12 @@ TEST_F(LiverContactsTest, FastStabWithShaftPointsFeelsLikeASlowOne) {
   for (double depth = -0.005; depth <= 0.01 + 1e-12; depth += 0.0005) t_slow = step(slow, pose_at_depth(depth));
   LiverContacts fast(*mesh_, *surface_, *tensors_, spec_);
   step(fast, pose_at_depth(-0.005));
-  const ContactTick t_fast = step(fast, pose_at_depth(0.01));  // 15 mm in one tick: three points cross together
+  ContactTick t_fast = step(fast, pose_at_depth(0.01));  // 15 mm in one tick: three points cross together
+  // Issue 14: the fast stab's initial penetration is blended in over the onset ramp; compare once both have settled.
+  for (int k = 0; k < 30; ++k) {
+    t_fast = step(fast, pose_at_depth(0.01));
+    t_slow = step(slow, pose_at_depth(0.01));
+  }
   ASSERT_GT(t_slow.force.z(), 0.0);
   EXPECT_EQ(t_fast.points_in_contact, t_slow.points_in_contact);
   EXPECT_NEAR(t_fast.force.z(), t_slow.force.z(), 1e-9 * t_slow.force.z());
