@@ -424,7 +424,7 @@ NonlinearSpec read_nonlinear(const Reader& r, const Field& f) {
 ToolSpec read_tool(const Reader& r, const Field& f) {
   const Map m(r, f,
               {"trocar", "axis", "shaft_length", "shaft_radius", "shaft_points", "shaft_spacing", "jaw_length",
-               "force_limit", "contact_capacity"});
+               "force_limit", "contact_capacity", "contact_model", "tip_radius", "friction"});
   ToolSpec t;
   if (m.has("trocar")) t.trocar = r.vec3(m.at("trocar"), "the fulcrum in world coordinates, m");
   if (m.has("axis")) t.axis = r.direction(m.at("axis"), "non-zero shaft direction into the body at pitch = yaw = 0");
@@ -439,6 +439,21 @@ ToolSpec read_tool(const Reader& r, const Field& f) {
   if (m.has("contact_capacity")) {
     t.contact_capacity = r.integer(m.at("contact_capacity"), 1, 64, "simultaneous contact nodes, 1..64");
   }
+  if (m.has("contact_model")) {
+    const std::string model = r.text(m.at("contact_model"), "patch | triangle");
+    if (model == "patch") {
+      t.contact_model = ContactModel::kPatch;
+    } else if (model == "triangle") {
+      t.contact_model = ContactModel::kTriangle;
+    } else {
+      r.fail(m.at("contact_model").line, m.key("contact_model"), "'" + model + "' is not a contact model",
+             "use patch (smooth, tip of finite radius) or triangle (the paper's barycentric distribution)");
+    }
+  }
+  if (m.has("tip_radius")) {
+    t.tip_radius = r.number(m.at("tip_radius"), closed(0, 0.1), "tip radius in m, 0..0.1 (0: 2.5 x the mean surface edge)");
+  }
+  if (m.has("friction")) t.friction = r.number(m.at("friction"), closed(0, 10), "Coulomb friction coefficient, 0..10");
   // The contact points must lie on the shaft.
   if ((t.shaft_points - 1) * t.shaft_spacing >= t.shaft_length) {
     const char* k = m.has("shaft_spacing") ? "shaft_spacing" : m.has("shaft_points") ? "shaft_points" : "shaft_length";
@@ -634,6 +649,9 @@ std::uint64_t Scene::hash() const {
   hash_double(h, tool.jaw_length);
   hash_double(h, tool.force_limit);
   h.value<std::int32_t>(tool.contact_capacity);
+  h.value<std::int32_t>(static_cast<std::int32_t>(tool.contact_model));
+  hash_double(h, tool.tip_radius);
+  hash_double(h, tool.friction);
 
   hash_double(h, haptic.rate_hz);
 
