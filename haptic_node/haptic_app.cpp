@@ -48,6 +48,7 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   // its mass-spring body and nothing of the liver) ---
   organ_ = make_haptic_organ(scene_, cache, total_ticks_, progress);
   scene_hash_ = scene_.hash() ^ (organ_->mesh_hash() * 0x9E3779B97F4A7C15ull);
+  force_stage_ = ForceStage(scene_.haptic, scene_.tool.force_limit);
 
   // --- init: outputs ---
   if (!options_.record.empty()) {
@@ -147,6 +148,7 @@ void HapticApp::tick(std::uint64_t k) {
     flags |= msg::kFlagInputLost;
     organ_->step(nullptr, pose.jaw, dt_, result);  // contacts dropped; a dynamic body keeps moving without the tool
   }
+  force_stage_.apply(input_ok ? &tool : nullptr, dt_, result);  // coupling damper + passivity control (force_stage.h)
   if (result.nonfinite) {
     ++nonfinite_rejected_;
     flags |= msg::kFlagNonFiniteHeld;
@@ -257,6 +259,7 @@ void HapticApp::shutdown() {
   j["loop_start_ns"] = loop_start_ns_;
   // Which organ model this run built (a liver run builds no intestine objects, an intestine run no liver ones).
   j["model_built"] = organ_->model_name();
+  force_stage_.add_stats(j);  // "force_stage": energy observed, dissipated by the controller, ticks it acted
   organ_->add_stats(j);
   if (!options_.stats.empty()) write_json_file(options_.stats, j);
   if (!options_.quiet) {

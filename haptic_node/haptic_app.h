@@ -10,6 +10,7 @@
 
 #include "async_writer.h"
 #include "core/stats.h"
+#include "force_stage.h"
 #include "organ.h"
 #include "scene/scene.h"
 #include "tool/trajectory.h"
@@ -73,6 +74,7 @@ class HapticApp {
   std::unique_ptr<AsyncLineWriter> record_writer_;  // --record lines, written off the loop thread
   std::unique_ptr<HapticOrgan> organ_;     // the scene's organ (make_haptic_organ)
   std::unique_ptr<HapticDds> dds_;
+  ForceStage force_stage_;                  // contact damper + passivity observer/controller on the force sent
   Pose5 held_pose_;                         // last good pose (held while device input is lost)
   Pose5 last_command_;                      // newest device command, its arrival (monotonic ns), commands so far
   std::uint64_t last_command_ns_ = 0;

@@ -466,10 +466,19 @@ ToolSpec read_tool(const Reader& r, const Field& f) {
 }
 
 HapticSpec read_haptic(const Reader& r, const Field& f) {
-  const Map m(r, f, {"rate_hz"});
+  const Map m(r, f, {"rate_hz", "passivity", "coupling_damping", "passivity_max_damping"});
   HapticSpec h;
   if (m.has("rate_hz"))
     h.rate_hz = r.number(m.at("rate_hz"), closed(50, 20000), "haptic rate in Hz, >= 300 for stable force feedback");
+  if (m.has("passivity")) h.passivity = r.boolean(m.at("passivity"));
+  if (m.has("coupling_damping")) {
+    h.coupling_damping = r.number(m.at("coupling_damping"), closed(0, 1000),
+                                  "contact damper in N s/m, 0..1000 (0: none), e.g. 3");
+  }
+  if (m.has("passivity_max_damping")) {
+    h.passivity_max_damping = r.number(m.at("passivity_max_damping"), {0, 1000, true, false},
+                                       "largest damping of the passivity controller in N s/m, (0, 1000], e.g. 30");
+  }
   return h;
 }
 
@@ -654,6 +663,9 @@ std::uint64_t Scene::hash() const {
   hash_double(h, tool.friction);
 
   hash_double(h, haptic.rate_hz);
+  h.value<std::uint8_t>(haptic.passivity);
+  hash_double(h, haptic.coupling_damping);
+  hash_double(h, haptic.passivity_max_damping);
 
   // The intestine's parameters (other models hash as before).
   if (model == "intestine") {

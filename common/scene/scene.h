@@ -16,6 +16,11 @@ namespace surgsim {
 
 struct HapticSpec {
   double rate_hz = 300.0;  // 50..20000
+  // The force stage before the device (haptic_node/force_stage.h): a contact damper (the virtual coupling) and a
+  // passivity observer / controller (Hannaford & Ryu 2002) on the force sent.
+  bool passivity = true;               // the passivity controller acts (the observer always runs)
+  double coupling_damping = 3.0;       // N s/m along the contact force, 0..1000 (0: no coupling damper)
+  double passivity_max_damping = 30.0; // N s/m, cap of the controller's variable damping, (0, 1000]
 };
 
 struct Camera {

@@ -88,6 +88,10 @@ TEST(SceneLoad, MinimalSceneGetsHeaderDefaults) {
   EXPECT_EQ(s.tool.force_limit, tool.force_limit);
   EXPECT_EQ(s.tool.contact_capacity, tool.contact_capacity);
   EXPECT_EQ(s.haptic.rate_hz, haptic.rate_hz);
+  EXPECT_EQ(s.haptic.passivity, haptic.passivity);
+  EXPECT_TRUE(s.haptic.passivity);  // the passivity controller is on unless a scene turns it off
+  EXPECT_EQ(s.haptic.coupling_damping, haptic.coupling_damping);
+  EXPECT_EQ(s.haptic.passivity_max_damping, haptic.passivity_max_damping);
   EXPECT_EQ(s.visual.rate_hz, visual.rate_hz);
   EXPECT_EQ(s.visual.width, visual.width);
   EXPECT_EQ(s.visual.height, visual.height);
@@ -133,7 +137,7 @@ tool:
   jaw_length: 0.01
   force_limit: 5
   contact_capacity: 32
-haptic: {rate_hz: 1000}
+haptic: {rate_hz: 1000, passivity: false, coupling_damping: 1.5, passivity_max_damping: 12}
 visual:
   rate_hz: 60
   width: 800
@@ -166,6 +170,9 @@ trajectory: ../traj/poke.csv
   EXPECT_EQ(s.tool.shaft_points, 5);
   EXPECT_EQ(s.tool.contact_capacity, 32);
   EXPECT_EQ(s.haptic.rate_hz, 1000.0);
+  EXPECT_FALSE(s.haptic.passivity);
+  EXPECT_EQ(s.haptic.coupling_damping, 1.5);
+  EXPECT_EQ(s.haptic.passivity_max_damping, 12.0);
   EXPECT_EQ(s.visual.width, 800);
   EXPECT_EQ(s.visual.png_every, 0);
   EXPECT_TRUE(s.visual.vtk);
@@ -383,6 +390,11 @@ TEST(SceneHash, IgnoresVisualSettingsButNotPhysics) {
 
   EXPECT_NE(h0, load_scene(write(dir / "d.yaml", std::string(kMinimal) + "material: {young_modulus: 3001}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "e.yaml", base + "haptic: {rate_hz: 1000}\n")).hash());
+  // The force stage's keys (the device gets a different force).
+  EXPECT_EQ(h0, load_scene(write(dir / "e0.yaml", base + "haptic: {passivity: true, coupling_damping: 3}\n")).hash());
+  EXPECT_NE(h0, load_scene(write(dir / "e1.yaml", base + "haptic: {passivity: false}\n")).hash());
+  EXPECT_NE(h0, load_scene(write(dir / "e2.yaml", base + "haptic: {coupling_damping: 0}\n")).hash());
+  EXPECT_NE(h0, load_scene(write(dir / "e3.yaml", base + "haptic: {passivity_max_damping: 10}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "f.yaml", base + "tool: {force_limit: 4}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "g.yaml", base + "fixed: {nodes: [1]}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "h.yaml",
@@ -562,6 +574,16 @@ INSTANTIATE_TEST_SUITE_P(
         ErrorCase{"NegativeNode", kHead + "fixed: {nodes: [0, -1]}\n", 3, "key 'fixed.nodes[1]'", "out of range"},
         ErrorCase{"HapticRateLow", kHead + "haptic: {rate_hz: 10}\n", 3, "key 'haptic.rate_hz'", "[50, 20000]"},
         ErrorCase{"HapticRateHigh", kHead + "haptic: {rate_hz: 1e6}\n", 3, "key 'haptic.rate_hz'", "out of range"},
+        ErrorCase{"Passivity", kHead + "haptic:\n  passivity: maybe\n", 4, "key 'haptic.passivity'", "not a boolean"},
+        ErrorCase{"CouplingDampingNegative", kHead + "haptic: {coupling_damping: -1}\n", 3,
+                  "key 'haptic.coupling_damping'", "[0, 1000]"},
+        ErrorCase{"CouplingDampingText", kHead + "haptic: {coupling_damping: soft}\n", 3,
+                  "key 'haptic.coupling_damping'"},
+        ErrorCase{"PassivityMaxDampingZero", kHead + "haptic: {passivity_max_damping: 0}\n", 3,
+                  "key 'haptic.passivity_max_damping'", "(0, 1000]"},
+        ErrorCase{"PassivityMaxDampingHigh", kHead + "haptic:\n  rate_hz: 1000\n  passivity_max_damping: 1e4\n", 5,
+                  "key 'haptic.passivity_max_damping'", "out of range"},
+        ErrorCase{"HapticUnknownKey", kHead + "haptic: {coupling_stiffness: 100}\n", 3, "coupling_stiffness"},
         ErrorCase{"VisualRate", kHead + "visual: {rate_hz: 0}\n", 3, "key 'visual.rate_hz'", "[1, 1000]"},
         ErrorCase{"Width", kHead + "visual: {width: 8}\n", 3, "key 'visual.width'", "[16, 8192]"},
         ErrorCase{"Height", kHead + "visual: {height: 10000}\n", 3, "key 'visual.height'", "[16, 8192]"},
