@@ -12,6 +12,7 @@
 #include "haptic_dds.h"
 #include "liver/tensor_cache.h"
 #include "mesher/scene_mesh.h"
+#include "publisher.h"
 #include "os/thread_priority.h"
 #include "rt_loop.h"
 #include "tool/tool.h"
@@ -84,6 +85,14 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
     std::cerr << "haptic_node: DDS " << dds_->profile() << ": " << dds_->description() << "; DDS threads "
               << dds_threads_note_ << "\n";
   organ_->create_writers(dds_->participant(), scene_hash_);  // e.g. the intestine's BodyState, every tick
+  dds_->attach_organ(organ_.get());
+  // The publisher thread starts here, so it runs at the DDS threads' priority (below the loop). --speed max keeps
+  // every tick's frame (the producer waits when the ring is full); a paced run never waits (publisher.h).
+  PublisherOptions popt;
+  popt.body_points = organ_->output_points();
+  popt.lossless = options_.speed <= 0;
+  popt.samples = static_cast<std::size_t>(total_ticks_) + 16;
+  publisher_ = std::make_unique<Publisher>(*dds_, popt);
   dds_priority.reset();
 
   msg::SceneInfo info;
@@ -107,6 +116,7 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
 }
 
 HapticApp::~HapticApp() {
+  if (publisher_ != nullptr) publisher_->finish();  // before the DDS entities it writes to go
   // The writer threads drain into the files, so they stop before the files close.
   record_writer_.reset();
   log_writer_.reset();
@@ -163,8 +173,23 @@ void HapticApp::tick(std::uint64_t k) {
   }
   if (result.grasp) flags |= msg::kFlagGrasp;
 
-  // --- publish: contact frame (visual node), force (device), the organ's own topics ---
-  dds_->publish(k, t, pose, tool, *organ_, result, flags);
+  // --- hand-off: the publisher thread writes force (device), contact frame (visual node), the organ's own topics ---
+  TickRecord& out = publisher_->begin();
+  out.seq = k;
+  out.sim_time = t;
+  out.due_ns = tick_due_ns_;
+  out.period_ns = period_ns_;
+  out.pose = pose;
+  out.tip = tool.tip;
+  out.force = result.force;
+  out.device_force = result.device_force;
+  out.direction = result.direction;
+  out.flags = flags;
+  out.contact_points = static_cast<std::uint32_t>(result.points_in_contact);
+  out.saturated = result.saturated;
+  out.last_tick = k + 1 >= total_ticks_;
+  organ_->fill_outputs(out.organ);
+  publisher_->commit();
 
   // --- log and statistics ---
   const Eigen::Vector3d& f = result.device_force;
@@ -187,6 +212,9 @@ int HapticApp::run() {
 
   const RealtimeStatus rt = enter_realtime(options_.speed > 0 ? options_.rt_priority : 0, options_.lock_memory, options_.cpu);
   realtime_note_ = rt.note;
+  // A loop without SCHED_FIFO keeps every frame (the publisher may make it wait when 64 ticks behind); a real-time
+  // loop never waits and the publisher skips frames it reaches too late (publisher.h).
+  publisher_->set_back_pressure(!rt.fifo);
   if (!options_.quiet) std::cerr << "haptic_node: " << rt.note << "\n";
 
   // --- run: the loop (no allocation from here to the end of the loop) ---
@@ -196,9 +224,13 @@ int HapticApp::run() {
   timer.start();
   const std::uint64_t wall_start = monotonic_ns();
   loop_start_ns_ = wall_start;
+  period_ns_ = paced ? static_cast<std::uint64_t>(period_ns) : 0;
   for (std::uint64_t k = 0; k < total_ticks_; ++k) {
     if (stop_requested_.load(std::memory_order_relaxed)) break;
-    if (paced) wake_late_us_.add(static_cast<double>(timer.wait()) * 1e-3);
+    if (paced) {
+      wake_late_us_.add(static_cast<double>(timer.wait()) * 1e-3);
+      tick_due_ns_ = static_cast<std::uint64_t>(timer.next_deadline_ns() - period_ns);  // this tick's deadline
+    }
     const std::uint64_t t0 = monotonic_ns();
     tick(k);
     tick_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
@@ -206,6 +238,8 @@ int HapticApp::run() {
   }
   wall_seconds_ = static_cast<double>(monotonic_ns() - wall_start) * 1e-9;
   deadline_misses_ = paced ? timer.misses() : 0;
+  // The last tick's force and frame are written, then a zero force releases the device.
+  finish_publishing();
   // --- shutdown starts here: the writer threads drain every line before the files close ---
   for (auto* w : {record_writer_.get(), log_writer_.get()}) {
     if (w != nullptr) w->finish();
@@ -219,7 +253,12 @@ int HapticApp::run() {
   return 0;
 }
 
+void HapticApp::finish_publishing() {
+  if (publisher_ != nullptr) publisher_->finish();
+}
+
 void HapticApp::shutdown() {
+  finish_publishing();
   const Percentiles tick = tick_us_.summary();
   const Percentiles late = wake_late_us_.summary();
   const Percentiles rtt = dds_->round_trip();
@@ -257,6 +296,23 @@ void HapticApp::shutdown() {
   j["dds_participant"] = dds_->profile();
   j["dds_threads"] = dds_threads_note_;
   j["loop_start_ns"] = loop_start_ns_;
+  // The publisher thread (publisher.h): frames written / skipped (a publisher too far behind jumps to the newest),
+  // forces written / superseded by a newer one before they went out, time per record and from hand-off to force.
+  j["publisher_mode"] = publisher_->lossless()        ? "every tick"
+                        : publisher_->back_pressure() ? "newest force, every frame (loop waits when 64 behind)"
+                                                      : "newest force, frames in order unless 32 behind";
+  j["publisher_written"] = publisher_->written();
+  j["publisher_skipped"] = publisher_->skipped();
+  j["publisher_forces_written"] = publisher_->forces_written();
+  j["publisher_forces_skipped"] = publisher_->forces_skipped();
+  j["publisher_write_us"] = to_json(publisher_->write_us());
+  j["publisher_force_latency_us"] = to_json(publisher_->force_latency_us());
+  // Overrun policy: held forces sent while the loop was late (hold one period, then linear fade to zero in 10 ms),
+  // fades that reached zero, and the zero force sent at exit.
+  j["overrun_hold_ticks"] = publisher_->overrun_hold_ticks();
+  j["overrun_faded_to_zero"] = publisher_->overrun_faded_to_zero();
+  j["overrun_fade_ms"] = publisher_->fade_ms();
+  j["final_zero_force_sent"] = publisher_->final_zero_sent();
   // Which organ model this run built (a liver run builds no intestine objects, an intestine run no liver ones).
   j["model_built"] = organ_->model_name();
   force_stage_.add_stats(j);  // "force_stage": energy observed, dissipated by the controller, ticks it acted
@@ -267,7 +323,8 @@ void HapticApp::shutdown() {
               << rate_hz_ * (options_.speed > 0 ? options_.speed : 0) << "), tick p50 " << tick.p50 << " us p99 "
               << tick.p99 << " us, " << deadline_misses_ << " missed deadlines, contacts max " << contacts_max_
               << ", force max " << force_max_n_ << " N, round trip p50 " << rtt.p50
-              << " us (" << rtt.count << " echoes)\n";
+              << " us (" << rtt.count << " echoes); publisher " << publisher_->written() << " frames written, "
+              << publisher_->skipped() << " skipped, " << publisher_->overrun_hold_ticks() << " held forces\n";
     organ_->print_summary(std::cerr);
   }
 }

@@ -18,6 +18,7 @@
 namespace surgsim {
 
 class HapticDds;
+class Publisher;
 
 struct HapticOptions {
   std::string scene = "liver";      // scene YAML path or shipped scene name
@@ -56,9 +57,13 @@ class HapticApp {
   /// Writes the stats JSON (when asked) and prints the summary line.
   void shutdown();
 
-  /// One loop iteration (tick k): input, contacts, force, publish, log. No allocation. Public for tests.
+  /// One loop iteration (tick k): input, contacts, force, hand-off to the publisher thread, log. No allocation, no
+  /// DDS call. Public for tests.
   void tick(std::uint64_t k);
   std::uint64_t total_ticks() const { return total_ticks_; }
+  /// Drains the publisher (every tick handed over is written, then a final zero force) and stops its thread.
+  /// run() calls it at its end; tests that drive tick() themselves call it before reading what was published.
+  void finish_publishing();
 
  private:
 
@@ -75,6 +80,9 @@ class HapticApp {
   std::unique_ptr<HapticOrgan> organ_;     // the scene's organ (make_haptic_organ)
   std::unique_ptr<HapticDds> dds_;
   ForceStage force_stage_;                  // contact damper + passivity observer/controller on the force sent
+  std::unique_ptr<Publisher> publisher_;  // the thread that writes what tick() hands over (publisher.h)
+  std::uint64_t tick_due_ns_ = 0;         // monotonic due time of the running tick, period (0: unpaced)
+  std::uint64_t period_ns_ = 0;
   Pose5 held_pose_;                         // last good pose (held while device input is lost)
   Pose5 last_command_;                      // newest device command, its arrival (monotonic ns), commands so far
   std::uint64_t last_command_ns_ = 0;
@@ -88,7 +96,7 @@ class HapticApp {
   std::uint64_t ticks_done_ = 0;
   std::uint64_t scene_hash_ = 0;
   std::string realtime_note_;
-  std::string dds_threads_note_;   // how the DDS threads are scheduled (stats "dds_threads")
+  std::string dds_threads_note_;   // how the DDS threads (and the publisher thread) are scheduled (stats "dds_threads")
 
   // Tick statistics (preallocated).
   SampleRecorder tick_us_;

@@ -1,5 +1,6 @@
 #include "haptic_dds.h"
 
+#include <algorithm>
 #include <chrono>
 #include <mutex>
 #include <thread>
@@ -157,38 +158,42 @@ void HapticDds::latest_command(Pose5& pose, std::uint64_t& receive_ns, std::uint
   impl_->tool_commands.try_get(pose, receive_ns, received);
 }
 
-void HapticDds::publish(std::uint64_t k, double t, const Pose5& pose, const ToolGeometry& tool, HapticOrgan& organ,
-                        const ContactTick& result, std::uint32_t flags) noexcept {
+static_assert(kMaxContactEntries == static_cast<int>(msg::kMaxContacts), "organ.h and the IDL disagree");
+
+void HapticDds::write_force(std::uint64_t seq, std::uint64_t stamp_ns, const Eigen::Vector3d& force, bool saturated,
+                            std::uint32_t flags) noexcept {
+  auto& ff = impl_->force;
+  ff.seq(seq);
+  ff.stamp_ns(stamp_ns);
+  ff.force(to_msg(force));
+  ff.saturated(saturated);
+  ff.flags(flags);
+  impl_->force_writer->write(&ff);
+}
+
+void HapticDds::write_frame(const TickRecord& r, std::uint64_t stamp_ns) noexcept {
   auto& frame = impl_->frame;
-  frame.seq(k);
-  frame.sim_time(t);
-  frame.pose(to_msg(pose));
-  frame.tip(to_msg(tool.tip));
+  frame.seq(r.seq);
+  frame.sim_time(r.sim_time);
+  frame.pose(to_msg(r.pose));
+  frame.tip(to_msg(r.tip));
   auto& entries = frame.contacts();
-  const int count = organ.contact_entries();
+  const int count = std::min(std::max(r.organ.contact_count, 0), kMaxContactEntries);
   entries.resize(static_cast<std::size_t>(count));  // within the reserved capacity: no allocation
   for (int l = 0; l < count; ++l) {
-    const ContactEntry c = organ.contact_entry(l);
+    const ContactEntry& c = r.organ.contacts[static_cast<std::size_t>(l)];
     auto& e = entries[static_cast<std::size_t>(l)];
     e.node(static_cast<std::uint32_t>(c.node));
     e.lambda(to_msg(c.lambda));
     e.u_tilde(to_msg(c.u_tilde));
   }
-  frame.direction(to_msg(result.direction));
-  frame.force(to_msg(result.force));
-  frame.contact_points(static_cast<std::uint32_t>(result.points_in_contact));
-  frame.flags(flags);
-  frame.stamp_ns(monotonic_ns());
+  frame.direction(to_msg(r.direction));
+  frame.force(to_msg(r.force));
+  frame.contact_points(r.contact_points);
+  frame.flags(r.flags);
+  frame.stamp_ns(stamp_ns);
   impl_->contact_writer->write(&frame);
-
-  auto& ff = impl_->force;
-  ff.seq(k);
-  ff.stamp_ns(frame.stamp_ns());
-  ff.force(to_msg(result.device_force));
-  ff.saturated(result.saturated);
-  ff.flags(flags);
-  impl_->force_writer->write(&ff);
-  organ.publish(frame);  // the organ's own topics (the intestine's BodyState), this tick
+  if (organ_ != nullptr) organ_->write(r, stamp_ns);  // the organ's own topics (the intestine's BodyState)
 }
 
 Percentiles HapticDds::round_trip() const { return impl_->visual_status.summary(); }

@@ -1,7 +1,8 @@
 // The haptic node's DDS entities (DESIGN.md 5): the participant, the ContactFrame, ForceFeedback and SceneInfo
 // writers, the ToolCommand reader (live input) and the VisualStatus reader (round-trip echoes), with their samples
-// allocated once. Init allocates; publish() and latest_command() allocate nothing (the listeners run on DDS threads;
-// the loop only try-locks the newest command, it never waits on them).
+// allocated once. Init allocates; write_force(), write_frame() (the publisher thread, publisher.h: never the loop)
+// and latest_command() (the loop) allocate nothing (the listeners run on DDS threads; the loop only try-locks the
+// newest command, it never waits on them).
 #pragma once
 #include <atomic>
 #include <cstdint>
@@ -11,6 +12,7 @@
 #include "core/stats.h"
 #include "dds_support.h"
 #include "organ.h"
+#include "publisher.h"
 #include "tool/trajectory.h"
 
 namespace surgsim {
@@ -19,7 +21,7 @@ namespace msg {
 class SceneInfo;
 }
 
-class HapticDds {
+class HapticDds final : public TickSink {
  public:
   /// Creates the participant and every endpoint; `live` adds the ToolCommand reader.
   HapticDds(const dds::DdsOptions& options, bool live, std::uint64_t scene_hash);
@@ -37,10 +39,14 @@ class HapticDds {
   /// arrived; keeps the previous ones when the listener holds the slot this instant.
   void latest_command(Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) noexcept;
 
-  /// Run phase, no allocation: tick k's ContactFrame (for the visual node), ForceFeedback (for the device) and the
-  /// organ's own topics.
-  void publish(std::uint64_t k, double t, const Pose5& pose, const ToolGeometry& tool, HapticOrgan& organ,
-               const ContactTick& result, std::uint32_t flags) noexcept;
+  /// Init: the organ whose own topics write_frame() writes after the ContactFrame (its write()).
+  void attach_organ(HapticOrgan* organ) { organ_ = organ; }
+
+  /// Publisher thread, no allocation: a ForceFeedback (for the device).
+  void write_force(std::uint64_t seq, std::uint64_t stamp_ns, const Eigen::Vector3d& force, bool saturated,
+                   std::uint32_t flags) noexcept override;
+  /// Publisher thread, no allocation: a tick's ContactFrame (for the visual node), then the organ's own topics.
+  void write_frame(const TickRecord& record, std::uint64_t stamp_ns) noexcept override;
 
   /// Shutdown: round trips measured from VisualStatus echoes (us), echoes received, the participant profile.
   Percentiles round_trip() const;
@@ -51,6 +57,7 @@ class HapticDds {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  HapticOrgan* organ_ = nullptr;
 };
 
 }  // namespace surgsim

@@ -3,10 +3,12 @@
 // its two implementations; make_haptic_organ() is the only place that looks at the scene's model.
 //
 // Phases: the factory and the constructors allocate (mesh, tensors, bucket grid, body state, step-time storage);
-// create_writers() allocates its DDS entities and samples once; step(), contact_entry() and publish() allocate nothing
-// and never throw; stats and summaries are for shutdown.
+// create_writers() allocates its DDS entities and samples once; step(), contact_entry() and fill_outputs() allocate
+// nothing and never throw (loop thread); write() allocates nothing (publisher thread, publisher.h); stats and
+// summaries are for shutdown.
 #pragma once
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <iosfwd>
 #include <memory>
@@ -21,9 +23,7 @@ namespace surgsim {
 namespace dds {
 class Participant;
 }
-namespace msg {
-class ContactFrame;
-}
+struct TickRecord;
 
 /// What one tick of an organ gives the loop.
 struct ContactTick {
@@ -42,6 +42,19 @@ struct ContactEntry {
   int node = 0;
   Eigen::Vector3d lambda = Eigen::Vector3d::Zero();   // N, contact force on the node
   Eigen::Vector3d u_tilde = Eigen::Vector3d::Zero();  // m, corrected constraint displacement
+};
+
+/// Contact entries a tick carries at most (msg::kMaxContacts; haptic_dds.cpp checks they agree).
+inline constexpr int kMaxContactEntries = 64;
+
+/// What an organ publishes for one tick, copied out on the loop thread (fill_outputs) and written on the publisher
+/// thread (write): fixed size, no allocation. `points` is storage the hand-off owns (3 * point_capacity doubles).
+struct OrganOutputs {
+  int contact_count = 0;
+  std::array<ContactEntry, kMaxContactEntries> contacts;
+  int point_count = 0;      // body positions filled (the intestine's masses)
+  int point_capacity = 0;   // output_points() of the organ
+  double* points = nullptr;
 };
 
 class HapticOrgan {
@@ -70,10 +83,21 @@ class HapticOrgan {
   /// True when a quasi non-linear force law bends the linear force (stats nonlinear_law).
   virtual bool nonlinear_law() const { return false; }
 
-  /// Init: the organ's own topics (the intestine's BodyState). Run phase: publishes them for the tick whose
-  /// ContactFrame is `frame` (no allocation).
+  /// Positions the organ publishes per tick (sizes OrganOutputs::points once, at init).
+  virtual int output_points() const { return 0; }
+  /// Loop thread, noexcept, no allocation: copies this tick's publishable state into `out` (the contact entries;
+  /// the body positions, at most out.point_capacity). The default copies contact_entries() / contact_entry().
+  virtual void fill_outputs(OrganOutputs& out) const noexcept {
+    const int n = contact_entries();
+    out.contact_count = n < kMaxContactEntries ? (n > 0 ? n : 0) : kMaxContactEntries;
+    for (int l = 0; l < out.contact_count; ++l) out.contacts[static_cast<std::size_t>(l)] = contact_entry(l);
+    out.point_count = 0;
+  }
+
+  /// Init: the organ's own topics (the intestine's BodyState). Publisher thread, no allocation: writes them from
+  /// `record` (a tick's outputs, filled by fill_outputs on the loop thread), stamped `stamp_ns`.
   virtual void create_writers(dds::Participant& participant, std::uint64_t scene_hash) {}
-  virtual void publish(const msg::ContactFrame& frame) noexcept {}
+  virtual void write(const TickRecord& record, std::uint64_t stamp_ns) noexcept {}
 
   /// One line for the start banner: "1382 nodes, 5523 tets, 646 surface nodes; ".
   virtual std::string describe() const = 0;

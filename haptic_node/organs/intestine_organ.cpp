@@ -9,6 +9,7 @@
 #include "SurgsimPubSubTypes.h"
 #include "core/clock.h"
 #include "core/error.h"
+#include "publisher.h"
 
 namespace surgsim {
 
@@ -72,23 +73,42 @@ void IntestineOrgan::step(const ToolGeometry* tool, double /*jaw*/, double dt, C
   active_pairs_max_ = std::max(active_pairs_max_, r.detection.segment_pairs + r.detection.cell_pairs);
 }
 
-void IntestineOrgan::publish(const msg::ContactFrame& frame) noexcept {
+void IntestineOrgan::fill_outputs(OrganOutputs& out) const noexcept {
+  out.contact_count = 0;
+  const int n = std::min(state_.point_count(), out.point_capacity);
+  if (out.points == nullptr || n <= 0) {
+    out.point_count = 0;
+    return;
+  }
+  std::copy(state_.positions(), state_.positions() + 3 * static_cast<std::size_t>(n), out.points);
+  out.point_count = n;
+}
+
+void IntestineOrgan::write(const TickRecord& r, std::uint64_t stamp_ns) noexcept {
   if (writer_ == nullptr) return;
-  sample_.seq(frame.seq());
-  sample_.sim_time(frame.sim_time());
-  sample_.pose(frame.pose());
-  sample_.tip(frame.tip());
-  // Sized at create_writer(): only the values change.
+  sample_.seq(r.seq);
+  sample_.sim_time(r.sim_time);
+  auto& pose = sample_.pose();
+  pose.pitch(r.pose.pitch);
+  pose.yaw(r.pose.yaw);
+  pose.insertion(r.pose.insertion);
+  pose.roll(r.pose.roll);
+  pose.jaw(r.pose.jaw);
+  sample_.tip().x(r.tip.x());
+  sample_.tip().y(r.tip.y());
+  sample_.tip().z(r.tip.z());
+  // Sized at create_writers(): only the values change.
   auto& out = sample_.positions();
-  const double* x = state_.positions();
-  for (std::size_t i = 0; i < out.size(); ++i) {
+  const std::size_t n = std::min(out.size(), static_cast<std::size_t>(std::max(r.organ.point_count, 0)));
+  const double* x = r.organ.points;
+  for (std::size_t i = 0; i < n; ++i) {
     out[i].x(x[3 * i]);
     out[i].y(x[3 * i + 1]);
     out[i].z(x[3 * i + 2]);
   }
-  sample_.stamp_ns(monotonic_ns());
+  sample_.stamp_ns(stamp_ns);
   writer_->write(&sample_);
-  ++published_;
+  published_.fetch_add(1, std::memory_order_relaxed);
 }
 
 nlohmann::json IntestineOrgan::stats() const {
@@ -111,7 +131,7 @@ nlohmann::json IntestineOrgan::stats() const {
   j["probe_contact_ticks"] = probe_contact_ticks_;
   j["probe_overflow_ticks"] = probe_overflow_ticks_;
   j["saturated_ticks"] = saturated_ticks_;
-  j["body_states_published"] = published_;
+  j["body_states_published"] = published_.load(std::memory_order_relaxed);
   j["energy_j"] = intestine::energy(model_, state_);
   j["positions_finite"] = state_.x.allFinite();
   return j;

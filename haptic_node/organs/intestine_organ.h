@@ -4,8 +4,10 @@
 // only), and an intestine scene builds no mesh, tensors or bucket grid.
 //
 // Phases: the constructor and create_writer() allocate (model, state, step-time storage, the DDS writer and its
-// sample sized once to the body's node count); step() and publish() allocate nothing; stats() is for shutdown.
+// sample sized once to the body's node count); step() and fill_outputs() (loop thread) and write() (publisher
+// thread) allocate nothing; stats() is for shutdown.
 #pragma once
+#include <atomic>
 #include <cstdint>
 #include <nlohmann/json.hpp>
 
@@ -38,9 +40,13 @@ class IntestineOrgan final : public HapticOrgan {
   void step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept override;
   int contacts(const ContactTick& out) const noexcept override { return out.points_in_contact; }
 
-  /// Run phase, no allocation: publishes the positions as BodyState with the seq, sim time, pose and tip of `frame`
-  /// (the ContactFrame of the same tick). Nothing when create_writers() was not called.
-  void publish(const msg::ContactFrame& frame) noexcept override;
+  /// The body's masses: the positions each tick hands to the publisher.
+  int output_points() const override { return state_.point_count(); }
+  /// Loop thread, noexcept, no allocation: copies the positions (at most out.point_capacity); no contact entries.
+  void fill_outputs(OrganOutputs& out) const noexcept override;
+  /// Publisher thread, no allocation: the positions of `record` as BodyState with its seq, sim time, pose and tip.
+  /// Nothing when create_writers() was not called.
+  void write(const TickRecord& record, std::uint64_t stamp_ns) noexcept override;
 
   /// SceneInfo: the body's masses, and the intestine's points among them.
   std::uint32_t node_count() const override { return static_cast<std::uint32_t>(model_.node_count()); }
@@ -78,7 +84,7 @@ class IntestineOrgan final : public HapticOrgan {
   int active_pairs_max_ = 0;
   eprosima::fastdds::dds::DataWriter* writer_ = nullptr;
   msg::BodyState sample_;
-  std::uint64_t published_ = 0;
+  std::atomic<std::uint64_t> published_{0};  // written on the publisher thread
 };
 
 }  // namespace surgsim

@@ -6,7 +6,13 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <string>
+#include <thread>
+#include <vector>
 
+#include "dds_support.h"
+
+#include "haptic_node/dds_write_spy.h"
 #include "support/alloc_counter.h"
 
 namespace surgsim {
@@ -53,6 +59,46 @@ TEST(HapticApp, IntestineTickAllocatesNothingOnceWarm) {
   const std::uint64_t warm = 200;  // first DDS sends, first self-contacts while the folds fall
   EXPECT_EQ(allocations_once_warm(app, warm), 0) << "ticks " << warm << ".." << app.total_ticks();
 }
+
+// Nothing but physics on the loop thread (issue 14): tick() hands its outputs over and the publisher thread makes
+// every DDS write. Every tick's ForceFeedback is written before its ContactFrame (--speed max keeps all of them), the
+// intestine's BodyState after both, and finish_publishing() ends with a zero force (seq = last tick + 1).
+void expect_no_dds_write_on_the_loop_thread(const std::string& scene, double duration, int per_tick) {
+  HapticOptions o = test_options();
+  o.scene = scene;
+  o.duration = duration;
+  HapticApp app(o);
+  test::dds_spy_start();
+  for (std::uint64_t k = 0; k < app.total_ticks(); ++k) app.tick(k);  // this thread is the loop
+  app.finish_publishing();
+  const std::vector<test::DdsWrite> w = test::dds_spy_stop();
+  const std::uint64_t n = app.total_ticks();
+  long on_loop = 0;
+  for (const auto& x : w) on_loop += x.thread == std::this_thread::get_id() ? 1 : 0;
+  EXPECT_EQ(on_loop, 0) << "DDS writes made by the loop thread";
+  ASSERT_EQ(w.size(), static_cast<std::size_t>(per_tick) * n + 1) << "every tick's topics and the final zero";
+  for (std::uint64_t k = 0; k < n; ++k) {
+    const auto& f = w[per_tick * k];
+    EXPECT_EQ(f.topic, dds::kForceFeedbackTopic) << "tick " << k << ": the force goes first";
+    EXPECT_EQ(f.seq, k);
+    EXPECT_EQ(w[per_tick * k + 1].topic, dds::kContactFrameTopic) << "tick " << k;
+    EXPECT_EQ(w[per_tick * k + 1].seq, k);
+    if (per_tick == 3) {
+      EXPECT_EQ(w[per_tick * k + 2].topic, dds::kBodyStateTopic) << "tick " << k;
+      EXPECT_EQ(w[per_tick * k + 2].seq, k);
+    }
+    if (::testing::Test::HasFailure()) break;
+  }
+  const auto& last = w.back();
+  EXPECT_EQ(last.topic, dds::kForceFeedbackTopic);
+  EXPECT_EQ(last.seq, n);
+  EXPECT_EQ(last.force[0], 0.0);
+  EXPECT_EQ(last.force[1], 0.0);
+  EXPECT_EQ(last.force[2], 0.0);
+}
+
+TEST(HapticApp, NoDdsWriteOnTheLoopThreadLiver) { expect_no_dds_write_on_the_loop_thread("liver", 2.0, 2); }
+TEST(HapticApp, NoDdsWriteOnTheLoopThreadIntestine) { expect_no_dds_write_on_the_loop_thread("intestine", 0.5, 3); }
 
 }  // namespace
 }  // namespace surgsim

@@ -1,0 +1,68 @@
+#include "dds_write_spy.h"
+
+#include <dlfcn.h>
+
+#include <atomic>
+#include <fastdds/dds/publisher/DataWriter.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+#include <mutex>
+
+#include "Surgsim.h"
+#include "dds_support.h"
+
+namespace surgsim::test {
+namespace {
+std::mutex g_mutex;
+std::atomic<bool> g_on{false};
+std::vector<DdsWrite> g_writes;
+}  // namespace
+
+void dds_spy_start() {
+  std::lock_guard<std::mutex> lock(g_mutex);
+  g_writes.clear();
+  g_on.store(true);
+}
+
+std::vector<DdsWrite> dds_spy_stop() {
+  g_on.store(false);
+  std::lock_guard<std::mutex> lock(g_mutex);
+  return g_writes;
+}
+
+}  // namespace surgsim::test
+
+namespace eprosima::fastdds::dds {
+
+// Interposes libfastrtps's DataWriter::write(void*) (symbol version CODEABI_1.0 in Fast DDS 2.9).
+bool DataWriter::write(void* data) {
+  using Real = bool (*)(DataWriter*, void*);
+  static const Real real = [] {
+    void* f = dlvsym(RTLD_NEXT, "_ZN8eprosima7fastdds3dds10DataWriter5writeEPv", "CODEABI_1.0");
+    if (f == nullptr) f = dlsym(RTLD_NEXT, "_ZN8eprosima7fastdds3dds10DataWriter5writeEPv");
+    return reinterpret_cast<Real>(f);
+  }();
+  if (surgsim::test::g_on.load()) {
+    surgsim::test::DdsWrite w;
+    w.thread = std::this_thread::get_id();
+    w.topic = get_topic()->get_name();
+    if (w.topic == surgsim::dds::kForceFeedbackTopic) {
+      const auto* f = static_cast<const surgsim::msg::ForceFeedback*>(data);
+      w.seq = f->seq();
+      w.force[0] = f->force().x();
+      w.force[1] = f->force().y();
+      w.force[2] = f->force().z();
+      w.flags = f->flags();
+    } else if (w.topic == surgsim::dds::kContactFrameTopic) {
+      const auto* c = static_cast<const surgsim::msg::ContactFrame*>(data);
+      w.seq = c->seq();
+      w.flags = c->flags();
+    } else if (w.topic == surgsim::dds::kBodyStateTopic) {
+      w.seq = static_cast<const surgsim::msg::BodyState*>(data)->seq();
+    }
+    std::lock_guard<std::mutex> lock(surgsim::test::g_mutex);
+    surgsim::test::g_writes.push_back(w);
+  }
+  return real(this, data);
+}
+
+}  // namespace eprosima::fastdds::dds

@@ -1,0 +1,290 @@
+// The publisher thread's hand-off (haptic_node/publisher.h): order of the writes (force first, then the frame),
+// every tick in lossless mode, the newest force first when the publisher falls behind, the jump to the newest frame
+// when it falls far behind, the overrun hold-and-fade, the final zero, and that the producer's thread never writes.
+// Deterministic: backlogs are made by a sink that blocks until the test releases it; no timing is asserted.
+#include "publisher.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "core/clock.h"
+#include "support/alloc_counter.h"
+
+namespace surgsim {
+namespace {
+
+struct Event {
+  char kind;  // 'F' force, 'C' contact frame
+  std::uint64_t seq;
+  Eigen::Vector3d force;
+  std::uint32_t flags;
+  std::thread::id thread;
+  int points;
+  double first_point;
+};
+
+class RecordingSink : public TickSink {
+ public:
+  void write_force(std::uint64_t seq, std::uint64_t, const Eigen::Vector3d& force, bool, std::uint32_t flags) noexcept
+      override {
+    gate();
+    std::lock_guard<std::mutex> lock(mutex_);
+    events_.push_back({'F', seq, force, flags, std::this_thread::get_id(), 0, 0});
+  }
+  void write_frame(const TickRecord& r, std::uint64_t) noexcept override {
+    std::lock_guard<std::mutex> lock(mutex_);
+    events_.push_back({'C', r.seq, r.force, r.flags, std::this_thread::get_id(), r.organ.point_count,
+                       r.organ.point_count > 0 ? r.organ.points[0] : 0.0});
+  }
+  /// The next write_force blocks until release() (and signals blocked()).
+  void hold_next() {
+    std::lock_guard<std::mutex> lock(gate_mutex_);
+    hold_ = true;
+  }
+  void wait_blocked() {
+    std::unique_lock<std::mutex> lock(gate_mutex_);
+    cv_.wait(lock, [&] { return blocked_; });
+  }
+  void release() {
+    std::lock_guard<std::mutex> lock(gate_mutex_);
+    hold_ = false;
+    cv_.notify_all();
+  }
+  std::vector<Event> events() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return events_;
+  }
+  std::size_t size() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return events_.size();
+  }
+
+ private:
+  void gate() {
+    std::unique_lock<std::mutex> lock(gate_mutex_);
+    if (!hold_) return;
+    blocked_ = true;
+    cv_.notify_all();
+    cv_.wait(lock, [&] { return !hold_; });
+    blocked_ = false;
+  }
+  std::mutex mutex_;
+  std::vector<Event> events_;
+  std::mutex gate_mutex_;
+  std::condition_variable cv_;
+  bool hold_ = false;
+  bool blocked_ = false;
+};
+
+void push(Publisher& p, std::uint64_t seq, double fx, std::uint64_t due_ns = 0, std::uint64_t period_ns = 0,
+          bool last = false) {
+  TickRecord& r = p.begin();
+  r.seq = seq;
+  r.sim_time = static_cast<double>(seq) * 1e-3;
+  r.due_ns = due_ns;
+  r.period_ns = period_ns;
+  r.device_force = Eigen::Vector3d(fx, 0, 0);
+  r.force = r.device_force;
+  r.flags = 0;
+  r.last_tick = last;
+  for (int i = 0; i < r.organ.point_capacity; ++i) {
+    r.organ.points[3 * i] = static_cast<double>(seq);
+    r.organ.points[3 * i + 1] = 0;
+    r.organ.points[3 * i + 2] = 0;
+  }
+  r.organ.point_count = r.organ.point_capacity;
+  p.commit();
+}
+
+std::vector<std::uint64_t> seqs(const std::vector<Event>& ev, char kind, bool held) {
+  std::vector<std::uint64_t> out;
+  for (const auto& e : ev) {
+    if (e.kind == kind && ((e.flags & kFlagHeld) != 0) == held) out.push_back(e.seq);
+  }
+  return out;
+}
+
+TEST(Publisher, OverrunHoldsOnePeriodThenFadesLinearlyToZero) {
+  const std::uint64_t ms = 1'000'000;
+  EXPECT_EQ(overrun_scale(1, ms, 10 * ms), 1.0);  // the first missed deadline: hold
+  EXPECT_NEAR(overrun_scale(2, ms, 10 * ms), 0.9, 1e-12);
+  EXPECT_NEAR(overrun_scale(6, ms, 10 * ms), 0.5, 1e-12);
+  EXPECT_EQ(overrun_scale(11, ms, 10 * ms), 0.0);  // zero 10 ms after the first missed deadline
+  EXPECT_EQ(overrun_scale(50, ms, 10 * ms), 0.0);
+  EXPECT_NEAR(overrun_scale(2, ms / 3 * 10, 10 * ms), 1.0 - 1.0 / 3.0, 1e-6);  // 300 Hz: zero after 3-4 periods
+  EXPECT_EQ(overrun_scale(5, ms / 3 * 10, 10 * ms), 0.0);
+}
+
+// --speed max: every record, its force before its frame, in order, from the publisher's thread; then a final zero.
+TEST(Publisher, LosslessWritesEveryTickForceFirstOffTheProducerThread) {
+  RecordingSink sink;
+  PublisherOptions o;
+  o.slots = 8;  // small: the producer waits for the publisher many times
+  o.lossless = true;
+  o.body_points = 5;
+  Publisher p(sink, o);
+  const std::uint64_t n = 2000;
+  {
+    test::AllocationCounter counter;
+    for (std::uint64_t k = 0; k < n; ++k) push(p, k, 1.0 + static_cast<double>(k));
+    EXPECT_EQ(counter.count(), 0) << "begin()/commit() allocate nothing";
+  }
+  p.finish();
+  const auto ev = sink.events();
+  ASSERT_EQ(ev.size(), 2 * n + 1);
+  for (std::uint64_t k = 0; k < n; ++k) {
+    EXPECT_EQ(ev[2 * k].kind, 'F');
+    EXPECT_EQ(ev[2 * k].seq, k);
+    EXPECT_EQ(ev[2 * k].force.x(), 1.0 + static_cast<double>(k));
+    EXPECT_EQ(ev[2 * k + 1].kind, 'C');
+    EXPECT_EQ(ev[2 * k + 1].seq, k);
+    EXPECT_EQ(ev[2 * k + 1].points, 5);
+    EXPECT_EQ(ev[2 * k + 1].first_point, static_cast<double>(k)) << "the body positions of the same tick";
+  }
+  for (const auto& e : ev) EXPECT_NE(e.thread, std::this_thread::get_id()) << "a write on the producer's thread";
+  EXPECT_EQ(ev.back().kind, 'F');
+  EXPECT_EQ(ev.back().seq, n);
+  EXPECT_EQ(ev.back().force, Eigen::Vector3d::Zero());
+  EXPECT_NE(ev.back().flags & kFlagHeld, 0u);
+  EXPECT_EQ(p.written(), n);
+  EXPECT_EQ(p.skipped(), 0u);
+  EXPECT_EQ(p.forces_written(), n);
+  EXPECT_TRUE(p.final_zero_sent());
+  EXPECT_EQ(p.write_us().count, n);
+}
+
+// Real-time mode, a publisher a few ticks behind: the newest force goes out first, the frames follow in order.
+TEST(Publisher, BehindSendsTheNewestForceFirstThenEveryFrame) {
+  RecordingSink sink;
+  PublisherOptions o;
+  o.slots = 64;
+  Publisher p(sink, o);
+  sink.hold_next();
+  push(p, 0, 1.0);
+  sink.wait_blocked();  // the publisher is inside the force write of tick 0
+  for (std::uint64_t k = 1; k <= 5; ++k) push(p, k, 1.0 + static_cast<double>(k));
+  sink.release();
+  p.finish();
+  const auto ev = sink.events();
+  std::string order;
+  for (const auto& e : ev) order += e.kind + std::to_string(e.seq) + " ";
+  EXPECT_EQ(order, "F0 C0 F5 C1 C2 C3 C4 C5 F6 ");
+  EXPECT_EQ(p.forces_written(), 2u);
+  EXPECT_EQ(p.forces_skipped(), 4u) << "the forces of ticks 1-4 were stale before they could go out";
+  EXPECT_EQ(p.written(), 6u);
+  EXPECT_EQ(p.skipped(), 0u);
+  EXPECT_EQ(ev.back().force, Eigen::Vector3d::Zero());
+}
+
+// Real-time mode, a publisher far behind (the ring wrapped): it jumps to the newest record and counts the rest.
+TEST(Publisher, FarBehindSkipsStaleFramesAndNeverWaitsTheProducer) {
+  RecordingSink sink;
+  PublisherOptions o;
+  o.slots = 8;
+  o.body_points = 3;
+  Publisher p(sink, o);
+  sink.hold_next();
+  push(p, 0, 1.0);
+  sink.wait_blocked();
+  for (std::uint64_t k = 1; k <= 20; ++k) push(p, k, 1.0 + static_cast<double>(k));  // 2.5 rings: no waiting
+  sink.release();
+  p.finish();
+  const auto ev = sink.events();
+  std::string order;
+  for (const auto& e : ev) order += e.kind + std::to_string(e.seq) + " ";
+  EXPECT_EQ(order, "F0 C0 F20 C20 F21 ");
+  EXPECT_EQ(ev[3].first_point, 20.0) << "the frame carries its own tick's positions";
+  EXPECT_EQ(p.written(), 2u);
+  EXPECT_EQ(p.skipped(), 19u);
+  EXPECT_EQ(p.forces_skipped(), 19u);
+  EXPECT_EQ(p.written() + p.skipped(), p.committed());
+}
+
+// A paced loop without SCHED_FIFO: the newest force first, but no frame skipped (the producer waits when full).
+TEST(Publisher, BackPressureKeepsEveryFrame) {
+  RecordingSink sink;
+  PublisherOptions o;
+  o.slots = 8;
+  o.back_pressure = true;
+  Publisher p(sink, o);
+  sink.hold_next();
+  push(p, 0, 1.0);
+  sink.wait_blocked();
+  std::thread producer([&] {
+    for (std::uint64_t k = 1; k <= 40; ++k) push(p, k, 1.0 + static_cast<double>(k));  // waits at tick 8
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  sink.release();
+  producer.join();
+  p.finish();
+  EXPECT_EQ(p.written(), 41u);
+  EXPECT_EQ(p.skipped(), 0u);
+  std::vector<std::uint64_t> expected(41);
+  for (std::uint64_t k = 0; k <= 40; ++k) expected[k] = k;
+  const auto ev = sink.events();
+  EXPECT_EQ(seqs(ev, 'C', false), expected) << "every frame, in order";
+  EXPECT_EQ(p.forces_written() + p.forces_skipped(), 41u);
+  EXPECT_EQ(ev.back().seq, 41u);
+}
+
+// A loop that stops handing ticks over: the device gets the last force held, then faded linearly to exactly zero,
+// each flagged kFlagHeld; the next fresh tick is sent as computed.
+TEST(Publisher, OverrunHoldsThenFadesTheLastForceToZero) {
+  RecordingSink sink;
+  PublisherOptions o;
+  o.fade_ns = 20'000'000;  // 20 ms at a 2 ms period: hold, then 10 steps down
+  Publisher p(sink, o);
+  const std::uint64_t period = 2'000'000;
+  push(p, 7, 4.0, monotonic_ns(), period);
+  // Functional wait (generous: a loaded machine may wake the publisher late; the content does not depend on it).
+  for (int i = 0; i < 2000 && p.overrun_faded_to_zero() == 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_EQ(p.overrun_faded_to_zero(), 1u);
+  std::this_thread::sleep_for(std::chrono::milliseconds(10));  // nothing more once zero was sent
+  const std::size_t after_zero = sink.size();
+  push(p, 8, 2.0, monotonic_ns(), period, /*last=*/true);
+  p.finish();
+  const auto ev = sink.events();
+  ASSERT_EQ(ev.size(), after_zero + 3);  // F8 C8 and the final zero
+  std::vector<double> held;
+  for (const auto& e : ev) {
+    if (e.kind == 'F' && (e.flags & kFlagHeld) != 0 && e.seq == 7) held.push_back(e.force.x());
+  }
+  ASSERT_FALSE(held.empty());
+  EXPECT_EQ(held.size(), p.overrun_hold_ticks());
+  for (std::size_t i = 0; i < held.size(); ++i) {
+    EXPECT_GE(held[i], 0.0);
+    EXPECT_LE(held[i], 4.0);
+    if (i > 0) EXPECT_LT(held[i], held[i - 1]) << "the held force only goes down";
+    // Every held force is one of the steps of the fade: 4 N * (1 - (m - 1) * 2 / 20).
+    const double steps = (1.0 - held[i] / 4.0) * 10.0;
+    EXPECT_NEAR(steps, std::round(steps), 1e-9) << held[i];
+  }
+  EXPECT_EQ(held.back(), 0.0);
+  EXPECT_EQ(seqs(ev, 'F', false), (std::vector<std::uint64_t>{7, 8}));
+  EXPECT_EQ(ev[ev.size() - 3].force.x(), 2.0) << "the fresh tick as computed";
+  EXPECT_EQ(ev.back().seq, 9u);
+  EXPECT_EQ(ev.back().force, Eigen::Vector3d::Zero());
+}
+
+// The run's last tick arms no watchdog (the final zero follows at finish()).
+TEST(Publisher, NoHoldAfterTheLastTick) {
+  RecordingSink sink;
+  Publisher p(sink, PublisherOptions{});
+  push(p, 0, 3.0, monotonic_ns(), 1'000'000, /*last=*/true);
+  std::this_thread::sleep_for(std::chrono::milliseconds(30));
+  p.finish();
+  EXPECT_EQ(p.overrun_hold_ticks(), 0u);
+  std::string order;
+  for (const auto& e : sink.events()) order += e.kind + std::to_string(e.seq) + " ";
+  EXPECT_EQ(order, "F0 C0 F1 ");
+}
+
+}  // namespace
+}  // namespace surgsim
