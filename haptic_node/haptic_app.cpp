@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -92,6 +93,10 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   popt.body_points = organ_->output_points();
   popt.lossless = options_.speed <= 0;
   popt.samples = static_cast<std::size_t>(total_ticks_) + 16;
+  // SURGSIM_HAPTIC_PUBLISHER=inline: the writes on the loop thread as before issue 14, to measure against (stats
+  // publisher_mode "inline (loop thread)"); anything else: the publisher thread.
+  const char* pub_env = std::getenv("SURGSIM_HAPTIC_PUBLISHER");
+  popt.inline_writes = pub_env != nullptr && std::string(pub_env) == "inline";
   publisher_ = std::make_unique<Publisher>(*dds_, popt);
   dds_priority.reset();
 
@@ -298,7 +303,8 @@ void HapticApp::shutdown() {
   j["loop_start_ns"] = loop_start_ns_;
   // The publisher thread (publisher.h): frames written / skipped (a publisher too far behind jumps to the newest),
   // forces written / superseded by a newer one before they went out, time per record and from hand-off to force.
-  j["publisher_mode"] = publisher_->lossless()        ? "every tick"
+  j["publisher_mode"] = publisher_->inline_writes()   ? "inline (loop thread)"
+                        : publisher_->lossless()        ? "every tick"
                         : publisher_->back_pressure() ? "newest force, every frame (loop waits when 64 behind)"
                                                       : "newest force, frames in order unless 32 behind";
   j["publisher_written"] = publisher_->written();

@@ -49,7 +49,7 @@ Publisher::Publisher(TickSink& sink, const PublisherOptions& options)
     slots_[s].record.organ.point_capacity = options_.body_points;
   }
   back_pressure_.store(options_.lossless || options_.back_pressure);
-  thread_ = std::thread([this] { run(); });
+  if (!options_.inline_writes) thread_ = std::thread([this] { run(); });
 }
 
 Publisher::~Publisher() { finish(); }
@@ -83,6 +83,17 @@ void Publisher::commit() noexcept {
   s.commit_ns = monotonic_ns();
   s.version.store(2 * (i + 1), std::memory_order_release);
   head_.store(i + 1, std::memory_order_release);
+  if (options_.inline_writes) {  // measurement only: the writes on the loop thread, as before issue 14
+    const std::uint64_t t0 = monotonic_ns();
+    write_record_force(s.record, s.commit_ns);
+    sink_.write_frame(s.record, monotonic_ns());
+    written_.fetch_add(1, std::memory_order_relaxed);
+    write_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
+    inline_last_ = s.record;
+    inline_have_last_ = true;
+    consumed_.store(i + 1, std::memory_order_release);
+    return;
+  }
   futex_.store(static_cast<std::uint32_t>(i + 1), std::memory_order_seq_cst);
   if (sleepers_.load(std::memory_order_seq_cst) != 0) futex_wake(&futex_);
 }
@@ -94,6 +105,11 @@ void Publisher::finish() {
   futex_.fetch_add(1u << 31, std::memory_order_seq_cst);  // any change wakes a sleeper
   futex_wake(&futex_);
   if (thread_.joinable()) thread_.join();
+  if (options_.inline_writes) {
+    sink_.write_force(inline_have_last_ ? inline_last_.seq + 1 : 0, monotonic_ns(), Eigen::Vector3d::Zero(), false,
+                      (inline_have_last_ ? inline_last_.flags : 0u) | kFlagHeld);
+    final_zero_.store(true, std::memory_order_relaxed);
+  }
 }
 
 bool Publisher::read(std::uint64_t i, TickRecord& out, double* points, std::uint64_t& commit_ns) const noexcept {

@@ -82,6 +82,8 @@ struct PublisherOptions {
   int body_points = 0;               // organ positions per record (HapticOrgan::output_points())
   bool lossless = false;             // write every record, producer waits when full (--speed max)
   bool back_pressure = false;        // keep every frame, producer waits when full (implied by lossless)
+  bool inline_writes = false;        // no thread: commit() writes on the caller's thread (the pre-issue-14 loop, kept
+                                     // only to measure against: SURGSIM_HAPTIC_PUBLISHER=inline)
   std::uint64_t fade_ns = 10'000'000;  // overrun: from hold to zero
   std::size_t samples = 1 << 16;     // write-time samples kept for the percentiles
 };
@@ -118,6 +120,7 @@ class Publisher {
   std::uint64_t overrun_faded_to_zero() const { return faded_to_zero_.load(std::memory_order_relaxed); }
   bool final_zero_sent() const { return final_zero_.load(std::memory_order_relaxed); }
   bool lossless() const { return options_.lossless; }
+  bool inline_writes() const { return options_.inline_writes; }
   double fade_ms() const { return static_cast<double>(options_.fade_ns) * 1e-6; }
   /// After finish(): time to write one record (ForceFeedback + ContactFrame + organ topics, us) and from commit to
   /// the ForceFeedback written (us).
@@ -154,6 +157,8 @@ class Publisher {
   SampleRecorder latency_us_;
   std::thread thread_;
   bool finished_ = false;
+  TickRecord inline_last_;  // inline_writes only
+  bool inline_have_last_ = false;
 };
 
 }  // namespace surgsim
