@@ -87,6 +87,9 @@ TEST(SceneLoad, MinimalSceneGetsHeaderDefaults) {
   EXPECT_EQ(s.tool.jaw_length, tool.jaw_length);
   EXPECT_EQ(s.tool.force_limit, tool.force_limit);
   EXPECT_EQ(s.tool.contact_capacity, tool.contact_capacity);
+  EXPECT_EQ(s.tool.contact_model, ContactModel::kPatch);  // issue 14: the smooth patch contact by default
+  EXPECT_EQ(s.tool.tip_radius, 0.0);                     // 0: 2.5 mean surface edges
+  EXPECT_EQ(s.tool.friction, 0.0);                       // frictionless
   EXPECT_EQ(s.haptic.rate_hz, haptic.rate_hz);
   EXPECT_EQ(s.haptic.passivity, haptic.passivity);
   EXPECT_TRUE(s.haptic.passivity);  // the passivity controller is on unless a scene turns it off
@@ -137,6 +140,9 @@ tool:
   jaw_length: 0.01
   force_limit: 5
   contact_capacity: 32
+  contact_model: triangle
+  tip_radius: 0.004
+  friction: 0.25
 haptic: {rate_hz: 1000, passivity: false, coupling_damping: 1.5, passivity_max_damping: 12}
 visual:
   rate_hz: 60
@@ -169,6 +175,9 @@ trajectory: ../traj/poke.csv
   EXPECT_NEAR((s.visual.camera.up - Eigen::Vector3d(0, 0, 1)).norm(), 0.0, 1e-15);
   EXPECT_EQ(s.tool.shaft_points, 5);
   EXPECT_EQ(s.tool.contact_capacity, 32);
+  EXPECT_EQ(s.tool.contact_model, ContactModel::kTriangle);
+  EXPECT_EQ(s.tool.tip_radius, 0.004);
+  EXPECT_EQ(s.tool.friction, 0.25);
   EXPECT_EQ(s.haptic.rate_hz, 1000.0);
   EXPECT_FALSE(s.haptic.passivity);
   EXPECT_EQ(s.haptic.coupling_damping, 1.5);
@@ -396,6 +405,9 @@ TEST(SceneHash, IgnoresVisualSettingsButNotPhysics) {
   EXPECT_NE(h0, load_scene(write(dir / "e2.yaml", base + "haptic: {coupling_damping: 0}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "e3.yaml", base + "haptic: {passivity_max_damping: 10}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "f.yaml", base + "tool: {force_limit: 4}\n")).hash());
+  EXPECT_NE(h0, load_scene(write(dir / "f1.yaml", base + "tool: {friction: 0.1}\n")).hash());
+  EXPECT_NE(h0, load_scene(write(dir / "f2.yaml", base + "tool: {tip_radius: 0.003}\n")).hash());
+  EXPECT_NE(h0, load_scene(write(dir / "f3.yaml", base + "tool: {contact_model: triangle}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "g.yaml", base + "fixed: {nodes: [1]}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "h.yaml",
                                  "name: mini\nmesh: {generate: liver, target_nodes: 1400}\n"
@@ -551,6 +563,12 @@ INSTANTIATE_TEST_SUITE_P(
         ErrorCase{"Capacity", kHead + "tool: {contact_capacity: 0}\n", 3, "key 'tool.contact_capacity'", "[1, 64]"},
         ErrorCase{"CapacityHigh", kHead + "tool: {contact_capacity: 65}\n", 3, "key 'tool.contact_capacity'",
                   "[1, 64]"},
+        ErrorCase{"ContactModel", kHead + "tool:\n  contact_model: sphere\n", 4, "key 'tool.contact_model'",
+                  "not a contact model"},
+        ErrorCase{"TipRadiusNegative", kHead + "tool: {tip_radius: -0.001}\n", 3, "key 'tool.tip_radius'", "[0, 0.1]"},
+        ErrorCase{"TipRadiusHigh", kHead + "tool: {tip_radius: 1}\n", 3, "key 'tool.tip_radius'", "out of range"},
+        ErrorCase{"FrictionNegative", kHead + "tool: {friction: -0.1}\n", 3, "key 'tool.friction'", "[0, 10]"},
+        ErrorCase{"FrictionText", kHead + "tool: {friction: sticky}\n", 3, "key 'tool.friction'"},
         ErrorCase{"ShaftLength", kHead + "tool: {shaft_length: 0}\n", 3, "key 'tool.shaft_length'", "out of range"},
         ErrorCase{"ShaftRadius", kHead + "tool: {shaft_radius: -1}\n", 3, "key 'tool.shaft_radius'", "out of range"},
         ErrorCase{"ShaftSpacing", kHead + "tool: {shaft_spacing: 0}\n", 3, "key 'tool.shaft_spacing'", "out of range"},
