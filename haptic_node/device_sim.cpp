@@ -18,6 +18,7 @@
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <vector>
 
 #include "Surgsim.h"
@@ -25,6 +26,7 @@
 #include "core/clock.h"
 #include "dds_support.h"
 #include "core/error.h"
+#include "os/thread_priority.h"
 #include "rt_loop.h"
 #include "scene/scene.h"
 #include "core/stats.h"
@@ -162,7 +164,7 @@ Pose5 scripted(double t, double depth) {
 int main(int argc, char** argv) {
   std::string trajectory, stats, profiles, participant, out_csv, scene_name = "liver";
   double rate = 1000, duration = -1, depth = 0.16, start_delay = 0;
-  int domain = -1, rt_priority = 0;
+  int domain = -1, rt_priority = 0, dds_rt_priority = 20;
   double wait_for_haptic = 0;
   bool physical = false;
   PhysicalDevice dev;
@@ -183,6 +185,10 @@ int main(int argc, char** argv) {
   cli.add_option("--dds-profiles", profiles, "Fast DDS XML profiles file (default config/dds/profiles.xml)");
   cli.add_option("--dds-participant", participant, "Participant profile (default $SURGSIM_DDS_PARTICIPANT or surgsim_default)");
   cli.add_option("--rt-priority", rt_priority, "SCHED_FIFO priority of the loop (0 = normal scheduling)")
+      ->capture_default_str();
+  cli.add_option("--dds-rt-priority", dds_rt_priority,
+                 "SCHED_FIFO priority of the DDS threads, below the loop's (used with --rt-priority > 1), so a force "
+                 "is taken when it arrives")
       ->capture_default_str();
   cli.add_flag("--physical", physical,
                "Simulated device: m x'' = F_hand - b x' + F_feedback . axis along the shaft, at --rate");
@@ -237,10 +243,14 @@ int main(int argc, char** argv) {
     o.profiles_file = profiles.empty() ? config_dir() + "/dds/profiles.xml" : profiles;
     o.participant_profile = participant;
     o.name = "surgsim_device_sim";
+    // The DDS threads start at SCHED_FIFO below the loop (as in the haptic node), never at or above it.
+    std::optional<ScopedFifo> dds_priority(std::in_place,
+                                           rt_priority > 1 ? std::clamp(dds_rt_priority, 0, rt_priority - 1) : 0);
     sdds::Participant p(o);
     ForceListener forces;
     auto* writer = p.writer(p.topic(sdds::kToolCommandTopic, new msg::ToolCommandPubSubType()), sdds::kStreamWriter);
     p.reader(p.topic(sdds::kForceFeedbackTopic, new msg::ForceFeedbackPubSubType()), sdds::kStreamReader, &forces);
+    dds_priority.reset();
 
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
@@ -256,6 +266,7 @@ int main(int argc, char** argv) {
       std::cerr << "device_sim: " << (st.current_count > 0 ? "haptic node matched" : "no haptic node yet") << "\n";
     }
 
+    nlohmann::json summary;
     msg::ToolCommand cmd;
     const auto send = [&](std::uint64_t seq, const Pose5& pose) {
       cmd.seq(seq);
@@ -269,10 +280,10 @@ int main(int argc, char** argv) {
     };
     const RealtimeStatus rt = enter_realtime(rt_priority, false);
     if (rt_priority > 0) std::cerr << "device_sim: " << rt.note << "\n";
+    summary["realtime"] = rt.note;
     PeriodicTimer timer(static_cast<std::int64_t>(1e9 / rate));
     timer.start();
     std::uint64_t k = 0;
-    nlohmann::json summary;
     if (!physical) {
       const std::uint64_t t0 = monotonic_ns();
       for (;; ++k) {
@@ -315,7 +326,7 @@ int main(int argc, char** argv) {
         send(k++, pose);
         samples.push_back({static_cast<double>(i + 1) * dt, x, v, f_axis, f, flags});
       }
-      summary = physical_summary(dev, samples, dt);
+      summary.update(physical_summary(dev, samples, dt));
       summary["deadline_misses"] = timer.misses();
       if (!out_csv.empty()) {
         std::FILE* out = std::fopen(out_csv.c_str(), "w");
