@@ -497,20 +497,23 @@ std::vector<CaseResult> liver_contact_cases() {
         contacts.step(tool_geometry(spec, pose), pose.jaw, tick);
         r.all_finite = r.all_finite && tick.force.allFinite() && tick.device_force.allFinite();
         r.max_force_n = std::max(r.max_force_n, tick.force.norm());
+        // Issue 14: the patch contact spreads over every surface node within the tip radius; the fixed ones among
+        // them are left out (PointPatch::fixed) and only the free ones constrained.
         const PointContact& pc = contacts.point(0);
-        if (pc.active) {
+        if (pc.tracked || pc.active) {
           touched = true;
-          fixed_corners = 0;
-          for (int node : pc.nodes) fixed_corners += box.fixed.node_touched(node) ? 1 : 0;
+          fixed_corners = contacts.patch(0).fixed;
           constrained = contacts.solution().count;
+          for (int l = 0; l < constrained; ++l)
+            if (box.fixed.node_touched(contacts.solution().nodes[static_cast<std::size_t>(l)])) fixed_corners = -1;
         }
         for (int l = 0; l < contacts.solution().count; ++l)
           r.max_displacement_m = std::max(r.max_displacement_m, contacts.solution().displacement[static_cast<std::size_t>(l)].norm());
       }
-      const bool ok = touched && fixed_corners > 0 && constrained == 3 - fixed_corners && r.all_finite &&
-                      !tick.nonfinite && (constrained > 0 || tick.force.isZero(0));
+      const bool ok = touched && fixed_corners > 0 && r.all_finite && !tick.nonfinite &&
+                      (constrained > 0 || tick.force.isZero(0));
       r.outcome = ok ? Outcome::kIgnored : Outcome::kFailed;
-      r.message = text("contact on a triangle with ", fixed_corners, " fixed corner(s): ", fixed_corners,
+      r.message = text("contact patch with ", fixed_corners, " fixed node(s): ", fixed_corners,
                        " ignored, ", constrained, " constrained; force ", tick.force.norm(), " N, status ",
                        to_string(contacts.status()));
     }));
@@ -574,9 +577,12 @@ std::vector<CaseResult> liver_tool_speed_cases() {
     bool stiff;         // the 10x stiffer box
     std::string what;
   };
-  const std::vector<Run> runs = {{0.1, 0.03, false, ""},
-                                 {1.0, 0.03, false, ""},
-                                 {10.0, 0.03, false, ""},
+  // Issue 14: the patch contact (a tip of 2.5 mean edges) is stiffer than the paper's point load on three nodes, so
+  // the soft box reaches the 8 N clamp before 30 mm: the speed runs end at 8 mm, below it, and every run holds its
+  // final pose for 30 ticks (a fast stab's initial penetration is blended in over LiverContacts::kOnsetRamp).
+  const std::vector<Run> runs = {{0.1, 0.008, false, ""},
+                                 {1.0, 0.008, false, ""},
+                                 {10.0, 0.008, false, ""},
                                  {10.0, 0.03, true, ", E x 10"},
                                  {10.0, 0.10, false, ", through"}};
   for (const Run& run : runs) {
@@ -588,7 +594,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
       int crossing_tick = -1, contact_tick = -1, saturated = 0, faults = 0;
       double max_device = 0, last_force = 0;
       int last_points = 0;
-      const int ticks = static_cast<int>(std::ceil((start + run.end_depth) / step)) + 1;
+      const int ticks = static_cast<int>(std::ceil((start + run.end_depth) / step)) + 1 + 30;
       for (int k = 0; k < ticks; ++k) {
         Pose5 pose;
         pose.insertion = spec.trocar.z() - (top + start) + std::min(k * step, start + run.end_depth);
