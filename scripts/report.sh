@@ -147,7 +147,36 @@ live_intestine() {
 # for as long as the live run, just before it (misses on a shared VM come and go within minutes).
 step rt_floor "$bench/rt_bench" --seconds "$live_s" --label alone --out "$csv"
 step live_liver live_liver
+# Issue 14: the same live run with the DDS writes back on the loop thread (SURGSIM_HAPTIC_PUBLISHER=inline), right
+# after, so the publisher thread's effect on the tick is measured side by side on the same machine state.
+live_liver_inline() {
+  SURGSIM_HAPTIC_PUBLISHER=inline SURGSIM_OUT=$out/raw/live_liver_inline HAPTIC_ARGS="--rate 1000 --duration $live_s" \
+    VISUAL_ARGS="--png-every 50" "$root/scripts/run_local.sh" liver "$root/config/trajectories/liver_sweep.csv"
+}
+step live_liver_inline live_liver_inline
 step live_intestine live_intestine
+# Issue 14: what the hand feels. The contact signal (triangle against patch on a slab and the shipped liver), then the
+# loop closed through a simulated device over DDS (surgsim-device-sim --physical) at the corners of the grid the
+# issue names (mass 0.05-0.2 kg, damping 0.1-1 N s/m, hand force 0.5-3 N): settling, oscillation, resting force.
+step haptic_signal "$bench/haptic_signal_bench" --out "$csv"
+device_loop() {
+  mkdir -p "$out/raw/device"
+  local corner m b f tag
+  for corner in "0.05 0.1 3" "0.05 1 0.5" "0.2 0.1 3" "0.2 1 0.5" "0.1 0.5 2"; do
+    read -r m b f <<<"$corner"
+    tag="m${m}_b${b}_f${f}"
+    echo "== mass $m kg, damping $b N s/m, hand $f N"
+    "$bin/haptic_node" --scene liver --input device --rate 1000 --duration 600 --quiet \
+      --stats "$out/raw/device/${tag}_haptic.json" &
+    local hpid=$!
+    "$bin/surgsim-device-sim" --physical --scene liver --mass "$m" --damping "$b" --hand-force "$f" --duration 6 \
+      --window 1 --settle-band 0.001 --rate 1000 --rt-priority 70 --wait-for-haptic 120 \
+      --out "$out/raw/device/${tag}_device.csv" --stats "$out/raw/device/${tag}_device.json" || true
+    kill -INT $hpid 2>/dev/null || true
+    wait $hpid || true
+  done
+}
+step device_loop device_loop
 # Issue 7's round trips: one host (shared memory, UDP), two hosts over veth and through the user-space impairment.
 if [ $quick = 1 ]; then step network "$root/scripts/network_figures.sh" 2 1000
 else step network "$root/scripts/network_figures.sh" 5 1000; fi

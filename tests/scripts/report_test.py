@@ -52,7 +52,8 @@ class ReportTest(unittest.TestCase):
               "tensors_float,float,4,6,3e-7,2e-7,25\n")
         # The other sections' inputs, a few rows each in the bench programs' formats.
         for name in ("intestine_timestep", "intestine_pairs", "intestine_lod", "stability", "liver_nonlinear",
-                     "liver_mesh_convergence", "node_tick", "liver_precompute", "rt_floor"):
+                     "liver_mesh_convergence", "node_tick", "liver_precompute", "rt_floor", "haptic_signal",
+                     "haptic_signal_slide"):
             shutil.copy(os.path.join(os.path.dirname(os.path.abspath(__file__)), "fixtures", name + ".csv"),
                         os.path.join(self.dir, "csv", name + ".csv"))
         rates = os.path.join(self.dir, "raw", "rates")
@@ -78,6 +79,10 @@ class ReportTest(unittest.TestCase):
         self.assertNotIn("failed**", text)
         self.assertIn("| intestine step (400 masses + collisions), dt 1 ms | p99 699 us", text)
         self.assertIn("| stability: cases with only finite outputs | 2 of 3 | all | **over** |", text)
+        # Issue 14's section: the patch contact against the paper's triangle, each against its budget.
+        self.assertIn("| slab slide 31.7 deg 3 mm | ripple | 96.77 % | 2.975 % | <= 5 % | within |", text)
+        self.assertIn("| slab onset 0.1 m/s to 3 mm | step_max | 3.333 % of held | 6.5 % of held | <= 5 % | **over** |", text)
+        self.assertIn("plots/haptic_signal_slide.png", text)
         self.assertIn("| precompute, 1382-node liver (direct, double) | 1.20 s | <= 2 s | within |", text)
         self.assertIn("(rt_bench, 10000 ticks) | 30 missed (0.300 %), wake-up late p99 25 / max 3533 us | < 0.1 % missed | **over** |",
                       text)
