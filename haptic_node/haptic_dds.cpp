@@ -8,8 +8,11 @@
 #include "Surgsim.h"
 #include "SurgsimPubSubTypes.h"
 #include "core/clock.h"
+#include "publisher.h"
 
 namespace surgsim {
+
+static_assert(kFlagHeld == msg::kFlagHeld, "publisher.h and idl/Surgsim.idl disagree on the held-force flag");
 
 using eprosima::fastdds::dds::DataReader;
 using eprosima::fastdds::dds::DataReaderListener;

@@ -41,7 +41,8 @@
 namespace surgsim {
 
 /// ForceFeedback / ContactFrame flag: this force was not computed for its tick but held, faded or zeroed by the
-/// publisher (overrun, or the final zero at exit). Not yet in idl/Surgsim.idl (the bits after kFlagGrasp = 16).
+/// publisher (overrun, or the final zero at exit). The same value as msg::kFlagHeld of idl/Surgsim.idl (checked in
+/// haptic_dds.cpp); kept here so that the publisher does not depend on the generated types.
 inline constexpr std::uint32_t kFlagHeld = 32;
 
 /// One tick's outputs, everything the publisher writes. Trivially copyable (the seqlock copies it with memcpy);
