@@ -596,13 +596,14 @@ def haptic_signal_section(rep):
             by.setdefault((r["case"], r["metric"]), {})[r["model"]] = r
         rep.md("Data: [`csv/haptic_signal.csv`](csv/haptic_signal.csv)")
         rep.md()
-        rep.md("| case | metric | triangle (paper) | patch | budget | verdict (patch) |")
-        rep.md("|---|---|---|---|---|---|")
+        rep.md("| case | metric | triangle (paper) | patch | patch + force stage (sent to the device) | budget | "
+               "verdict (patch) |")
+        rep.md("|---|---|---|---|---|---|---|")
         budgets = {"ripple": ("ripple_pct", "<= %g %%"), "tangential_max": ("tangential_pct", "<= %g %%"),
                    "step_max": ("step_pct", "<= %g %%")}
         for (case, metric), models in by.items():
-            tri, pat = models.get("triangle"), models.get("patch")
-            unit = (pat or tri)["unit"]
+            tri, pat, staged = models.get("triangle"), models.get("patch"), models.get("patch+stage")
+            unit = (pat or tri or staged)["unit"]
             cell = lambda r: "%.4g %s" % (r["value"], unit) if r else "-"
             budget, ok = "", ""
             if metric in budgets and pat and "stab" not in case:
@@ -611,7 +612,7 @@ def haptic_signal_section(rep):
                 ok = verdict(pat["value"] <= BUDGETS[key])
                 rep.headline.append(("hand: %s, %s (patch; paper's triangle %s)" % (case, metric, cell(tri)),
                                      cell(pat), budget, ok))
-            rep.md("| %s | %s | %s | %s | %s | %s |" % (case, metric, cell(tri), cell(pat), budget, ok))
+            rep.md("| %s | %s | %s | %s | %s | %s | %s |" % (case, metric, cell(tri), cell(pat), cell(staged), budget, ok))
         rep.md()
     slide = rep.csv_rows("haptic_signal_slide")
     if slide:

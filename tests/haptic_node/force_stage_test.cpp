@@ -145,20 +145,25 @@ TEST(ForceStage, CouplingDamperNoDragWhenSlidingNeverPullsAndStartsFromZero) {
     stage.apply(tip_at(Eigen::Vector3d(0.1 * k * dt, 0, -0.01)), dt, out);
     EXPECT_NEAR((out.device_force - Eigen::Vector3d(0, 0, 1.0)).norm(), 0.0, 1e-12) << "tick " << k;
   }
-  // Pressing in (tip moving down at 0.2 m/s): the damper pushes out, at most doubling the contact force.
+  // Pressing in (tip moving down at 0.2 m/s): the damper pushes out, by at most 35 % of the contact force (so that
+  // a 0.1 m/s onset stays continuous).
   out = ContactTick{};
   out.device_force = Eigen::Vector3d(0, 0, 0.1);
   stage.apply(tip_at(Eigen::Vector3d(0.01, 0, -0.0102)), dt, out);
-  EXPECT_NEAR(out.device_force.z(), 0.2, 1e-12);
+  EXPECT_NEAR(out.device_force.z(), 0.135, 1e-12);
   // Pulling out fast: the damper lowers the push-back but never below zero (never pulls the tool in).
   out = ContactTick{};
   out.device_force = Eigen::Vector3d(0, 0, 0.3);
   stage.apply(tip_at(Eigen::Vector3d(0.01, 0, -0.0002)), dt, out);
   EXPECT_GE(out.device_force.z(), 0.0);
   EXPECT_LE(out.device_force.z(), 0.3);
-  // No contact force, no damper force, whatever the speed (contact onset starts from zero).
+  // No contact force, no damper force, whatever the speed (contact onset starts from zero). A stage of its own: the
+  // synthetic pull-out above gave energy back, which the controller would rightly dissipate on the next tick.
+  ForceStage fresh(spec(false, 5.0), 8.0);
   out = ContactTick{};
-  stage.apply(tip_at(Eigen::Vector3d(0.01, 0, -0.05)), dt, out);
+  fresh.apply(tip_at(Eigen::Vector3d(0.01, 0, -0.01)), dt, out);
+  out = ContactTick{};
+  fresh.apply(tip_at(Eigen::Vector3d(0.01, 0, -0.05)), dt, out);
   EXPECT_TRUE(out.device_force.isZero(0));
 }
 
