@@ -8,7 +8,7 @@
 //
 //  1. Coupling (a spring-damper between the device and the tool proxy whose spring is the organ itself, so the proxy
 //     is the device's pose and only the damper is added): along the contact force's direction n = F / |F|,
-//         F <- F - B (v . n) n,   the damper force clamped to [-|F|, |F|],
+//         F <- F - B (v . n) n,   the damper force clamped to [-0.35 |F|, 0.35 |F|],
 //     B = haptic.coupling_damping (N s/m). It acts only in contact (F = 0 gives no force), never pulls the tool into
 //     the organ (the normal force stays >= 0) and grows with the contact force from 0, so it adds no step at contact
 //     onset; it leaves sliding at constant depth untouched (v . n = 0 there: no drag).
