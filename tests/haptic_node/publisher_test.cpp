@@ -261,7 +261,9 @@ TEST(Publisher, OverrunHoldsThenFadesTheLastForceToZero) {
   for (std::size_t i = 0; i < held.size(); ++i) {
     EXPECT_GE(held[i], 0.0);
     EXPECT_LE(held[i], 4.0);
-    if (i > 0) EXPECT_LT(held[i], held[i - 1]) << "the held force only goes down";
+    if (i > 0) {
+      EXPECT_LT(held[i], held[i - 1]) << "the held force only goes down";
+    }
     // Every held force is one of the steps of the fade: 4 N * (1 - (m - 1) * 2 / 20).
     const double steps = (1.0 - held[i] / 4.0) * 10.0;
     EXPECT_NEAR(steps, std::round(steps), 1e-9) << held[i];
