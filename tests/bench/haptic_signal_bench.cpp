@@ -29,6 +29,7 @@
 #include "organs/liver_contacts.h"
 #include "organs/liver_organ.h"
 #include "scene/scene.h"
+#include "support/slab_util.h"
 #include "tool/trajectory.h"
 
 namespace surgsim {
@@ -66,42 +67,8 @@ ToolGeometry vertical_tool(const Eigen::Vector3d& tip) {
   return g;
 }
 
-// Peak-to-peak of y after removing its least-squares line in s, over the mean of y.
-double ripple(const std::vector<double>& s, const std::vector<double>& y) {
-  const double m = static_cast<double>(s.size());
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    sx += s[i];
-    sy += y[i];
-    sxx += s[i] * s[i];
-    sxy += s[i] * y[i];
-  }
-  const double slope = (m * sxy - sx * sy) / (m * sxx - sx * sx), icpt = (sy - slope * sx) / m;
-  double lo = HUGE_VAL, hi = -HUGE_VAL;
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    const double r = y[i] - (icpt + slope * s[i]);
-    lo = std::min(lo, r);
-    hi = std::max(hi, r);
-  }
-  return sy / m > 0 ? (hi - lo) / (sy / m) : 0.0;
-}
-
-struct Slab {
-  TetMesh mesh;
-  SurfaceMesh surface;
-  Tensors tensors;
-  Slab() {
-    mesh = make_box_mesh(20, 20, 4, {0.2, 0.2, 0.04});
-    surface = boundary_surface(mesh);
-    FixedRegion region;
-    region.has_plane = true;
-    region.plane_point = {0, 0, 0.001};
-    region.plane_normal = {0, 0, -1};
-    const FixedSet fixed = fixed_set_from_region(mesh, region);
-    const ElasticModel model = build_elastic_model(mesh, Material{3000.0, 0.45}, fixed);
-    const std::vector<int> contacts = contactable_nodes(mesh, fixed);
-    tensors = precompute_tensors(model, contacts, standard_row_sets(mesh, contacts), {});
-  }
+struct Slab : test::Slab {
+  Slab() : test::Slab(20, 20, 4, {0.2, 0.2, 0.04}) {}
   ToolSpec spec(ContactModel m) const {
     ToolSpec s;
     s.shaft_points = 1;
@@ -146,7 +113,7 @@ void slab_slides(const Slab& slab, Out& out) {
         }
         double mean = 0;
         for (double f : fn) mean += f / static_cast<double>(fn.size());
-        out.figure(name, m, "ripple", 100 * ripple(s, fn), "%");
+        out.figure(name, m, "ripple", 100 * test::detrended_ripple(s, fn), "%");
         out.figure(name, m, "tangential_max", 100 * tangential, "% of normal");
         out.figure(name, m, "normal_mean", mean, "N");
       }

@@ -10,6 +10,7 @@
 #include "liver/fem.h"
 #include "liver/fixed_set.h"
 #include "liver/precompute.h"
+#include "support/slab_util.h"
 
 namespace surgsim {
 namespace {
@@ -18,22 +19,12 @@ namespace {
 class LiverContactsTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    mesh_ = new TetMesh(make_box_mesh(8, 8, 2, {0.2, 0.2, 0.04}));
-    surface_ = new SurfaceMesh(boundary_surface(*mesh_));
-    FixedRegion region;
-    region.has_plane = true;
-    region.plane_point = {0, 0, 0.001};
-    region.plane_normal = {0, 0, -1};
-    const FixedSet fixed = fixed_set_from_region(*mesh_, region);
-    const ElasticModel model = build_elastic_model(*mesh_, Material{3000.0, 0.45}, fixed);
-    const std::vector<int> contacts = contactable_nodes(*mesh_, fixed);
-    tensors_ = new Tensors(precompute_tensors(model, contacts, standard_row_sets(*mesh_, contacts), {}));
+    slab_ = new test::Slab(8, 8, 2, {0.2, 0.2, 0.04});
+    mesh_ = &slab_->mesh;
+    surface_ = &slab_->surface;
+    tensors_ = &slab_->tensors;
   }
-  static void TearDownTestSuite() {
-    delete tensors_;
-    delete surface_;
-    delete mesh_;
-  }
+  static void TearDownTestSuite() { delete slab_; }
   void SetUp() override {
     spec_.trocar = {0.1031, 0.0977, 0.2};  // off the grid lines, so the tip lands inside a triangle
     spec_.axis = {0, 0, -1};
@@ -54,14 +45,16 @@ class LiverContactsTest : public ::testing::Test {
     return t;
   }
 
-  static TetMesh* mesh_;
-  static SurfaceMesh* surface_;
-  static Tensors* tensors_;
+  static test::Slab* slab_;
+  static const TetMesh* mesh_;
+  static const SurfaceMesh* surface_;
+  static const Tensors* tensors_;
   ToolSpec spec_;
 };
-TetMesh* LiverContactsTest::mesh_ = nullptr;
-SurfaceMesh* LiverContactsTest::surface_ = nullptr;
-Tensors* LiverContactsTest::tensors_ = nullptr;
+test::Slab* LiverContactsTest::slab_ = nullptr;
+const TetMesh* LiverContactsTest::mesh_ = nullptr;
+const SurfaceMesh* LiverContactsTest::surface_ = nullptr;
+const Tensors* LiverContactsTest::tensors_ = nullptr;
 
 TEST_F(LiverContactsTest, PokePushesBackAndReleases) {
   LiverContacts c(*mesh_, *surface_, *tensors_, spec_);

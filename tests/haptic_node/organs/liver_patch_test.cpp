@@ -16,6 +16,7 @@
 #include "liver/precompute.h"
 #include "mesh/box_mesh.h"
 #include "organs/liver_contacts.h"
+#include "support/slab_util.h"
 
 namespace surgsim {
 namespace {
@@ -26,22 +27,12 @@ constexpr double kDt = 1e-3;   // s, 1 kHz
 class LiverPatchTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    mesh_ = new TetMesh(make_box_mesh(20, 20, 4, {0.2, 0.2, 0.04}));
-    surface_ = new SurfaceMesh(boundary_surface(*mesh_));
-    FixedRegion region;
-    region.has_plane = true;
-    region.plane_point = {0, 0, 0.001};
-    region.plane_normal = {0, 0, -1};
-    const FixedSet fixed = fixed_set_from_region(*mesh_, region);
-    const ElasticModel model = build_elastic_model(*mesh_, Material{3000.0, 0.45}, fixed);
-    const std::vector<int> contacts = contactable_nodes(*mesh_, fixed);
-    tensors_ = new Tensors(precompute_tensors(model, contacts, standard_row_sets(*mesh_, contacts), {}));
+    slab_ = new test::Slab(20, 20, 4, {0.2, 0.2, 0.04});
+    mesh_ = &slab_->mesh;
+    surface_ = &slab_->surface;
+    tensors_ = &slab_->tensors;
   }
-  static void TearDownTestSuite() {
-    delete tensors_;
-    delete surface_;
-    delete mesh_;
-  }
+  static void TearDownTestSuite() { delete slab_; }
   void SetUp() override {
     spec_.shaft_points = 1;
     spec_.force_limit = 100.0;
@@ -90,35 +81,23 @@ class LiverPatchTest : public ::testing::Test {
       fn.push_back(t.force.z());
       out.tangential = std::max(out.tangential, t.force.head<2>().norm() / t.force.z());
     }
-    // Remove the linear trend (least squares), then peak-to-peak over the mean.
-    const double m = static_cast<double>(s.size());
-    double sx = 0, sy = 0, sxx = 0, sxy = 0;
-    for (std::size_t i = 0; i < s.size(); ++i) {
-      sx += s[i];
-      sy += fn[i];
-      sxx += s[i] * s[i];
-      sxy += s[i] * fn[i];
-    }
-    const double slope = (m * sxy - sx * sy) / (m * sxx - sx * sx), icpt = (sy - slope * sx) / m;
-    double lo = HUGE_VAL, hi = -HUGE_VAL;
-    for (std::size_t i = 0; i < s.size(); ++i) {
-      const double r = fn[i] - (icpt + slope * s[i]);
-      lo = std::min(lo, r);
-      hi = std::max(hi, r);
-    }
-    out.mean = sy / m;
-    out.ripple = (hi - lo) / out.mean;
+    double sum = 0;
+    for (double f : fn) sum += f;
+    out.mean = sum / static_cast<double>(fn.size());
+    out.ripple = test::detrended_ripple(s, fn);
     return out;
   }
 
-  static TetMesh* mesh_;
-  static SurfaceMesh* surface_;
-  static Tensors* tensors_;
+  static test::Slab* slab_;
+  static const TetMesh* mesh_;
+  static const SurfaceMesh* surface_;
+  static const Tensors* tensors_;
   ToolSpec spec_;
 };
-TetMesh* LiverPatchTest::mesh_ = nullptr;
-SurfaceMesh* LiverPatchTest::surface_ = nullptr;
-Tensors* LiverPatchTest::tensors_ = nullptr;
+test::Slab* LiverPatchTest::slab_ = nullptr;
+const TetMesh* LiverPatchTest::mesh_ = nullptr;
+const SurfaceMesh* LiverPatchTest::surface_ = nullptr;
+const Tensors* LiverPatchTest::tensors_ = nullptr;
 
 // Part 2 and 3: at constant depth the normal force does not depend on where the tip is relative to the mesh (ripple
 // <= 5 % of the mean, trend removed), along a grid line and at an irrational angle; frictionless: |F_t| <= 2 % F_n.
