@@ -112,7 +112,13 @@ int main(int argc, char** argv) {
                    3 * static_cast<int>(contacts.size()),
                    estimate_precompute_memory(model, static_cast<int>(contacts.size()), rows, opts).describe().c_str());
     PrecomputeReport report;
-    const Tensors tensors = precompute_tensors(model, contacts, rows, opts, &report);
+    Tensors tensors;
+    try {
+      tensors = precompute_tensors(model, contacts, rows, opts, &report);
+    } catch (const Error& e) {  // e.g. CHOLMOD: name the scene and its mesh file
+      const bool other_mesh = !mesh.source.empty() && mesh.source != where;
+      throw Error(where + (other_mesh ? " (mesh " + mesh.source + ")" : "") + ": " + e.what());
+    }
     save_tensor_cache(out, tensors, key);
     std::printf("wrote %s: %d nodes, %d contactable, blocks haptic %d x %d and visual %d x %d (%s), %.1f MiB\n",
                 out.c_str(), tensors.node_count, tensors.column_count(), tensors.blocks[0].row_count(),

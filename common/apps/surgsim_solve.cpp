@@ -133,19 +133,24 @@ int main(int argc, char** argv) {
     const TetMesh mesh = cli::load_mesh(mesh_file, generate, nodes, &std::cerr);
     const FixedRegion region = cli::fixed_region(fixed_opts);
     const FixedSet fixed = fixed_set_from_region(mesh, region);
-    const ElasticModel model = build_elastic_model(mesh, material, fixed, mesh_file.empty() ? generate : mesh_file);
+    const std::string where = mesh_file.empty() ? generate : mesh_file;
+    const ElasticModel model = build_elastic_model(mesh, material, fixed, where);
 
     const auto t0 = std::chrono::steady_clock::now();
     StaticSolution s;
-    if (method == "tensor") {
-      s = solve_by_tensors(model, imposed);
-    } else {
-      StaticSolverOptions opts;
-      opts.method = parse_solve_method(method);
-      opts.cg_tolerance = tol;
-      opts.cg_max_iterations = max_iter;
-      StaticSolver solver(model, opts);
-      s = solver.solve(imposed);
+    try {
+      if (method == "tensor") {
+        s = solve_by_tensors(model, imposed);
+      } else {
+        StaticSolverOptions opts;
+        opts.method = parse_solve_method(method);
+        opts.cg_tolerance = tol;
+        opts.cg_max_iterations = max_iter;
+        StaticSolver solver(model, opts);
+        s = solver.solve(imposed);
+      }
+    } catch (const Error& e) {  // e.g. CHOLMOD: name the mesh
+      throw Error(where + ": " + e.what());
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 

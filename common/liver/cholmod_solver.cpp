@@ -101,7 +101,9 @@ void CholmodSolver::factorize() {
   const int ok = cholmod_factorize(s.a, s.l, &s.common);
   if (s.common.status == CHOLMOD_NOT_POSDEF)
     throw_error("CHOLMOD: the matrix is not positive definite (failure at column ", s.l->minor, " of ", s.l->n,
-                "); for a stiffness matrix this means a rigid mode is free or an element is inverted");
+                "); for a stiffness matrix this means a rigid mode is free (a part of the mesh not held by 3 non-collinear "
+                "fixed nodes of its own, e.g. one joined to the rest only at a vertex or an edge) or an element is "
+                "inverted");
   if (!ok || s.common.status < CHOLMOD_OK) s.fail("factorize");
   s.factorized = true;
 }

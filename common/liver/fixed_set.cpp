@@ -2,6 +2,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 #include <sstream>
@@ -113,6 +114,125 @@ Eigen::Vector3d canonical_direction(Eigen::Vector3d v) {
 
 }  // namespace
 
+namespace {
+
+// Mechanically independent parts: tetrahedra sharing a face (3 nodes) move as one body; a shared vertex or edge is
+// a hinge. Union-find over tets through their sorted faces, O(T log T).
+struct MeshParts {
+  std::vector<int> tet_part;                    // #T, part index 0..count-1 (numbered by first tet)
+  std::vector<std::vector<int>> nodes;          // per part, its nodes ascending
+  std::vector<std::vector<int>> node_parts;     // per node, the parts using it ascending (empty: in no tet)
+  int count() const { return static_cast<int>(nodes.size()); }
+};
+
+MeshParts face_connected_parts(const TetMesh& mesh) {
+  const int n = static_cast<int>(mesh.nodes.rows());
+  const int t_count = static_cast<int>(mesh.tets.rows());
+  // Each face as one sortable key: its sorted node indices packed in 21 bits each (meshes up to 2^21 nodes), else
+  // the node triple itself.
+  const bool packed = n < (1 << 21);
+  struct Face {
+    std::uint64_t key;
+    std::array<int, 3> v;
+    int tet;
+  };
+  std::vector<Face> faces;
+  faces.reserve(static_cast<std::size_t>(t_count) * 4);
+  for (int t = 0; t < t_count; ++t)
+    for (int skip = 0; skip < 4; ++skip) {
+      Face f{0, {0, 0, 0}, t};
+      int k = 0;
+      for (int a = 0; a < 4; ++a)
+        if (a != skip) f.v[static_cast<std::size_t>(k++)] = mesh.tets(t, a);
+      std::sort(f.v.begin(), f.v.end());
+      if (packed)
+        f.key = (static_cast<std::uint64_t>(f.v[0]) << 42) | (static_cast<std::uint64_t>(f.v[1]) << 21) |
+                static_cast<std::uint64_t>(f.v[2]);
+      faces.push_back(f);
+    }
+  if (packed)
+    std::sort(faces.begin(), faces.end(), [](const Face& a, const Face& b) { return a.key < b.key; });
+  else
+    std::sort(faces.begin(), faces.end(), [](const Face& a, const Face& b) { return a.v < b.v; });
+  std::vector<int> parent(static_cast<std::size_t>(t_count));
+  std::iota(parent.begin(), parent.end(), 0);
+  for (std::size_t i = 1; i < faces.size(); ++i)
+    if (faces[i].v == faces[i - 1].v) {
+      const int r0 = find_root(parent, faces[i - 1].tet), r1 = find_root(parent, faces[i].tet);
+      if (r0 != r1) parent[static_cast<std::size_t>(std::max(r0, r1))] = std::min(r0, r1);
+    }
+  MeshParts parts;
+  parts.tet_part.assign(static_cast<std::size_t>(t_count), -1);
+  parts.node_parts.assign(static_cast<std::size_t>(n), {});
+  std::vector<int> root_part(static_cast<std::size_t>(t_count), -1);
+  for (int t = 0; t < t_count; ++t) {
+    int& p = root_part[static_cast<std::size_t>(find_root(parent, t))];
+    if (p < 0) p = static_cast<int>(parts.nodes.size()), parts.nodes.emplace_back();
+    parts.tet_part[static_cast<std::size_t>(t)] = p;
+    for (int a = 0; a < 4; ++a) {
+      const int v = mesh.tets(t, a);
+      if (v < 0 || v >= n) continue;  // validate_mesh reports it
+      auto& list = parts.node_parts[static_cast<std::size_t>(v)];  // a node is in few parts: a linear scan
+      if (std::find(list.begin(), list.end(), p) == list.end()) list.push_back(p);
+    }
+  }
+  for (int v = 0; v < n; ++v) {
+    auto& list = parts.node_parts[static_cast<std::size_t>(v)];
+    std::sort(list.begin(), list.end());
+    for (int p : list) parts.nodes[static_cast<std::size_t>(p)].push_back(v);  // ascending
+  }
+  return parts;
+}
+
+// How part p is attached to the others (it shares no face with them by construction): "is not attached to
+// anything ..." or "touches part 1 only at node 17 (a vertex hinge)" / "... along the edge 17-18 (an edge hinge)".
+std::string describe_attachment(const TetMesh& mesh, const MeshParts& parts, int p) {
+  std::vector<std::pair<int, int>> shared;  // (other part, node)
+  for (int v : parts.nodes[static_cast<std::size_t>(p)])
+    for (int q : parts.node_parts[static_cast<std::size_t>(v)])
+      if (q != p) shared.emplace_back(q, v);
+  if (shared.empty())
+    return "is not attached to anything (it shares no node with the other parts: the mesh is not connected)";
+  std::sort(shared.begin(), shared.end());
+  std::ostringstream os;
+  os << "is joined to the rest only through hinges (a shared vertex or edge, about which it can turn; only shared "
+        "faces attach): it";
+  std::size_t i = 0;
+  int shown = 0;
+  while (i < shared.size()) {
+    std::size_t j = i;
+    std::vector<int> nodes;
+    while (j < shared.size() && shared[j].first == shared[i].first) nodes.push_back(shared[j++].second);
+    const int q = shared[i].first;
+    if (shown == 3) {
+      os << "; and touches other parts too";
+      break;
+    }
+    os << (shown ? "; and" : "") << " touches part " << q + 1;
+    if (nodes.size() == 1) {
+      os << " only at node " << nodes[0] << " (a vertex hinge)";
+    } else {
+      bool edge = false;
+      if (nodes.size() == 2)
+        for (Eigen::Index t = 0; t < mesh.tets.rows() && !edge; ++t) {
+          if (parts.tet_part[static_cast<std::size_t>(t)] != p) continue;
+          int hits = 0;
+          for (int a = 0; a < 4; ++a) hits += (mesh.tets(t, a) == nodes[0] || mesh.tets(t, a) == nodes[1]);
+          edge = hits == 2;
+        }
+      if (edge)
+        os << " along the edge " << nodes[0] << "-" << nodes[1] << " (an edge hinge)";
+      else
+        os << " at nodes " << list_nodes(nodes, 6) << " (vertices and edges only, no shared face)";
+    }
+    ++shown;
+    i = j;
+  }
+  return os.str();
+}
+
+}  // namespace
+
 void check_rigid_modes_removed(const TetMesh& mesh, const FixedSet& fixed, const std::string& where) {
   const int n = static_cast<int>(mesh.nodes.rows());
   const std::string prefix = where.empty() ? std::string() : where + ": ";
@@ -125,40 +245,43 @@ void check_rigid_modes_removed(const TetMesh& mesh, const FixedSet& fixed, const
   if (fixed_nodes.empty())
     throw_error(prefix, "no node is fixed, so the organ can translate and rotate freely (6 rigid modes): ", fix_hint);
 
-  // Connected parts of the mesh (nodes sharing a tet).
-  std::vector<int> parent(static_cast<std::size_t>(n));
-  std::iota(parent.begin(), parent.end(), 0);
-  for (Eigen::Index t = 0; t < mesh.tets.rows(); ++t)
-    for (int a = 1; a < 4; ++a) {
-      const int r0 = find_root(parent, mesh.tets(t, 0)), r1 = find_root(parent, mesh.tets(t, a));
-      if (r0 != r1) parent[static_cast<std::size_t>(std::max(r0, r1))] = std::min(r0, r1);
-    }
+  // Mechanically independent parts (tets sharing a face). A part is held only by its own fixed dofs: a node it
+  // shares with another part is a hinge, which leaves the rotations about it free.
+  MeshParts parts = face_connected_parts(mesh);
+  if (mesh.tets.rows() == 0) {  // no element at all: validate_mesh reports it; treat the nodes as one body
+    parts.nodes.assign(1, std::vector<int>(static_cast<std::size_t>(n)));
+    std::iota(parts.nodes[0].begin(), parts.nodes[0].end(), 0);
+  }
 
   // Per part: the rigid modes (3 translations, 3 rotations about the part's centroid, scaled by its size) evaluated
   // at the fixed dofs. A mode is free when this 6-column matrix has a null vector.
-  std::vector<std::vector<int>> groups(static_cast<std::size_t>(n));
-  for (int i = 0; i < n; ++i) groups[static_cast<std::size_t>(find_root(parent, i))].push_back(i);
-  for (int root = 0; root < n; ++root) {
-    const std::vector<int>& nodes = groups[static_cast<std::size_t>(root)];
-    if (nodes.empty()) continue;
-    if (nodes.size() == 1 && mesh.tets.rows() > 0) continue;  // a node in no tet: validate_mesh reports it
+  for (int p = 0; p < parts.count(); ++p) {
+    const std::vector<int>& nodes = parts.nodes[static_cast<std::size_t>(p)];
     std::vector<int> part_fixed;
     for (int i : nodes)
-      if (fixed.node_touched(i)) part_fixed.push_back(i);
+      if (i >= 0 && i < n && fixed.node_touched(i)) part_fixed.push_back(i);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (int i : nodes) centroid += mesh.nodes.row(i).transpose();
     centroid /= static_cast<double>(nodes.size());
     double size = 0;
     for (int i : nodes) size = std::max(size, (mesh.nodes.row(i).transpose() - centroid).norm());
     if (size <= 0) size = 1;
+    const bool one_part = parts.count() == 1;
     const std::string part =
-        static_cast<int>(nodes.size()) == n
-            ? std::string("the organ")
-            : "the part of the mesh containing node " + std::to_string(root) + " (" + std::to_string(nodes.size()) +
-                  " of " + std::to_string(n) + " nodes; the mesh is not connected)";
+        one_part ? std::string("the organ")
+                 : "part " + std::to_string(p + 1) + " of " + std::to_string(parts.count()) + " of the mesh (" +
+                       std::to_string(nodes.size()) + " of " + std::to_string(n) + " nodes: " + list_nodes(nodes, 6) +
+                       ")";
+    // "; " + the fix for one body; ". Part 2 touches ...: " + the fix for a part among several.
+    const std::string fix =
+        one_part ? "; " + fix_hint
+                 : ". Part " + std::to_string(p + 1) + " " + describe_attachment(mesh, parts, p) +
+                       ". Either fix at least 3 non-collinear nodes of that part (scene key 'fixed': nodes, box, boxes or "
+                       "plane; programs: --fixed i,j,k, --fixed-box or --fixed-plane), merge the bodies so that they "
+                       "share faces, or remove the part";
     if (part_fixed.empty())
       throw_error(prefix, part, " has no fixed node and can move freely (", fixed_nodes.size(),
-                  " node(s) are fixed elsewhere: ", list_nodes(fixed_nodes), "): ", fix_hint, " in every part");
+                  " node(s) are fixed elsewhere: ", list_nodes(fixed_nodes), ")", fix);
 
     Eigen::Matrix<double, 6, 6> gram = Eigen::Matrix<double, 6, 6>::Zero();
     for (int i : part_fixed) {
@@ -196,7 +319,7 @@ void check_rigid_modes_removed(const TetMesh& mesh, const FixedSet& fixed, const
     else
       shape = "the fixed components do not hold every rigid motion";
     throw_error(prefix, "the fixed set leaves ", free_modes, " rigid mode(s) of ", part, " free (", shape, "; e.g. ",
-                what.str(), "); ", part_fixed.size(), " node(s) fixed there: ", list_nodes(part_fixed), "; ", fix_hint);
+                what.str(), "); ", part_fixed.size(), " node(s) fixed there: ", list_nodes(part_fixed), fix);
   }
 }
 

@@ -55,10 +55,13 @@ std::vector<int> nodes_in_region(const TetMesh& mesh, const FixedRegion& region)
 /// FixedSet fixing the nodes of nodes_in_region(mesh, region) completely.
 FixedSet fixed_set_from_region(const TetMesh& mesh, const FixedRegion& region);
 
-/// Throws surgsim::Error when the fixed dofs leave a rigid-body mode free in some connected part of the mesh (the
-/// stiffness would then be singular): nothing fixed, a single fixed point, all fixed nodes on one line, or a part of
-/// the mesh with no fixed node. The message says how many and which nodes are fixed, which motion is left free and
-/// how to fix the scene; `where` (e.g. the scene file) prefixes it.
+/// Throws surgsim::Error when the fixed dofs leave a rigid-body mode free in some mechanically independent part of
+/// the mesh (the stiffness would then be singular). Parts are tetrahedra joined through shared faces (union-find over
+/// sorted faces, O(T log T)); a vertex or an edge shared between parts is a hinge, so each part must be held by its
+/// own fixed dofs. Refused: nothing fixed, a single fixed point, all fixed nodes on one line, a part with no fixed
+/// node. The message says how many and which nodes are fixed, which motion is left free, which part (node count and
+/// a few node indices), how it touches the other parts ("only at node 17 (a vertex hinge)", "along the edge 17-18 (an
+/// edge hinge)", "not attached to anything") and how to fix the scene; `where` (e.g. the scene file) prefixes it.
 void check_rigid_modes_removed(const TetMesh& mesh, const FixedSet& fixed, const std::string& where = "");
 
 }  // namespace surgsim

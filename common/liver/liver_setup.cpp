@@ -93,7 +93,13 @@ Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, c
     };
   }
   PrecomputeReport report;
-  t = precompute_tensors(model, setup.contacts, setup.rows, options, &report);
+  try {
+    t = precompute_tensors(model, setup.contacts, setup.rows, options, &report);
+  } catch (const Error& e) {  // e.g. CHOLMOD: name the scene and its mesh file
+    const std::string mesh_file = mesh.source.empty() || mesh.source == where ? "" : " (mesh " + mesh.source + ")";
+    if (where.empty() && mesh_file.empty()) throw;
+    throw Error((where.empty() ? "mesh " + mesh.source : where + mesh_file) + ": " + e.what());
+  }
   out.rebuilt = true;
   try {
     save_tensor_cache(setup.cache_path, t, setup.key);

@@ -104,5 +104,89 @@ TEST(FixedSet, EveryConnectedPartNeedsFixedNodes) {
   EXPECT_EQ(rigid_error(m, FixedSet(16, {0, 1, 2, 3, 8, 9, 10})), "");
 }
 
+// Box a (unit cube at the origin, 8 nodes) and box b (unit cube at b_origin) in one mesh; b's nodes listed in
+// `shared` (b node -> a node) are merged into a's, the others follow a's nodes in order.
+TetMesh two_boxes(const Eigen::Vector3d& b_origin, const std::vector<std::pair<int, int>>& shared) {
+  const TetMesh a = make_box_mesh(1, 1, 1, Eigen::Vector3d::Ones());
+  const TetMesh b = make_box_mesh(1, 1, 1, Eigen::Vector3d::Ones(), b_origin);
+  std::vector<int> map(8, -1);
+  for (const auto& [bn, an] : shared) map[static_cast<std::size_t>(bn)] = an;
+  int next = 8;
+  for (int& m : map)
+    if (m < 0) m = next++;
+  TetMesh out;
+  out.nodes.resize(next, 3);
+  out.nodes.topRows(8) = a.nodes;
+  for (int i = 0; i < 8; ++i) {
+    if (map[static_cast<std::size_t>(i)] >= 8) out.nodes.row(map[static_cast<std::size_t>(i)]) = b.nodes.row(i);
+    else EXPECT_TRUE(out.nodes.row(map[static_cast<std::size_t>(i)]).isApprox(b.nodes.row(i)));
+  }
+  out.tets.resize(a.tets.rows() + b.tets.rows(), 4);
+  out.tets.topRows(a.tets.rows()) = a.tets;
+  for (Eigen::Index t = 0; t < b.tets.rows(); ++t)
+    for (int c = 0; c < 4; ++c) out.tets(a.tets.rows() + t, c) = map[static_cast<std::size_t>(b.tets(t, c))];
+  return out;
+}
+
+// a's bottom face z = 0 (nodes 0..3): holds box a on its own.
+const std::vector<int> kBottomOfA = {0, 1, 2, 3};
+
+TEST(FixedSet, BodyHingedAtAVertexIsRefused) {
+  // b's corner (0,0,0) is a's corner (1,1,1) = node 7: one shared node, no shared face.
+  const TetMesh m = two_boxes(Eigen::Vector3d(1, 1, 1), {{0, 7}});
+  ASSERT_EQ(m.nodes.rows(), 15);
+  const std::string e = rigid_error(m, FixedSet(15, kBottomOfA));
+  EXPECT_NE(e.find("scene.yaml: "), std::string::npos) << e;
+  EXPECT_NE(e.find("part 2 of 2 of the mesh (8 of 15 nodes: 7, 8, 9"), std::string::npos) << e;
+  EXPECT_NE(e.find("no fixed node"), std::string::npos) << e;
+  EXPECT_NE(e.find("touches part 1 only at node 7 (a vertex hinge)"), std::string::npos) << e;
+  EXPECT_NE(e.find("Either fix at least 3 non-collinear nodes of that part"), std::string::npos) << e;
+  EXPECT_NE(e.find("share faces"), std::string::npos) << e;
+  EXPECT_THROW(build_elastic_model(m, test::liver_material(), FixedSet(15, kBottomOfA)), Error);
+
+  // Fixing the hinge node itself holds b at one point only: its rotations about node 7 stay free.
+  std::vector<int> with_hinge = kBottomOfA;
+  with_hinge.push_back(7);
+  const std::string h = rigid_error(m, FixedSet(15, with_hinge));
+  EXPECT_NE(h.find("3 rigid mode(s) of part 2 of 2"), std::string::npos) << h;
+  EXPECT_NE(h.find("a single fixed node"), std::string::npos) << h;
+  EXPECT_NE(h.find("(a vertex hinge)"), std::string::npos) << h;
+
+  // Three non-collinear fixed nodes of b hold it.
+  std::vector<int> both = kBottomOfA;
+  for (int i : {8, 9, 10}) both.push_back(i);
+  EXPECT_EQ(rigid_error(m, FixedSet(15, both)), "");
+}
+
+TEST(FixedSet, BodyHingedAlongAnEdgeIsRefused) {
+  // b at (1,0,1): its nodes (0,0,0) and (0,1,0) (0 and 2) are a's (1,0,1) and (1,1,1) (5 and 7): a shared edge.
+  const TetMesh m = two_boxes(Eigen::Vector3d(1, 0, 1), {{0, 5}, {2, 7}});
+  ASSERT_EQ(m.nodes.rows(), 14);
+  const std::string e = rigid_error(m, FixedSet(14, kBottomOfA));
+  EXPECT_NE(e.find("part 2 of 2 of the mesh (8 of 14 nodes"), std::string::npos) << e;
+  EXPECT_NE(e.find("touches part 1 along the edge 5-7 (an edge hinge)"), std::string::npos) << e;
+  // Fixing both hinge nodes leaves the rotation about the edge (along y) free.
+  const std::string h = rigid_error(m, FixedSet(14, {0, 1, 2, 3, 5, 7}));
+  EXPECT_NE(h.find("1 rigid mode(s) of part 2 of 2"), std::string::npos) << h;
+  EXPECT_NE(h.find("rotation about the axis along (0 1 0)"), std::string::npos) << h;
+  EXPECT_NE(h.find("(an edge hinge)"), std::string::npos) << h;
+}
+
+TEST(FixedSet, BodiesSharingAFaceAreOne) {
+  // b at (1,0,0): its face x = 0 is a's face x = 1 (nodes 1, 3, 5, 7), split alike: one body held by a's bottom.
+  const TetMesh m = two_boxes(Eigen::Vector3d(1, 0, 0), {{0, 1}, {2, 3}, {4, 5}, {6, 7}});
+  ASSERT_EQ(m.nodes.rows(), 12);
+  EXPECT_EQ(rigid_error(m, FixedSet(12, kBottomOfA)), "");
+  EXPECT_NO_THROW(build_elastic_model(m, test::liver_material(), FixedSet(12, kBottomOfA)));
+}
+
+TEST(FixedSet, FloatingBodyIsRefused) {
+  const TetMesh m = two_boxes(Eigen::Vector3d(2, 0, 0), {});
+  const std::string e = rigid_error(m, FixedSet(16, kBottomOfA));
+  EXPECT_NE(e.find("part 2 of 2 of the mesh (8 of 16 nodes: 8, 9"), std::string::npos) << e;
+  EXPECT_NE(e.find("is not attached to anything"), std::string::npos) << e;
+  EXPECT_NE(e.find("remove the part"), std::string::npos) << e;
+}
+
 }  // namespace
 }  // namespace surgsim
