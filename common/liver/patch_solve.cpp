@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "liver/dense_llt.h"
 
 namespace surgsim {
 
@@ -24,11 +25,8 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c) noexcept {
   const int n = c.node_count;
   if (n < 0 || n > kMaxContacts || c.patch_count < 0 || c.patch_count > kMaxPatches) return ContactStatus::kOverCapacity;
   for (int u = 0; u < n; ++u) {
-    const int node = c.nodes[static_cast<std::size_t>(u)];
-    if (node < 0 || node >= tensors_.node_count) return ContactStatus::kInvalidNode;
-    if (tensors_.fixed_mask[static_cast<std::size_t>(node)] != 0) return ContactStatus::kFixedNode;
-    if (tensors_.column_of_node[static_cast<std::size_t>(node)] < 0) return ContactStatus::kNotContactable;
-    if (block_.row_of_node[static_cast<std::size_t>(node)] < 0) return ContactStatus::kNotInBlock;
+    const ContactStatus st = contact_node_status(tensors_, block_, c.nodes[static_cast<std::size_t>(u)]);
+    if (st != ContactStatus::kOk) return st;
   }
   const int entries = c.patch_start[static_cast<std::size_t>(c.patch_count)];
   if (entries < 0 || entries > kMaxPatchEntries) return ContactStatus::kOverCapacity;
@@ -130,17 +128,7 @@ void PatchSolver::solve(const double* b, double* mu) const noexcept {
   const Eigen::Index ld = a_.rows();
   std::array<double, kMaxPatchRows> y{};
   for (int j = 0; j < n; ++j) y[static_cast<std::size_t>(j)] = b[order_[static_cast<std::size_t>(j)]];
-  for (int j = 0; j < n; ++j) {
-    const double* cj = a + j * ld;
-    y[static_cast<std::size_t>(j)] /= cj[j];
-    for (int i = j + 1; i < n; ++i) y[static_cast<std::size_t>(i)] -= cj[i] * y[static_cast<std::size_t>(j)];
-  }
-  for (int j = n - 1; j >= 0; --j) {
-    const double* cj = a + j * ld;
-    double s = y[static_cast<std::size_t>(j)];
-    for (int i = j + 1; i < n; ++i) s -= cj[i] * y[static_cast<std::size_t>(i)];
-    y[static_cast<std::size_t>(j)] = s / cj[j];
-  }
+  llt_solve_in_place(a, ld, n, y.data());
   for (int k = 0; k < row_count_; ++k) mu[k] = 0;  // rows not enabled get 0
   for (int j = 0; j < n; ++j) mu[order_[static_cast<std::size_t>(j)]] = y[static_cast<std::size_t>(j)];
 }

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "liver/dense_llt.h"
 
 namespace surgsim {
 
@@ -20,6 +21,14 @@ const char* to_string(ContactStatus status) {
     case ContactStatus::kNearSingular: return "near-singular G_CC";
   }
   return "?";
+}
+
+ContactStatus contact_node_status(const Tensors& t, const TensorBlock& b, int node) noexcept {
+  if (node < 0 || node >= t.node_count) return ContactStatus::kInvalidNode;
+  if (t.fixed_mask[static_cast<std::size_t>(node)] != 0) return ContactStatus::kFixedNode;
+  if (t.column_of_node[static_cast<std::size_t>(node)] < 0) return ContactStatus::kNotContactable;
+  if (b.row_of_node[static_cast<std::size_t>(node)] < 0) return ContactStatus::kNotInBlock;
+  return ContactStatus::kOk;
 }
 
 namespace {
@@ -41,9 +50,7 @@ ContactStatus merge_contacts(const Tensors& t, const TensorBlock& b, const Conta
     r.bad = i;
     if (node < 0 || node >= t.node_count) return ContactStatus::kInvalidNode;
     if (!contacts[i].displacement.allFinite()) return ContactStatus::kNonFinite;
-    if (t.fixed_mask[static_cast<std::size_t>(node)] != 0) return ContactStatus::kFixedNode;
-    if (t.column_of_node[static_cast<std::size_t>(node)] < 0) return ContactStatus::kNotContactable;
-    if (b.row_of_node[static_cast<std::size_t>(node)] < 0) return ContactStatus::kNotInBlock;
+    if (const ContactStatus st = contact_node_status(t, b, node); st != ContactStatus::kOk) return st;
     int l = 0;
     while (l < r.count && nodes[l] != node) ++l;
     if (l < r.count) {
@@ -89,21 +96,6 @@ Superposition::Superposition(const Tensors& tensors, const std::string& block_na
 }
 
 namespace {
-
-// y <- (L L^T)^-1 y for the Cholesky factor L in the lower triangle of `a` (leading dimension ld), n x n.
-void llt_solve_in_place(const double* a, Eigen::Index ld, int n, double* y) noexcept {
-  for (int j = 0; j < n; ++j) {
-    const double* cj = a + j * ld;
-    y[j] /= cj[j];
-    for (int i = j + 1; i < n; ++i) y[i] -= cj[i] * y[j];
-  }
-  for (int j = n - 1; j >= 0; --j) {
-    const double* cj = a + j * ld;
-    double s = y[j];
-    for (int i = j + 1; i < n; ++i) s -= cj[i] * y[i];
-    y[j] = s / cj[j];
-  }
-}
 
 // 1-norm of the symmetric n x n matrix whose lower triangle is in `a`; `colsum` holds n entries (scratch).
 double symmetric_norm1(const double* a, Eigen::Index ld, int n, double* colsum) noexcept {
@@ -246,17 +238,7 @@ ContactStatus Superposition::solve(const Contact* contacts, int m, ContactSoluti
   double* y = rhs_.data();
   for (int l = 0; l < r.count; ++l)
     for (int c = 0; c < 3; ++c) y[3 * l + c] = out.displacement[static_cast<std::size_t>(l)][c];
-  for (int j = 0; j < n; ++j) {
-    const double* cj = a + j * ld;
-    y[j] /= cj[j];
-    for (int i = j + 1; i < n; ++i) y[i] -= cj[i] * y[j];
-  }
-  for (int j = n - 1; j >= 0; --j) {
-    const double* cj = a + j * ld;
-    double s = y[j];
-    for (int i = j + 1; i < n; ++i) s -= cj[i] * y[i];
-    y[j] = s / cj[j];
-  }
+  llt_solve_in_place(a, ld, n, y);
   for (int l = 0; l < r.count; ++l) {
     const auto ul = static_cast<std::size_t>(l);
     out.lambda[ul] = Eigen::Vector3d(y[3 * l], y[3 * l + 1], y[3 * l + 2]);

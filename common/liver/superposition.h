@@ -36,6 +36,10 @@ enum class ContactStatus : std::uint8_t {
 };
 const char* to_string(ContactStatus status);
 
+/// Whether `node` can carry a contact on `block`: kOk, or why not (out of range, fixed, no precomputed column, not a
+/// row of the block). No allocation; Superposition::solve and PatchSolver::prepare refuse nodes with it.
+ContactStatus contact_node_status(const Tensors& tensors, const TensorBlock& block, int node) noexcept;
+
 /// One imposed contact: node k and its displacement u*_k (m).
 struct Contact {
   int node = -1;
