@@ -74,16 +74,7 @@ BucketGrid::BucketGrid(const TetMesh& mesh, const SurfaceMesh& surface, double c
 
   // Node -> incident triangles.
   const int nv = static_cast<int>(mesh.nodes.rows());
-  tri_start_.assign(nv + 1, 0);
-  for (int f = 0; f < surface.tris.rows(); ++f) {
-    for (int e = 0; e < 3; ++e) ++tri_start_[surface.tris(f, e) + 1];
-  }
-  for (int n = 0; n < nv; ++n) tri_start_[n + 1] += tri_start_[n];
-  tri_list_.resize(tri_start_[nv]);
-  std::vector<int> fill(tri_start_.begin(), tri_start_.end() - 1);
-  for (int f = 0; f < surface.tris.rows(); ++f) {
-    for (int e = 0; e < 3; ++e) tri_list_[fill[surface.tris(f, e)]++] = f;
-  }
+  node_tris_ = node_triangles(surface, nv);
   node_mark_.assign(nv, 0);
   tri_mark_.assign(surface.tris.rows(), 0);
 }
@@ -156,8 +147,8 @@ int BucketGrid::gather_cells(const Eigen::Vector3d& p0, const Eigen::Vector3d& p
 int BucketGrid::triangles_of(const int* nodes, int count, int* tris, int capacity) const {
   int n_tris = 0;
   for (int a = 0; a < count; ++a) {
-    for (int t = tri_start_[nodes[a]]; t < tri_start_[nodes[a] + 1]; ++t) {
-      const int f = tri_list_[t];
+    for (int t = node_tris_.start[nodes[a]]; t < node_tris_.start[nodes[a] + 1]; ++t) {
+      const int f = node_tris_.list[t];
       if (tri_mark_[f] == stamp_) continue;
       tri_mark_[f] = stamp_;
       if (n_tris == capacity) return n_tris;

@@ -94,8 +94,7 @@ class BucketGrid {
   std::vector<int> count_;
   std::vector<int> cell_nodes_;
   // Node -> incident surface triangles (CSR over mesh node indices).
-  std::vector<int> tri_start_;
-  std::vector<int> tri_list_;
+  NodeTriangles node_tris_;
   // Scratch marks for de-duplication (mutable: queries are logically const, single-threaded per grid).
   mutable std::vector<std::uint32_t> node_mark_;
   mutable std::vector<std::uint32_t> tri_mark_;

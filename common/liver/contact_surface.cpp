@@ -40,7 +40,6 @@ ContactSurface::ContactSurface(const TetMesh& mesh, const SurfaceMesh& surface,
   const auto nf = static_cast<std::size_t>(surface.tris.rows());
   vertex_normals_.assign(nv, Eigen::Vector3d::Zero());
   face_normals_.resize(nf);
-  std::vector<int> counts(nv + 1, 0);
   for (std::size_t f = 0; f < nf; ++f) {
     const auto fi = static_cast<Eigen::Index>(f);
     const Eigen::Vector3d a = node_at(mesh, surface.tris(fi, 0)), b = node_at(mesh, surface.tris(fi, 1)),
@@ -50,22 +49,13 @@ ContactSurface::ContactSurface(const TetMesh& mesh, const SurfaceMesh& surface,
     face_normals_[f] = len > 0 ? Eigen::Vector3d(n2 / len) : Eigen::Vector3d::UnitZ();
     for (int v = 0; v < 3; ++v) {
       vertex_normals_[static_cast<std::size_t>(surface.tris(fi, v))] += n2;  // area weighted
-      ++counts[static_cast<std::size_t>(surface.tris(fi, v)) + 1];
     }
   }
   for (auto& n : vertex_normals_) {
     const double len = n.norm();
     if (len > 0) n /= len;
   }
-  node_tri_start_.assign(nv + 1, 0);
-  for (std::size_t i = 0; i < nv; ++i) node_tri_start_[i + 1] = node_tri_start_[i] + counts[i + 1];
-  node_tris_.resize(static_cast<std::size_t>(node_tri_start_[nv]));
-  std::vector<int> fill(node_tri_start_.begin(), node_tri_start_.end() - 1);
-  for (std::size_t f = 0; f < nf; ++f)
-    for (int v = 0; v < 3; ++v) {
-      const auto n = static_cast<std::size_t>(surface.tris(static_cast<Eigen::Index>(f), v));
-      node_tris_[static_cast<std::size_t>(fill[n]++)] = static_cast<int>(f);
-    }
+  node_tris_ = node_triangles(surface, static_cast<int>(nv));
   // Candidate patch nodes per triangle: surface nodes within r + circumradius of the centroid (brute force, once).
   cand_start_.assign(nf + 1, 0);
   for (std::size_t f = 0; f < nf; ++f) {
@@ -105,8 +95,8 @@ RestPoint ContactSurface::closest_local(const Eigen::Vector3d& p, int start, con
     const int current = best.triangle;
     for (int v = 0; v < 3; ++v) {
       const auto n = static_cast<std::size_t>(surface_.tris(current, v));
-      for (int k = node_tri_start_[n]; k < node_tri_start_[n + 1]; ++k) {
-        const int f = node_tris_[static_cast<std::size_t>(k)];
+      for (int k = node_tris_.start[n]; k < node_tris_.start[n + 1]; ++k) {
+        const int f = node_tris_.list[static_cast<std::size_t>(k)];
         if (f == best.triangle) continue;
         if (facing != nullptr && !(face_normals_[static_cast<std::size_t>(f)].dot(*facing) > 0.5)) continue;
         const RestPoint r = on_triangle(p, f);

@@ -75,7 +75,7 @@ class ContactSurface {
   double radius_;
   std::vector<Eigen::Vector3d> vertex_normals_;  // per mesh node (zero off the surface)
   std::vector<Eigen::Vector3d> face_normals_;
-  std::vector<int> node_tri_start_, node_tris_;  // node -> incident triangles (CSR over mesh nodes)
+  NodeTriangles node_tris_;                      // node -> incident triangles
   std::vector<int> cand_start_, cand_nodes_;     // triangle -> candidate patch nodes (CSR), free or fixed
   std::vector<std::uint8_t> free_;
 };

@@ -119,6 +119,20 @@ double tet_quality(const TetMesh& mesh, int t) {
   return l_rms > 0 ? 6 * std::sqrt(2.0) * std::abs(tet_volume(mesh, t)) / (l_rms * l_rms * l_rms) : 0.0;
 }
 
+NodeTriangles node_triangles(const SurfaceMesh& surface, int node_count) {
+  NodeTriangles t;
+  t.start.assign(static_cast<std::size_t>(node_count) + 1, 0);
+  for (Eigen::Index f = 0; f < surface.tris.rows(); ++f)
+    for (int e = 0; e < 3; ++e) ++t.start[static_cast<std::size_t>(surface.tris(f, e)) + 1];
+  for (int n = 0; n < node_count; ++n) t.start[static_cast<std::size_t>(n) + 1] += t.start[static_cast<std::size_t>(n)];
+  t.list.resize(static_cast<std::size_t>(t.start.back()));
+  std::vector<int> fill(t.start.begin(), t.start.end() - 1);
+  for (Eigen::Index f = 0; f < surface.tris.rows(); ++f)
+    for (int e = 0; e < 3; ++e)
+      t.list[static_cast<std::size_t>(fill[static_cast<std::size_t>(surface.tris(f, e))]++)] = static_cast<int>(f);
+  return t;
+}
+
 SurfaceMesh boundary_surface(const TetMesh& mesh) {
   check_indices(mesh, "boundary_surface");
   const std::vector<Face> faces = sorted_faces(mesh.tets);

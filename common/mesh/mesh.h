@@ -52,6 +52,14 @@ void write_msh(const std::string& path, const TetMesh& mesh);
 /// Boundary faces (faces belonging to exactly one tet), oriented outward.
 SurfaceMesh boundary_surface(const TetMesh& mesh);
 
+/// The surface triangles around each mesh node (CSR over all `node_count` nodes, triangles in ascending order):
+/// the triangles of node n are list[start[n]] .. list[start[n + 1] - 1].
+struct NodeTriangles {
+  std::vector<int> start;  // node_count + 1
+  std::vector<int> list;   // 3 #F
+};
+NodeTriangles node_triangles(const SurfaceMesh& surface, int node_count);
+
 /// Signed volume of tet t (positive when nodes 1,2,3 are counter-clockwise seen from node 0... i.e.
 /// det[x1-x0, x2-x0, x3-x0] / 6 > 0).
 double tet_volume(const TetMesh& mesh, int t);
