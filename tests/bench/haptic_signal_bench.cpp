@@ -54,19 +54,6 @@ struct Out {
 // controller with the shipped scene's defaults): what the device is sent.
 constexpr const char* kStaged = "patch+stage";
 
-// A single-point tool at `tip`, its shaft vertical.
-ToolGeometry vertical_tool(const Eigen::Vector3d& tip) {
-  ToolGeometry g{};
-  g.direction = {0, 0, -1};
-  g.trocar = tip + Eigen::Vector3d(0, 0, 0.15);
-  g.tip = tip;
-  g.jaw_normal = {1, 0, 0};
-  g.jaw_tips = {tip, tip};
-  g.point_count = 1;
-  g.points[0] = tip;
-  return g;
-}
-
 struct Slab : test::Slab {
   Slab() : test::Slab(20, 20, 4, {0.2, 0.2, 0.04}) {}
   ToolSpec spec(ContactModel m) const {
@@ -81,7 +68,7 @@ struct Slab : test::Slab {
 
 ContactTick step(LiverContacts& c, const Eigen::Vector3d& tip, double jaw = 0.5) {
   ContactTick t;
-  c.step(vertical_tool(tip), jaw, t, kDt);
+  c.step(test::vertical_tool(tip), jaw, t, kDt);
   return t;
 }
 
@@ -141,7 +128,7 @@ void slab_steps(const Slab& slab, Out& out) {
       for (int k = 0; k <= 160; ++k) {
         const Eigen::Vector3d tip = start + Eigen::Vector3d(0, 0, std::max(-0.006, -1e-4 * k));
         ContactTick t;
-        const ToolGeometry g = vertical_tool(tip);
+        const ToolGeometry g = test::vertical_tool(tip);
         c.step(g, 0.5, t, kDt);
         stage.apply(g, kDt, t);
         held = t.device_force.norm();
@@ -191,7 +178,7 @@ void liver_runs(const std::string& cache, Out& out) {
     // Straight press at 0.1 m/s from 1 cm above to 45 mm deep and back: monotonic? energy returned?
     Pose5 p;
     p.jaw = 0.5;
-    double prev = 0, largest_drop = 0, energy = 0;
+    double prev = 0, largest_drop = 0, energy = 0, force_at_5mm = -1, first_contact_z = 0;
     Eigen::Vector3d tip_prev = Eigen::Vector3d::Zero();
     Eigen::Vector3d f_prev = Eigen::Vector3d::Zero();
     const int half = 600;  // 60 mm of travel each way at 0.1 mm per tick
@@ -204,11 +191,15 @@ void liver_runs(const std::string& cache, Out& out) {
       const Eigen::Vector3d f = t.force;  // on the tool, before the device clamp
       if (k > 0) energy += 0.5 * (f + f_prev).dot(g.tip - tip_prev);  // trapezoid: work on the tool
       if (k <= half) largest_drop = std::max(largest_drop, prev - f.norm());
+      if (k <= half && t.points_in_contact > 0 && first_contact_z == 0) first_contact_z = g.tip.z();
+      if (k <= half && force_at_5mm < 0 && first_contact_z != 0 && first_contact_z - g.tip.z() >= 0.005)
+        force_at_5mm = t.device_force.norm();
       prev = f.norm();
       tip_prev = g.tip;
       f_prev = f;
     }
     out.figure("liver straight press to 60 mm", m, "largest_force_drop_in", largest_drop, "N");
+    out.figure("liver straight press to 60 mm", m, "force_5mm_past_contact", force_at_5mm, "N");
     out.figure("liver press and return", m, "energy_returned", 1e3 * energy, "mJ");
     if (m == ContactModel::kPatch) {  // the same cycle as the device is sent it (after the force stage)
       LiverOrgan staged_organ(scene, cache, nullptr);

@@ -1,4 +1,4 @@
-// A bottom-fixed slab with its precomputed tensors, and the detrended ripple of a force signal: shared by the liver
+// A bottom-fixed slab with its precomputed tensors, a vertical single-point tool, and the detrended ripple of a force signal: shared by the liver
 // contact tests (tests/haptic_node/organs/) and haptic_signal_bench (tests/bench/).
 #pragma once
 #include <algorithm>
@@ -9,6 +9,7 @@
 #include "liver/fixed_set.h"
 #include "liver/precompute.h"
 #include "mesh/box_mesh.h"
+#include "tool/tool.h"
 
 namespace surgsim::test {
 
@@ -31,6 +32,19 @@ struct Slab {
     tensors = precompute_tensors(model, contacts, standard_row_sets(mesh, contacts), {});
   }
 };
+
+/// A single-point tool whose tip is at `tip`, its shaft vertical (trocar 15 cm above).
+inline ToolGeometry vertical_tool(const Eigen::Vector3d& tip) {
+  ToolGeometry g{};
+  g.direction = {0, 0, -1};
+  g.trocar = tip + Eigen::Vector3d(0, 0, 0.15);
+  g.tip = tip;
+  g.jaw_normal = {1, 0, 0};
+  g.jaw_tips = {tip, tip};
+  g.point_count = 1;
+  g.points[0] = tip;
+  return g;
+}
 
 /// Peak-to-peak of y after removing its least-squares line in s, over the mean of y (0 when the mean is not > 0).
 inline double detrended_ripple(const std::vector<double>& s, const std::vector<double>& y) {

@@ -38,18 +38,7 @@ class LiverPatchTest : public ::testing::Test {
     spec_.force_limit = 100.0;
     spec_.contact_capacity = 64;
   }
-  // A single-point tool whose tip is at `tip`, its shaft vertical.
-  static ToolGeometry at(const Eigen::Vector3d& tip) {
-    ToolGeometry g{};
-    g.direction = {0, 0, -1};
-    g.trocar = tip + Eigen::Vector3d(0, 0, 0.15);
-    g.tip = tip;
-    g.jaw_normal = {1, 0, 0};
-    g.jaw_tips = {tip, tip};
-    g.point_count = 1;
-    g.points[0] = tip;
-    return g;
-  }
+  static ToolGeometry at(const Eigen::Vector3d& tip) { return test::vertical_tool(tip); }
   static ContactTick step(LiverContacts& c, const Eigen::Vector3d& tip, double jaw = 0.5) {
     ContactTick t;
     c.step(at(tip), jaw, t, kDt);
