@@ -160,21 +160,7 @@ step live_intestine live_intestine
 # issue names (mass 0.05-0.2 kg, damping 0.1-1 N s/m, hand force 0.5-3 N): settling, oscillation, resting force.
 step haptic_signal "$bench/haptic_signal_bench" --out "$csv"
 device_loop() {
-  mkdir -p "$out/raw/device"
-  local corner m b f tag
-  for corner in "0.05 0.1 3" "0.05 1 0.5" "0.2 0.1 3" "0.2 1 0.5" "0.1 0.5 2"; do
-    read -r m b f <<<"$corner"
-    tag="m${m}_b${b}_f${f}"
-    echo "== mass $m kg, damping $b N s/m, hand $f N"
-    "$bin/haptic_node" --scene liver --input device --rate 1000 --duration 600 --quiet \
-      --stats "$out/raw/device/${tag}_haptic.json" &
-    local hpid=$!
-    "$bin/surgsim-device-sim" --physical --scene liver --mass "$m" --damping "$b" --hand-force "$f" --duration 6 \
-      --window 1 --settle-band 0.001 --rate 1000 --rt-priority 70 --wait-for-haptic 120 \
-      --out "$out/raw/device/${tag}_device.csv" --stats "$out/raw/device/${tag}_device.json" || true
-    kill -INT $hpid 2>/dev/null || true
-    wait $hpid || true
-  done
+  "$root/scripts/device_grid.sh" --out "$out/raw/device" --points "0.05,0.1,3 0.05,1,0.5 0.2,0.1,3 0.2,1,0.5 0.1,0.5,2"
 }
 step device_loop device_loop
 # Issue 7's round trips: one host (shared memory, UDP), two hosts over veth and through the user-space impairment.

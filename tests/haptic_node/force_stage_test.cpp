@@ -5,6 +5,8 @@
 // comes to rest with the hand's force at the corners of the mass / damping / hand-force grid.
 #include <gtest/gtest.h>
 
+#include <iostream>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -94,12 +96,14 @@ TEST(ForceStage, ObserverSeesTheDelayedWallAddEnergyAndTheControllerRemovesIt) {
   EXPECT_LT(off.energy_min, -0.01) << "the delayed wall is active: the observer must see energy going negative";
   EXPECT_GT(off.device_energy_max_late, off.device_energy_start) << "without the controller the oscillation grows";
   EXPECT_EQ(off.pc_ticks, 0u);
+  std::cout << "[delayed wall] observer energy min without the controller " << off.energy_min << " J\n";
 
   // With the controller: the observed energy never goes below zero (up to rounding), the controller did the work,
   // and what is left of the oscillation is a small fraction of the growth without it (the controller makes the port
   // passive; it does not add damping beyond the deficit, which is the coupling damper's job).
   const DelayedWallRun on = run_delayed_wall(spec(true, 0.0, 1000.0), 4, 6.0);
   EXPECT_GE(on.energy_min, -1e-9) << "the environment added energy through the controller";
+  std::cout << "[delayed wall] observer energy min with the controller " << on.energy_min << " J\n";
   EXPECT_GT(on.pc_ticks, 0u);
   EXPECT_GT(on.pc_dissipated, 0.0);
   EXPECT_LT(on.device_energy_max_late, 0.1 * off.device_energy_max_late);
