@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/union_find.h"
 #include "core/hash.h"
 
 namespace surgsim {
@@ -85,14 +86,6 @@ FixedSet fixed_set_from_region(const TetMesh& mesh, const FixedRegion& region) {
 }
 
 namespace {
-
-int find_root(std::vector<int>& parent, int i) {
-  while (parent[static_cast<std::size_t>(i)] != i) {
-    parent[static_cast<std::size_t>(i)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(i)])];
-    i = parent[static_cast<std::size_t>(i)];
-  }
-  return i;
-}
 
 std::string list_nodes(const std::vector<int>& nodes, std::size_t max_shown = 12) {
   std::ostringstream os;

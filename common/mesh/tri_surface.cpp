@@ -9,19 +9,9 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/union_find.h"
 
 namespace surgsim {
-namespace {
-
-int find_root(std::vector<int>& parent, int a) {
-  while (parent[static_cast<std::size_t>(a)] != a) {
-    parent[static_cast<std::size_t>(a)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(a)])];
-    a = parent[static_cast<std::size_t>(a)];
-  }
-  return a;
-}
-
-}  // namespace
 
 TriSurfaceTopology tri_surface_topology(const TriSurface& mesh) {
   TriSurfaceTopology t;
