@@ -21,8 +21,7 @@
 #include <optional>
 #include <vector>
 
-#include "Surgsim.h"
-#include "SurgsimPubSubTypes.h"
+#include "surgsim_types.h"
 #include "core/clock.h"
 #include "dds_support.h"
 #include "core/error.h"

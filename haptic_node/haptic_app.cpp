@@ -7,7 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
-#include "Surgsim.h"
+#include "surgsim_types.h"
 #include "core/clock.h"
 #include "core/error.h"
 #include "haptic_dds.h"

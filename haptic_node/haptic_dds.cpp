@@ -5,8 +5,7 @@
 #include <mutex>
 #include <thread>
 
-#include "Surgsim.h"
-#include "SurgsimPubSubTypes.h"
+#include "surgsim_types.h"
 #include "core/clock.h"
 #include "publisher.h"
 

@@ -18,7 +18,10 @@
 namespace surgsim {
 
 namespace msg {
+namespace v2 {
 class SceneInfo;
+}  // namespace v2
+using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 
 class HapticDds final : public TickSink {

@@ -37,9 +37,16 @@ struct ContactTick {
   int points_in_contact = 0;   // tool points (liver) or body elements (intestine) the tool touches
 };
 
+/// One instrument's input for a tick (issue 19: an organ is stepped with every instrument of the scene at once).
+struct InstrumentInput {
+  const ToolGeometry* tool = nullptr;  // the instrument's geometry, or null while its device input is lost
+  double jaw = 0;                      // rad, jaw opening
+};
+
 /// One contact entry of a ContactFrame (what the visual node needs to deform the organ).
 struct ContactEntry {
   int node = 0;
+  int instrument = 0;                                 // whose contact holds the node (the first, when shared)
   Eigen::Vector3d lambda = Eigen::Vector3d::Zero();   // N, contact force on the node
   Eigen::Vector3d u_tilde = Eigen::Vector3d::Zero();  // m, corrected constraint displacement
 };
@@ -64,12 +71,21 @@ class HapticOrgan {
   /// The model this organ implements ("liver", "intestine"): the stats key model_built.
   virtual const char* model_name() const = 0;
 
-  /// Run phase, noexcept, no allocation: one tick of dt (s). `tool` is the tool's geometry with jaw opening `jaw`
-  /// (rad), or null while the device input is lost (the organ drops its contacts; a dynamic body keeps moving).
-  virtual void step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept = 0;
+  /// Run phase, noexcept, no allocation: one tick of dt (s) for `count` instruments (the scene's tools, in order,
+  /// 1..kMaxInstruments). inputs[i].tool is instrument i's geometry, or null while its device input is lost (the
+  /// organ drops that instrument's contacts and gives it zero force; the others go on; a dynamic body keeps moving).
+  /// out[i] receives instrument i's force (from its own contacts, clamped to its own device limit) and flags.
+  virtual void step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept = 0;
+  /// One instrument: step(&{tool, jaw}, 1, dt, &out).
+  void step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept {
+    const InstrumentInput in{tool, jaw};
+    step(&in, 1, dt, &out);
+  }
 
-  /// Contacts the log and the stats count this tick (liver: contact nodes; intestine: elements the probe touches).
-  virtual int contacts(const ContactTick& out) const noexcept = 0;
+  /// Contacts the log and the stats count this tick, all instruments (liver: contact nodes; intestine: elements the
+  /// probes touch), and those of instrument i.
+  virtual int contacts() const noexcept = 0;
+  virtual int instrument_contacts(int i) const noexcept = 0;
   /// Contact entries the ContactFrame carries this tick (at most msg::kMaxContacts), and entry l of them.
   virtual int contact_entries() const noexcept { return 0; }
   virtual ContactEntry contact_entry(int l) const noexcept { return {}; }

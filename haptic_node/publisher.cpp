@@ -106,8 +106,7 @@ void Publisher::finish() {
   futex_wake(&futex_);
   if (thread_.joinable()) thread_.join();
   if (options_.inline_writes) {
-    sink_.write_force(inline_have_last_ ? inline_last_.seq + 1 : 0, monotonic_ns(), Eigen::Vector3d::Zero(), false,
-                      (inline_have_last_ ? inline_last_.flags : 0u) | kFlagHeld);
+    write_zero(inline_have_last_ ? &inline_last_ : nullptr);
     final_zero_.store(true, std::memory_order_relaxed);
   }
 }
@@ -130,8 +129,25 @@ bool Publisher::read(std::uint64_t i, TickRecord& out, double* points, std::uint
   return s.version.load(std::memory_order_relaxed) == v1;
 }
 
+void Publisher::write_zero(const TickRecord* last) noexcept {
+  // Every instrument of the last record (the first otherwise) gets a zero force.
+  const int n = last != nullptr ? std::clamp(last->instrument_count, 1, kMaxInstruments) : 1;
+  for (int i = 0; i < n; ++i) {
+    if (last != nullptr) {
+      sink_.write_force(i, last->seq + 1, monotonic_ns(), Eigen::Vector3d::Zero(), false,
+                        last->instruments[static_cast<std::size_t>(i)].flags | kFlagHeld);
+    } else {
+      sink_.write_force(i, 0, monotonic_ns(), Eigen::Vector3d::Zero(), false, kFlagHeld);
+    }
+  }
+}
+
 void Publisher::write_record_force(const TickRecord& r, std::uint64_t commit_ns) noexcept {
-  sink_.write_force(r.seq, monotonic_ns(), r.device_force, r.saturated, r.flags);
+  const int n = std::clamp(r.instrument_count, 1, kMaxInstruments);
+  for (int i = 0; i < n; ++i) {
+    const InstrumentRecord& ir = r.instruments[static_cast<std::size_t>(i)];
+    sink_.write_force(i, r.seq, monotonic_ns(), ir.device_force, ir.saturated, ir.flags);
+  }
   forces_written_.fetch_add(1, std::memory_order_relaxed);
   const std::uint64_t now = monotonic_ns();
   latency_us_.add(now > commit_ns ? static_cast<double>(now - commit_ns) * 1e-3 : 0.0);
@@ -225,11 +241,7 @@ void Publisher::run() noexcept {
     if (stop_.load(std::memory_order_acquire)) {
       if (head_.load(std::memory_order_acquire) != h) continue;  // committed just before the stop
       // The final zero: the device is released when the node exits.
-      if (have_last) {
-        sink_.write_force(last.seq + 1, monotonic_ns(), Eigen::Vector3d::Zero(), false, last.flags | kFlagHeld);
-      } else {
-        sink_.write_force(0, monotonic_ns(), Eigen::Vector3d::Zero(), false, kFlagHeld);
-      }
+      write_zero(have_last ? &last : nullptr);
       final_zero_.store(true, std::memory_order_relaxed);
       return;
     }
@@ -243,8 +255,12 @@ void Publisher::run() noexcept {
       if (now >= deadline) {
         const std::uint64_t m = (now - first_miss) / last.period_ns + 1;
         const double scale = overrun_scale(m, last.period_ns, options_.fade_ns);
-        sink_.write_force(last.seq, now, last.device_force * scale, last.saturated && scale == 1.0,
-                          last.flags | kFlagHeld);
+        const int n = std::clamp(last.instrument_count, 1, kMaxInstruments);
+        for (int i = 0; i < n; ++i) {
+          const InstrumentRecord& ir = last.instruments[static_cast<std::size_t>(i)];
+          sink_.write_force(i, last.seq, now, ir.device_force * scale, ir.saturated && scale == 1.0,
+                            ir.flags | kFlagHeld);
+        }
         hold_ticks_.fetch_add(1, std::memory_order_relaxed);
         missed_sent = m;
         if (scale == 0.0) {

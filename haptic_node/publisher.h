@@ -29,6 +29,7 @@
 //    written), then a final zero ForceFeedback (seq = last tick + 1, the last tick's flags | kFlagHeld).
 #pragma once
 #include <Eigen/Core>
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <thread>
@@ -45,6 +46,18 @@ namespace surgsim {
 /// haptic_dds.cpp); kept here so that the publisher does not depend on the generated types.
 inline constexpr std::uint32_t kFlagHeld = 32;
 
+/// One instrument's part of a tick record.
+struct InstrumentRecord {
+  Pose5 pose;
+  Eigen::Vector3d tip = Eigen::Vector3d::Zero();
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();         // N, on the instrument (ContactFrame)
+  Eigen::Vector3d device_force = Eigen::Vector3d::Zero();  // N, sent to its device (ForceFeedback)
+  Eigen::Vector3d direction = Eigen::Vector3d::Zero();
+  std::uint32_t flags = 0;
+  std::uint32_t contact_points = 0;
+  bool saturated = false;
+};
+
 /// One tick's outputs, everything the publisher writes. Trivially copyable (the seqlock copies it with memcpy);
 /// organ.points points into the ring's own storage.
 struct TickRecord {
@@ -52,14 +65,9 @@ struct TickRecord {
   double sim_time = 0;                  // s
   std::uint64_t due_ns = 0;             // monotonic time the tick was due (0: unpaced, no overrun watchdog)
   std::uint64_t period_ns = 0;          // loop period (0: unpaced)
-  Pose5 pose;
-  Eigen::Vector3d tip = Eigen::Vector3d::Zero();
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();         // N, on the tool (ContactFrame)
-  Eigen::Vector3d device_force = Eigen::Vector3d::Zero();  // N, sent to the device (ForceFeedback)
-  Eigen::Vector3d direction = Eigen::Vector3d::Zero();
-  std::uint32_t flags = 0;
-  std::uint32_t contact_points = 0;
-  bool saturated = false;
+  int instrument_count = 1;             // the scene's instruments, 1..kMaxInstruments
+  std::array<InstrumentRecord, kMaxInstruments> instruments{};
+  std::uint32_t flags = 0;              // the union of the instruments' flags
   bool last_tick = false;               // the run's last tick: no overrun watchdog after it
   OrganOutputs organ;
 };
@@ -68,8 +76,9 @@ struct TickRecord {
 class TickSink {
  public:
   virtual ~TickSink() = default;
-  virtual void write_force(std::uint64_t seq, std::uint64_t stamp_ns, const Eigen::Vector3d& force, bool saturated,
-                           std::uint32_t flags) noexcept = 0;
+  /// Instrument `instrument`'s ForceFeedback.
+  virtual void write_force(int instrument, std::uint64_t seq, std::uint64_t stamp_ns, const Eigen::Vector3d& force,
+                           bool saturated, std::uint32_t flags) noexcept = 0;
   /// ContactFrame, then the organ's own topics.
   virtual void write_frame(const TickRecord& record, std::uint64_t stamp_ns) noexcept = 0;
 };
@@ -138,6 +147,8 @@ class Publisher {
   /// Copies record i out of its slot into `out` (its points into `points`); false when it was overwritten.
   bool read(std::uint64_t i, TickRecord& out, double* points, std::uint64_t& commit_ns) const noexcept;
   void write_record_force(const TickRecord& r, std::uint64_t commit_ns) noexcept;
+  /// The final zero force of every instrument of `last` (null: instrument 0 only, nothing was handed over).
+  void write_zero(const TickRecord* last) noexcept;
   void wait_for(std::uint64_t seen_head, std::uint64_t deadline_ns) noexcept;
 
   TickSink& sink_;

@@ -26,7 +26,10 @@ namespace dds {
 class Participant;
 }
 namespace msg {
+namespace v2 {
 class ContactFrame;
+}  // namespace v2
+using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 class Renderer;
 

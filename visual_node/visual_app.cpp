@@ -6,7 +6,7 @@
 #include <optional>
 #include <thread>
 
-#include "Surgsim.h"
+#include "surgsim_types.h"
 #include "core/clock.h"
 #include "core/error.h"
 #include "dds_support.h"

@@ -16,7 +16,10 @@
 namespace surgsim {
 
 namespace msg {
+namespace v2 {
 class ContactFrame;
+}  // namespace v2
+using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 class FrameOutput;
 class OrganView;

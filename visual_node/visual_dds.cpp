@@ -2,7 +2,7 @@
 
 #include <mutex>
 
-#include "SurgsimPubSubTypes.h"
+#include "surgsim_types.h"
 #include "core/clock.h"
 #include "haptic_watch.h"
 

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <memory>
 
-#include "Surgsim.h"
+#include "surgsim_types.h"
 #include "core/stats.h"
 #include "dds_support.h"
 

@@ -423,9 +423,18 @@ NonlinearSpec read_nonlinear(const Reader& r, const Field& f) {
 
 ToolSpec read_tool(const Reader& r, const Field& f) {
   const Map m(r, f,
-              {"trocar", "axis", "shaft_length", "shaft_radius", "shaft_points", "shaft_spacing", "jaw_length",
+              {"name", "trocar", "axis", "shaft_length", "shaft_radius", "shaft_points", "shaft_spacing", "jaw_length",
                "force_limit", "contact_capacity", "contact_model", "tip_radius", "friction"});
   ToolSpec t;
+  if (m.has("name")) {
+    t.name = r.text(m.at("name"), "the instrument's name, e.g. grasper (letters, digits, '_' or '-')");
+    for (const char ch : t.name) {
+      if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '-')) {
+        r.fail(m.at("name").line, m.key("name"), "'" + t.name + "' has the character '" + std::string(1, ch) + "'",
+               "use letters, digits, '_' or '-' (the name heads trajectory columns and stats keys)");
+      }
+    }
+  }
   if (m.has("trocar")) t.trocar = r.vec3(m.at("trocar"), "the fulcrum in world coordinates, m");
   if (m.has("axis")) t.axis = r.direction(m.at("axis"), "non-zero shaft direction into the body at pitch = yaw = 0");
   if (m.has("shaft_length")) t.shaft_length = r.number(m.at("shaft_length"), positive(), "length in m, > 0");
@@ -649,18 +658,24 @@ std::uint64_t Scene::hash() const {
     h.value<std::int32_t>(nonlinear.degree);
   }
 
-  hash_vec(h, tool.trocar);
-  hash_vec(h, tool.axis);
-  hash_double(h, tool.shaft_length);
-  hash_double(h, tool.shaft_radius);
-  h.value<std::int32_t>(tool.shaft_points);
-  hash_double(h, tool.shaft_spacing);
-  hash_double(h, tool.jaw_length);
-  hash_double(h, tool.force_limit);
-  h.value<std::int32_t>(tool.contact_capacity);
-  h.value<std::int32_t>(static_cast<std::int32_t>(tool.contact_model));
-  hash_double(h, tool.tip_radius);
-  hash_double(h, tool.friction);
+  // Every instrument, in order (a second instrument changes the hash; one instrument hashes as before issue 19,
+  // its name excepted).
+  for (std::size_t i = 0; i < tools.size(); ++i) {
+    const ToolSpec& tool = tools[i];
+    if (i > 0) h.str(tool.name);
+    hash_vec(h, tool.trocar);
+    hash_vec(h, tool.axis);
+    hash_double(h, tool.shaft_length);
+    hash_double(h, tool.shaft_radius);
+    h.value<std::int32_t>(tool.shaft_points);
+    hash_double(h, tool.shaft_spacing);
+    hash_double(h, tool.jaw_length);
+    hash_double(h, tool.force_limit);
+    h.value<std::int32_t>(tool.contact_capacity);
+    h.value<std::int32_t>(static_cast<std::int32_t>(tool.contact_model));
+    hash_double(h, tool.tip_radius);
+    hash_double(h, tool.friction);
+  }
 
   hash_double(h, haptic.rate_hz);
   h.value<std::uint8_t>(haptic.passivity);
@@ -720,8 +735,8 @@ Scene load_scene(const std::string& path) {
   }
 
   const Map top(r, {root, "", 1},
-                {"name", "model", "mesh", "material", "fixed", "nonlinear", "tool", "haptic", "visual", "intestine",
-                 "trajectory"});
+                {"name", "model", "mesh", "material", "fixed", "nonlinear", "tool", "tools", "haptic", "visual",
+                 "intestine", "trajectory"});
   Scene s;
   s.file = abs.string();
   s.dir = abs.parent_path().string();
@@ -738,7 +753,41 @@ Scene load_scene(const std::string& path) {
   if (top.has("material")) s.material = read_material(r, top.at("material"));
   if (top.has("fixed")) s.fixed = read_fixed(r, top.at("fixed"));
   if (top.has("nonlinear")) s.nonlinear = read_nonlinear(r, top.at("nonlinear"));
-  if (top.has("tool")) s.tool = read_tool(r, top.at("tool"));
+  if (top.has("tool") && top.has("tools")) {
+    r.fail(top.at("tools").line, "tools", "given together with 'tool' (line " + std::to_string(top.at("tool").line) + ")",
+           "keep one: 'tool:' for one instrument, or 'tools:' listing each instrument with its name");
+  }
+  if (top.has("tool")) s.tools = {read_tool(r, top.at("tool"))};
+  if (top.has("tools")) {
+    const Field& tf = top.at("tools");
+    const std::string fix = "a list of 1.." + std::to_string(kMaxInstruments) +
+                            " instruments, each a map like 'tool:' with its own name, e.g. - {name: grasper, trocar: "
+                            "[0, 0, 0.2]}";
+    if (!tf.node.IsSequence()) r.fail(tf.line, tf.key, "expected a list, got " + Reader::kind(tf.node), fix);
+    if (tf.node.size() < 1 || tf.node.size() > static_cast<std::size_t>(kMaxInstruments)) {
+      r.fail(tf.line, tf.key, "lists " + std::to_string(tf.node.size()) + " instruments", fix);
+    }
+    s.tools.clear();
+    for (std::size_t i = 0; i < tf.node.size(); ++i) {
+      const YAML::Node e = tf.node[i];
+      const Field ef{e, tf.key + "[" + std::to_string(i) + "]", line_of(e, tf.line)};
+      const Map em(r, ef, {"name", "trocar", "axis", "shaft_length", "shaft_radius", "shaft_points", "shaft_spacing",
+                           "jaw_length", "force_limit", "contact_capacity", "contact_model", "tip_radius", "friction"});
+      if (!em.has("name")) r.fail(ef.line, ef.key + ".name", "missing", "every instrument of 'tools:' needs a name");
+      s.tools.push_back(read_tool(r, ef));
+      for (std::size_t j = 0; j < i; ++j) {
+        if (s.tools[j].name == s.tools[i].name) {
+          r.fail(em.at("name").line, ef.key + ".name", "'" + s.tools[i].name + "' is also instrument " + std::to_string(j),
+                 "give each instrument its own name");
+        }
+      }
+      if (s.tools[i].contact_model != s.tools[0].contact_model) {
+        r.fail(em.has("contact_model") ? em.at("contact_model").line : ef.line, ef.key + ".contact_model",
+               "differs from instrument 0's: all contacts are solved together with one model",
+               "give every instrument the same contact_model");
+      }
+    }
+  }
   if (top.has("haptic")) s.haptic = read_haptic(r, top.at("haptic"));
   if (top.has("visual")) s.visual = read_visual(r, top.at("visual"));
   if (top.has("intestine")) {
@@ -748,9 +797,9 @@ Scene load_scene(const std::string& path) {
     }
     s.intestine = read_intestine(r, top.at("intestine"));
   }
-  s.intestine.params.probe_force_limit = s.tool.force_limit;  // the device clamp is the tool's
+  s.intestine.params.probe_force_limit = s.tools[0].force_limit;  // the device clamp is the tool's (each probe its own)
   if (top.has("trajectory"))
-    s.trajectory = r.file(top.at("trajectory"), "a tool trajectory CSV (surgsim-trajectory v1)");
+    s.trajectory = r.file(top.at("trajectory"), "a tool trajectory CSV (surgsim-trajectory v1, or v2 with one column group per instrument)");
   return s;
 }
 

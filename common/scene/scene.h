@@ -51,7 +51,9 @@ struct Scene {
   Material material;
   FixedRegion fixed;
   NonlinearSpec nonlinear;
-  ToolSpec tool;
+  /// The instruments (issue 19): 1..kMaxInstruments, from the `tools:` list or the single `tool:` key (one
+  /// instrument named "tool"). Never empty. Instrument i is ToolCommand/ForceFeedback instrument i.
+  std::vector<ToolSpec> tools = {ToolSpec{}};
   HapticSpec haptic;
   VisualSpec visual;
   IntestineSpec intestine;  // read for model "intestine" only

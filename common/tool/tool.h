@@ -2,6 +2,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <array>
+#include <string>
 
 #include "tool/trajectory.h"
 
@@ -17,6 +18,7 @@ enum class ContactModel : int { kPatch = 0, kTriangle = 1 };
 
 /// Laparoscopic tool through a trocar (5 DOF: pitch, yaw, insertion, roll, jaw).
 struct ToolSpec {
+  std::string name = "tool";    // unique in the scene; names the instrument in stats, logs and trajectories
   Eigen::Vector3d trocar = Eigen::Vector3d(0, 0, 0.2);   // m, fulcrum in world coordinates
   Eigen::Vector3d axis = Eigen::Vector3d(0, 0, -1);      // unit shaft direction (into the body) at pitch = yaw = 0
   double shaft_length = 0.35;    // m

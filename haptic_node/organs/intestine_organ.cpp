@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "SurgsimPubSubTypes.h"
+#include "surgsim_types.h"
 #include "core/clock.h"
 #include "core/error.h"
 #include "publisher.h"

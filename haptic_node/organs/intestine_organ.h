@@ -11,7 +11,7 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 
-#include "Surgsim.h"
+#include "surgsim_types.h"
 #include "dds_support.h"
 #include "intestine/intestine_model.h"
 #include "liver_contacts.h"

@@ -173,7 +173,7 @@ void slab_steps(const Slab& slab, Out& out) {
 void liver_runs(const std::string& cache, Out& out) {
   for (ContactModel m : {ContactModel::kTriangle, ContactModel::kPatch}) {
     Scene scene = load_scene(resolve_scene_path("liver"));
-    scene.tool.contact_model = m;
+    scene.tools[0].contact_model = m;
     LiverOrgan organ(scene, cache, nullptr);
     // Straight press at 0.1 m/s from 1 cm above to 45 mm deep and back: monotonic? energy returned?
     Pose5 p;
@@ -185,7 +185,7 @@ void liver_runs(const std::string& cache, Out& out) {
     for (int k = 0; k <= 2 * half; ++k) {
       const int j = k <= half ? k : 2 * half - k;
       p.insertion = 0.15 + 1e-4 * j;
-      const ToolGeometry g = tool_geometry(scene.tool, p);
+      const ToolGeometry g = tool_geometry(scene.tools[0], p);
       ContactTick t;
       organ.step(&g, p.jaw, kDt, t);
       const Eigen::Vector3d f = t.force;  // on the tool, before the device clamp
@@ -203,13 +203,13 @@ void liver_runs(const std::string& cache, Out& out) {
     out.figure("liver press and return", m, "energy_returned", 1e3 * energy, "mJ");
     if (m == ContactModel::kPatch) {  // the same cycle as the device is sent it (after the force stage)
       LiverOrgan staged_organ(scene, cache, nullptr);
-      ForceStage stage(scene.haptic, scene.tool.force_limit);
+      ForceStage stage(scene.haptic, scene.tools[0].force_limit);
       double e = 0;
       Eigen::Vector3d tp = Eigen::Vector3d::Zero(), fp = Eigen::Vector3d::Zero();
       for (int k = 0; k <= 2 * half; ++k) {
         const int j = k <= half ? k : 2 * half - k;
         p.insertion = 0.15 + 1e-4 * j;
-        const ToolGeometry g = tool_geometry(scene.tool, p);
+        const ToolGeometry g = tool_geometry(scene.tools[0], p);
         ContactTick t;
         staged_organ.step(&g, p.jaw, kDt, t);
         stage.apply(g, kDt, t);
@@ -226,7 +226,7 @@ void liver_runs(const std::string& cache, Out& out) {
     const int ticks = static_cast<int>(traj.duration() / kDt);
     for (int k = 0; k <= ticks; ++k) {
       const Pose5 q = traj.at(k * kDt);
-      const ToolGeometry g = tool_geometry(scene.tool, q);
+      const ToolGeometry g = tool_geometry(scene.tools[0], q);
       ContactTick t;
       fresh.step(&g, q.jaw, kDt, t);
       const double fn = t.direction.norm() > 0 ? -t.force.dot(t.direction) : t.force.norm();

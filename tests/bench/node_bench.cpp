@@ -125,14 +125,14 @@ int main(int argc, char** argv) {
       std::printf("%10s | %8s %8s %8s\n", "size", "p50", "p99", "max");
       for (auto [w, h] : {std::pair{640, 480}, std::pair{1280, 720}}) {
         auto renderer = make_renderer("osmesa", w, h);
-        ToolGeometry tool = tool_geometry(scene.tool, Pose5{0, 0, 0.17, 0, 0.5});
+        ToolGeometry tool = tool_geometry(scene.tools[0], Pose5{0, 0, 0.17, 0, 0.5});
         SampleRecorder rr(200);
         for (int f = 0; f < 120; ++f) {
           deformer.apply(sol.nodes.data(), sol.lambda.data(), sol.count);
           const std::uint64_t t0 = monotonic_ns();
           renderer->begin_frame(scene.visual.camera);
           renderer->draw_surface(deformer.positions(), deformer.tris(), kLiverRgb);
-          renderer->draw_tool(tool, static_cast<float>(scene.tool.shaft_radius));
+          renderer->draw_tool(tool, static_cast<float>(scene.tools[0].shaft_radius));
           renderer->end_frame();
           if (f >= 20) rr.add(static_cast<double>(monotonic_ns() - t0) * 1e-6);
         }

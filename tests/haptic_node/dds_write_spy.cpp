@@ -7,7 +7,7 @@
 #include <fastdds/dds/topic/Topic.hpp>
 #include <mutex>
 
-#include "Surgsim.h"
+#include "surgsim_types.h"
 #include "dds_support.h"
 
 namespace surgsim::test {

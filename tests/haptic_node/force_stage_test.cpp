@@ -231,11 +231,11 @@ LiverRun run_liver(const Scene& scene, double m, double b, double hand, double s
   const double dt = 1e-3;
   const auto organ = make_haptic_organ(scene, SURGSIM_TEST_CACHE_DIR, static_cast<std::uint64_t>(seconds / dt) + 2,
                                        nullptr);
-  ForceStage stage(scene.haptic, scene.tool.force_limit);
+  ForceStage stage(scene.haptic, scene.tools[0].force_limit);
   Pose5 pose;
   pose.insertion = 0.155;
   pose.jaw = 0.5;
-  const Eigen::Vector3d axis = tool_geometry(scene.tool, pose).direction;
+  const Eigen::Vector3d axis = tool_geometry(scene.tools[0], pose).direction;
   double x = pose.insertion, v = 0;
   Eigen::Vector3d sent = Eigen::Vector3d::Zero();
   const int steps = static_cast<int>(std::lround(seconds / dt));
@@ -245,7 +245,7 @@ LiverRun run_liver(const Scene& scene, double m, double b, double hand, double s
     v += (hand - b * v + sent.dot(axis)) / m * dt;
     x += v * dt;
     pose.insertion = x;
-    const ToolGeometry tool = tool_geometry(scene.tool, pose);
+    const ToolGeometry tool = tool_geometry(scene.tools[0], pose);
     ContactTick out;
     organ->step(&tool, pose.jaw, dt, out);
     stage.apply(tool, dt, out);

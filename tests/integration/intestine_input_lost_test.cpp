@@ -14,8 +14,7 @@
 #include <sstream>
 #include <vector>
 
-#include "Surgsim.h"
-#include "SurgsimPubSubTypes.h"
+#include "surgsim_types.h"
 #include "dds_support.h"
 #include "force_log.h"
 #include "node_test.h"

@@ -1,6 +1,7 @@
 #!/usr/bin/python3
-"""Every struct of idl/Surgsim.idl is annotated @final (the wire format is XCDR1, final, keyless: another vendor's
-generator must not guess its extensibility), and none is keyed. Usage: check_idl_final.py IDL_FILE"""
+"""Every struct of idl/Surgsim.idl is annotated @final (the wire format is XCDR1, final: another vendor's generator
+must not guess its extensibility), and the only keys are the `instrument` members of the per-instrument streams
+(ToolCommand, ForceFeedback: issue 19, wire version v2). Usage: check_idl_final.py IDL_FILE"""
 import re
 import sys
 
@@ -20,8 +21,27 @@ for i, line in enumerate(lines):
     annotations = lines[j].strip() if j >= 0 else ''
     if '@final' not in annotations:
         bad.append(f'{path}:{i + 1}: struct {m.group(1)} is not annotated @final (write "@final" on the line above)')
+KEYED = {'ToolCommand': 'instrument', 'ForceFeedback': 'instrument'}
+current = None
+keys = {}
 for i, line in enumerate(lines):
-    if '@key' in line.split('//', 1)[0]:
-        bad.append(f'{path}:{i + 1}: @key: the surgsim types are keyless')
-print('\n'.join(bad) if bad else f'check_idl_final: {structs} structs, all @final and keyless')
+    m = re.match(r'^\s*struct\s+(\w+)', line)
+    if m:
+        current = m.group(1)
+    code = line.split('//', 1)[0]
+    if '@key' in code:
+        k = re.search(r'@key\s+[\w\s]+?\s(\w+)\s*;', code)
+        member = k.group(1) if k else '?'
+        if KEYED.get(current) != member:
+            bad.append(f'{path}:{i + 1}: @key {member} in struct {current}: only the instrument of ToolCommand and '
+                       'ForceFeedback is a key (a new key changes the wire format: make a new module version)')
+        keys[current] = member
+for struct, member in KEYED.items():
+    if keys.get(struct) != member:
+        bad.append(f'{path}: struct {struct} must be keyed by `@key unsigned long {member};` (one instance per '
+                   'instrument)')
+if not re.search(r'module\s+v2\b', text):
+    bad.append(f'{path}: the types must be in module surgsim::msg::v2 (the wire version of issue 19)')
+print('\n'.join(bad) if bad else f'check_idl_final: {structs} structs, all @final; keyed by instrument: '
+      + ', '.join(sorted(KEYED)))
 sys.exit(1 if bad or structs == 0 else 0)

@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "Surgsim.h"
+#include "surgsim_types.h"
 #include "views/intestine_view.h"
 #include "views/liver_view.h"
 #include "render/renderer.h"

@@ -5,8 +5,7 @@
 #include <iostream>
 #include <mutex>
 
-#include "Surgsim.h"
-#include "SurgsimPubSubTypes.h"
+#include "surgsim_types.h"
 #include "core/clock.h"
 #include "render/renderer.h"
 

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <nlohmann/json.hpp>
 
-#include "Surgsim.h"
+#include "surgsim_types.h"
 #include "core/clock.h"
 #include "core/error.h"
 #include "liver/liver_setup.h"

@@ -170,7 +170,7 @@ TEST(Segmentation, WrittenSceneLoadsAndSolvesInTheLiverSetting) {
   const ElasticModel model = build_elastic_model(mesh, scene.material, fixed, scene.file);
   Eigen::Index top = 0;
   mesh.nodes.col(2).maxCoeff(&top);
-  EXPECT_NEAR(scene.tool.trocar.x(), mesh.nodes(top, 0), 1e-3);
+  EXPECT_NEAR(scene.tools[0].trocar.x(), mesh.nodes(top, 0), 1e-3);
   StaticSolver solver(model);
   ImposedDisplacement push;
   push.node = static_cast<int>(top);
