@@ -76,7 +76,9 @@ void ForceStage::apply(const ToolGeometry* tool, double dt, ContactTick& out) no
   out.device_force = f_pc;
 }
 
-void ForceStage::add_stats(nlohmann::json& stats) const {
+void ForceStage::add_stats(nlohmann::json& stats) const { stats["force_stage"] = to_json(); }
+
+nlohmann::json ForceStage::to_json() const {
   nlohmann::json j;
   j["passivity"] = passivity_;
   j["coupling_damping_ns_per_m"] = coupling_damping_;
@@ -88,7 +90,7 @@ void ForceStage::add_stats(nlohmann::json& stats) const {
   j["energy_dissipated_coupling_j"] = coupling_dissipated_;
   j["pc_ticks"] = pc_ticks_;
   j["clamped_ticks"] = clamped_ticks_;
-  stats["force_stage"] = j;
+  return j;
 }
 
 }  // namespace surgsim

@@ -57,6 +57,8 @@ class ForceStage {
 
   /// Shutdown: the "force_stage" entry of the stats JSON.
   void add_stats(nlohmann::json& stats) const;
+  /// Shutdown: that entry's value.
+  nlohmann::json to_json() const;
 
  private:
   bool passivity_ = true;

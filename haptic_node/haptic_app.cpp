@@ -34,12 +34,34 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
     throw_error("--input '", options_.input, "' is not an input (use replay or device)");
   }
   live_ = options_.input == "device";
+  instrument_count_ = static_cast<int>(scene_.tools.size());
   std::string replay;
   if (!live_) {
     replay = options_.replay.empty() ? scene_.trajectory : options_.replay;
     if (replay.empty()) throw_error(scene_.file, ": no trajectory to replay (give --replay FILE or set 'trajectory')");
-    trajectory_ = Trajectory::load(replay);
-    held_pose_ = trajectory_.at(0);
+    trajectory_ = MultiTrajectory::load(replay);
+    // Each instrument replays the column group of its name (a one-instrument file drives a one-instrument scene
+    // whatever its name).
+    std::string names;
+    for (const ToolSpec& t : scene_.tools) names += (names.empty() ? "" : ", ") + t.name;
+    std::string file_names;
+    for (const std::string& n : trajectory_.names()) file_names += (file_names.empty() ? "" : ", ") + n;
+    for (int i = 0; i < instrument_count_; ++i) {
+      Instrument& in = instruments_[static_cast<std::size_t>(i)];
+      in.track = instrument_count_ == 1 && trajectory_.instruments() == 1
+                     ? 0 : trajectory_.find(scene_.tools[static_cast<std::size_t>(i)].name);
+      if (in.track < 0) {
+        throw_error(replay, ": has no instrument '", scene_.tools[static_cast<std::size_t>(i)].name, "' (it has ",
+                    file_names, "; the scene ", scene_.file, " has ", names,
+                    "): record one with --record, or give a trajectory with a column group per instrument");
+      }
+      Pose5 first;
+      if (trajectory_.at(in.track, 0, first)) in.held_pose = first;
+    }
+    if (trajectory_.instruments() > instrument_count_) {
+      throw_error(replay, ": has ", trajectory_.instruments(), " instruments (", file_names, ") but the scene ",
+                  scene_.file, " has ", instrument_count_, " (", names, "): give the scene with every instrument");
+    }
   }
   double duration = options_.duration;
   if (duration < 0) duration = live_ ? 3600.0 : trajectory_.duration() + 0.5;
@@ -50,20 +72,34 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   // its mass-spring body and nothing of the liver) ---
   organ_ = make_haptic_organ(scene_, cache, total_ticks_, progress);
   scene_hash_ = scene_.hash() ^ (organ_->mesh_hash() * 0x9E3779B97F4A7C15ull);
-  force_stage_ = ForceStage(scene_.haptic, scene_.tool.force_limit);
+  for (int i = 0; i < instrument_count_; ++i) {
+    instruments_[static_cast<std::size_t>(i)].force_stage =
+        ForceStage(scene_.haptic, scene_.tools[static_cast<std::size_t>(i)].force_limit);
+  }
 
   // --- init: outputs ---
   if (!options_.record.empty()) {
-    recorder_.open(options_.record);
-    record_writer_ = std::make_unique<AsyncLineWriter>(recorder_.file(), options_.speed <= 0);
+    std::vector<std::string> names;
+    for (const ToolSpec& t : scene_.tools) names.push_back(t.name);
+    recorder_.open(options_.record, names);  // v1 for one instrument named "tool", else v2
+    record_writer_ = std::make_unique<AsyncLineWriter>(recorder_.file(), options_.speed <= 0, std::size_t{1} << 14,
+                                                       TrajectoryRecorder::kMultiLineBytes);
   }
   if (!options_.log.empty()) {
     log_ = std::fopen(options_.log.c_str(), "w");
     if (log_ == nullptr) throw_error(options_.log, ": cannot create the --log file");
     std::setvbuf(log_, nullptr, _IOFBF, 1 << 16);
-    std::fprintf(log_, "tick,t,fx,fy,fz,contacts\n");
+    // tick, t, instrument 0's force sent, all contacts; with several instruments each one's force and contacts follow.
+    std::fprintf(log_, "tick,t,fx,fy,fz,contacts");
+    if (instrument_count_ > 1) {
+      for (const ToolSpec& tool : scene_.tools) {
+        const char* n = tool.name.c_str();
+        std::fprintf(log_, ",%s.fx,%s.fy,%s.fz,%s.contacts", n, n, n, n);
+      }
+    }
+    std::fprintf(log_, "\n");
     std::fflush(log_);
-    log_writer_ = std::make_unique<AsyncLineWriter>(log_, options_.speed <= 0);
+    log_writer_ = std::make_unique<AsyncLineWriter>(log_, options_.speed <= 0, std::size_t{1} << 14, 1024);
   }
   tick_us_ = SampleRecorder(total_ticks_ + 16);
   wake_late_us_ = SampleRecorder(total_ticks_ + 16);
@@ -81,7 +117,7 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   dopt.profiles_file = options_.dds_profiles.empty() ? config_dir() + "/dds/profiles.xml" : options_.dds_profiles;
   dopt.participant_profile = options_.dds_participant;
   dopt.name = "surgsim_haptic";
-  dds_ = std::make_unique<HapticDds>(dopt, live_, scene_hash_);
+  dds_ = std::make_unique<HapticDds>(dopt, live_, scene_hash_, instrument_count_);
   if (!options_.quiet)
     std::cerr << "haptic_node: DDS " << dds_->profile() << ": " << dds_->description() << "; DDS threads "
               << dds_threads_note_ << "\n";
@@ -108,6 +144,7 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
   info.tensor_hash(organ_->tensor_hash());
   info.node_count(organ_->node_count());
   info.surface_node_count(organ_->surface_node_count());
+  info.instrument_count(static_cast<std::uint32_t>(instrument_count_));
   info.haptic_rate_hz(rate_hz_);
   info.visual_rate_hz(scene_.visual.rate_hz);
   info.start_stamp_ns(monotonic_ns());
@@ -115,7 +152,8 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
 
   if (!options_.quiet) {
     std::cerr << "haptic_node: scene '" << scene_.name << "' (" << scene_.file << "), " << organ_->describe()
-              << rate_hz_ << " Hz for " << total_ticks_ << " ticks; "
+              << instrument_count_ << (instrument_count_ == 1 ? " instrument, " : " instruments, ") << rate_hz_
+              << " Hz for " << total_ticks_ << " ticks; "
               << (live_ ? std::string("live input from the device topic") : "replaying " + replay) << "\n";
   }
 }
@@ -128,87 +166,128 @@ HapticApp::~HapticApp() {
   if (log_ != nullptr) std::fclose(log_);
 }
 
-bool HapticApp::input_pose(double t, Pose5& pose) {
+bool HapticApp::input_pose(int i, double t, Pose5& pose) {
+  Instrument& in = instruments_[static_cast<std::size_t>(i)];
   if (!live_) {
-    pose = trajectory_.at(t);
-    return true;
+    if (trajectory_.at(in.track, t, pose)) return true;
+    pose = in.held_pose;  // recorded lost: held, as live
+    return false;
   }
-  dds_->latest_command(last_command_, last_command_ns_, commands_received_);
-  const bool fresh = commands_received_ > 0 &&
-                     static_cast<double>(monotonic_ns() - last_command_ns_) * 1e-9 <= options_.input_timeout;
-  pose = fresh ? last_command_ : held_pose_;
+  dds_->latest_command(i, in.last_command, in.last_command_ns, in.commands_received);
+  const bool fresh = in.commands_received > 0 &&
+                     static_cast<double>(monotonic_ns() - in.last_command_ns) * 1e-9 <= options_.input_timeout;
+  pose = fresh ? in.last_command : in.held_pose;
   return fresh;
 }
 
 void HapticApp::tick(std::uint64_t k) {
   const double t = static_cast<double>(k) * dt_;
+  const int n = instrument_count_;
 
-  // --- input: a lost device drops every contact, zeroes the force and holds the tool where it was ---
-  Pose5 pose;
-  const bool input_ok = input_pose(t, pose);
-  ContactTick result;
-  std::uint32_t flags = 0;
-  const ToolGeometry tool = tool_geometry(scene_.tool, pose);
-  if (input_ok) {
-    held_pose_ = pose;
-    if (record_writer_ != nullptr) {
-      if (char* line = record_writer_->begin_line()) {
-        const int n = recorder_.format(line, record_writer_->slot_bytes(), t, pose);
-        if (n > 0) record_writer_->commit_line(static_cast<std::size_t>(n));
-      }
+  // --- input, per instrument: a lost one drops its contacts, gets zero force and is held where it was ---
+  std::array<Pose5, kMaxInstruments> pose;
+  std::array<bool, kMaxInstruments> input_ok{};
+  std::array<ToolGeometry, kMaxInstruments> tool;
+  std::array<InstrumentInput, kMaxInstruments> inputs;
+  bool any_lost = false;
+  for (int i = 0; i < n; ++i) {
+    const auto si = static_cast<std::size_t>(i);
+    input_ok[si] = input_pose(i, t, pose[si]);
+    tool[si] = tool_geometry(scene_.tools[si], pose[si]);
+    inputs[si] = InstrumentInput{input_ok[si] ? &tool[si] : nullptr, pose[si].jaw};
+    if (input_ok[si]) {
+      instruments_[si].held_pose = pose[si];
+    } else {
+      any_lost = true;
     }
-    organ_->step(&tool, pose.jaw, dt_, result);
-  } else {
-    ++input_lost_ticks_;
-    flags |= msg::kFlagInputLost;
-    organ_->step(nullptr, pose.jaw, dt_, result);  // contacts dropped; a dynamic body keeps moving without the tool
   }
-  force_stage_.apply(input_ok ? &tool : nullptr, dt_, result);  // coupling damper + passivity control (force_stage.h)
-  if (result.nonfinite) {
-    ++nonfinite_rejected_;
-    flags |= msg::kFlagNonFiniteHeld;
+  if (record_writer_ != nullptr && (n > 1 || input_ok[0])) {  // one instrument: its lost ticks are not recorded
+    if (char* line = record_writer_->begin_line()) {
+      const int len = recorder_.format_multi(line, record_writer_->slot_bytes(), t, pose.data(), input_ok.data(), n);
+      if (len > 0) record_writer_->commit_line(static_cast<std::size_t>(len));
+    }
   }
-  if (result.over_capacity) {
-    ++over_capacity_events_;
-    flags |= msg::kFlagOverCapacity;
-  }
-  if (result.saturated) {
-    ++saturated_ticks_;
-    flags |= msg::kFlagSaturated;
-  }
-  if (result.grasp) flags |= msg::kFlagGrasp;
+  if (any_lost) ++input_lost_ticks_;
 
-  // --- hand-off: the publisher thread writes force (device), contact frame (visual node), the organ's own topics ---
+  // --- every instrument's contacts in one solve (the organ couples them), then each one's force stage ---
+  std::array<ContactTick, kMaxInstruments> result;
+  organ_->step(inputs.data(), n, dt_, result.data());
+
+  // --- hand-off: the publisher thread writes each force (devices), the contact frame (visual node), organ topics ---
   TickRecord& out = publisher_->begin();
   out.seq = k;
   out.sim_time = t;
   out.due_ns = tick_due_ns_;
   out.period_ns = period_ns_;
-  out.pose = pose;
-  out.tip = tool.tip;
-  out.force = result.force;
-  out.device_force = result.device_force;
-  out.direction = result.direction;
-  out.flags = flags;
-  out.contact_points = static_cast<std::uint32_t>(result.points_in_contact);
-  out.saturated = result.saturated;
+  out.instrument_count = n;
+  out.flags = 0;
   out.last_tick = k + 1 >= total_ticks_;
+  for (int i = 0; i < n; ++i) {
+    const auto si = static_cast<std::size_t>(i);
+    Instrument& in = instruments_[si];
+    ContactTick& r = result[si];
+    in.force_stage.apply(input_ok[si] ? &tool[si] : nullptr, dt_, r);  // coupling damper + passivity (force_stage.h)
+    std::uint32_t flags = 0;
+    if (!input_ok[si]) {
+      ++in.input_lost_ticks;
+      flags |= msg::kFlagInputLost;
+    }
+    if (r.nonfinite) {
+      ++nonfinite_rejected_;
+      ++in.nonfinite_rejected;
+      flags |= msg::kFlagNonFiniteHeld;
+    }
+    if (r.over_capacity) {
+      ++over_capacity_events_;
+      ++in.over_capacity_events;
+      flags |= msg::kFlagOverCapacity;
+    }
+    if (r.saturated) {
+      ++saturated_ticks_;
+      ++in.saturated_ticks;
+      flags |= msg::kFlagSaturated;
+    }
+    if (r.grasp) flags |= msg::kFlagGrasp;
+    InstrumentRecord& ir = out.instruments[si];
+    ir.pose = pose[si];
+    ir.tip = tool[si].tip;
+    ir.force = r.force;
+    ir.device_force = r.device_force;
+    ir.direction = r.direction;
+    ir.flags = flags;
+    ir.contact_points = static_cast<std::uint32_t>(r.points_in_contact);
+    ir.saturated = r.saturated;
+    out.flags |= flags;
+    const int c = organ_->instrument_contacts(i);
+    in.contacts_max = std::max(in.contacts_max, c);
+    if (c > 0) ++in.contact_ticks;
+    in.force_max_n = std::max(in.force_max_n, r.device_force.norm());
+  }
   organ_->fill_outputs(out.organ);
   publisher_->commit();
 
   // --- log and statistics ---
-  const Eigen::Vector3d& f = result.device_force;
-  const int contacts = organ_->contacts(result);
+  const int contacts = organ_->contacts();
   if (log_writer_ != nullptr) {
     if (char* line = log_writer_->begin_line()) {
-      const int n = std::snprintf(line, log_writer_->slot_bytes(), "%llu,%.9f,%.17g,%.17g,%.17g,%d\n",
-                                  static_cast<unsigned long long>(k), t, f.x(), f.y(), f.z(), contacts);
-      if (n > 0) log_writer_->commit_line(static_cast<std::size_t>(n));
+      const std::size_t size = log_writer_->slot_bytes();
+      const Eigen::Vector3d& f = result[0].device_force;
+      int len = std::snprintf(line, size, "%llu,%.9f,%.17g,%.17g,%.17g,%d", static_cast<unsigned long long>(k), t,
+                              f.x(), f.y(), f.z(), contacts);
+      for (int i = 0; n > 1 && i < n && len > 0 && static_cast<std::size_t>(len) < size; ++i) {
+        const Eigen::Vector3d& fi = result[static_cast<std::size_t>(i)].device_force;
+        len += std::snprintf(line + len, size - static_cast<std::size_t>(len), ",%.17g,%.17g,%.17g,%d", fi.x(),
+                             fi.y(), fi.z(), organ_->instrument_contacts(i));
+      }
+      if (len > 0 && static_cast<std::size_t>(len) + 1 < size) {
+        line[len++] = '\n';
+        log_writer_->commit_line(static_cast<std::size_t>(len));
+      }
     }
   }
   if (contacts > contacts_max_) contacts_max_ = contacts;
   if (contacts > 0) ++contact_ticks_;
-  force_max_n_ = std::max(force_max_n_, f.norm());
+  for (int i = 0; i < n; ++i) force_max_n_ = std::max(force_max_n_, result[static_cast<std::size_t>(i)].device_force.norm());
 }
 
 int HapticApp::run() {
@@ -288,7 +367,9 @@ void HapticApp::shutdown() {
   j["contact_ticks"] = contact_ticks_;
   j["input"] = live_ ? "device" : "replay";
   j["input_lost_ticks"] = input_lost_ticks_;
-  j["commands_received"] = commands_received_;
+  std::uint64_t commands = 0;
+  for (int i = 0; i < instrument_count_; ++i) commands += instruments_[static_cast<std::size_t>(i)].commands_received;
+  j["commands_received"] = commands;
   j["tensor_hash"] = std::to_string(organ_->tensor_hash());
   j["nonlinear_law"] = organ_->nonlinear_law();
   j["round_trip_us"] = to_json(rtt);
@@ -321,7 +402,27 @@ void HapticApp::shutdown() {
   j["final_zero_force_sent"] = publisher_->final_zero_sent();
   // Which organ model this run built (a liver run builds no intestine objects, an intestine run no liver ones).
   j["model_built"] = organ_->model_name();
-  force_stage_.add_stats(j);  // "force_stage": energy observed, dissipated by the controller, ticks it acted
+  // "force_stage": instrument 0's energy observed, dissipated by the controller, ticks it acted.
+  instruments_[0].force_stage.add_stats(j);
+  // Per instrument (issue 19), besides the totals above.
+  nlohmann::json tools = nlohmann::json::array();
+  for (int i = 0; i < instrument_count_; ++i) {
+    const Instrument& in = instruments_[static_cast<std::size_t>(i)];
+    nlohmann::json e;
+    e["name"] = scene_.tools[static_cast<std::size_t>(i)].name;
+    e["contacts_max"] = in.contacts_max;
+    e["force_max_n"] = in.force_max_n;
+    e["input_lost_ticks"] = in.input_lost_ticks;
+    e["saturated_ticks"] = in.saturated_ticks;
+    e["contact_ticks"] = in.contact_ticks;
+    e["over_capacity_events"] = in.over_capacity_events;
+    e["nonfinite_rejected"] = in.nonfinite_rejected;
+    e["commands_received"] = in.commands_received;
+    e["force_stage"] = in.force_stage.to_json();
+    tools.push_back(e);
+  }
+  j["tools"] = tools;
+  j["instrument_count"] = instrument_count_;
   organ_->add_stats(j);
   if (!options_.stats.empty()) write_json_file(options_.stats, j);
   if (!options_.quiet) {

@@ -2,6 +2,7 @@
 // (stats). The organ is behind HapticOrgan (organ.h), the DDS entities behind HapticDds (haptic_dds.h): nothing here
 // depends on which organ the scene names.
 #pragma once
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <cstdio>
@@ -67,26 +68,41 @@ class HapticApp {
 
  private:
 
-  /// The pose to use this tick: trajectory sample, or the newest device command (held when lost).
-  bool input_pose(double t, Pose5& pose);
+  /// Instrument i's pose this tick: its trajectory sample, or its newest device command (held when lost). False when
+  /// its input is lost (live: no command for input_timeout; replay: recorded lost).
+  bool input_pose(int i, double t, Pose5& pose);
+
+  /// Per-instrument state and statistics (preallocated; index = the scene's tools).
+  struct Instrument {
+    int track = 0;                          // replay: its column group in the trajectory
+    Pose5 held_pose;                        // last good pose (held while its input is lost)
+    Pose5 last_command;                     // newest device command, its arrival (monotonic ns), commands so far
+    std::uint64_t last_command_ns = 0;
+    std::uint64_t commands_received = 0;
+    ForceStage force_stage;                 // contact damper + passivity observer/controller on its force
+    int contacts_max = 0;
+    double force_max_n = 0;
+    std::uint64_t input_lost_ticks = 0;
+    std::uint64_t saturated_ticks = 0;
+    std::uint64_t contact_ticks = 0;
+    std::uint64_t over_capacity_events = 0;
+    std::uint64_t nonfinite_rejected = 0;
+  };
 
   HapticOptions options_;
   Scene scene_;
-  Trajectory trajectory_;
+  MultiTrajectory trajectory_;
   TrajectoryRecorder recorder_;
   std::FILE* log_ = nullptr;
   std::unique_ptr<AsyncLineWriter> log_writer_;     // --log lines, written off the loop thread
   std::unique_ptr<AsyncLineWriter> record_writer_;  // --record lines, written off the loop thread
   std::unique_ptr<HapticOrgan> organ_;     // the scene's organ (make_haptic_organ)
   std::unique_ptr<HapticDds> dds_;
-  ForceStage force_stage_;                  // contact damper + passivity observer/controller on the force sent
   std::unique_ptr<Publisher> publisher_;  // the thread that writes what tick() hands over (publisher.h)
   std::uint64_t tick_due_ns_ = 0;         // monotonic due time of the running tick, period (0: unpaced)
   std::uint64_t period_ns_ = 0;
-  Pose5 held_pose_;                         // last good pose (held while device input is lost)
-  Pose5 last_command_;                      // newest device command, its arrival (monotonic ns), commands so far
-  std::uint64_t last_command_ns_ = 0;
-  std::uint64_t commands_received_ = 0;
+  int instrument_count_ = 1;
+  std::array<Instrument, kMaxInstruments> instruments_{};
   bool live_ = false;
   std::atomic<bool> stop_requested_{false};
 
@@ -107,7 +123,7 @@ class HapticApp {
   std::uint64_t nonfinite_rejected_ = 0;
   std::uint64_t over_capacity_events_ = 0;
   std::uint64_t saturated_ticks_ = 0;
-  std::uint64_t input_lost_ticks_ = 0;
+  std::uint64_t input_lost_ticks_ = 0;      // ticks with at least one instrument's input lost
   std::uint64_t contact_ticks_ = 0;
   std::uint64_t record_writer_stats_ = 0;   // lines dropped (ring full) or failed to write
   std::uint64_t log_writer_stats_ = 0;

@@ -1,6 +1,7 @@
 #include "haptic_dds.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <mutex>
 #include <thread>
@@ -71,36 +72,55 @@ class VisualStatusListener : public DataReaderListener {
   std::uint64_t received_ = 0;
 };
 
-// Newest device command. The loop reads it with try_lock, so it never waits on the DDS thread.
+// Newest device command of each instrument (the ToolCommand key). The loop reads it with try_lock, so it never waits
+// on the DDS thread.
 class ToolCommandListener : public DataReaderListener {
  public:
+  void set_instruments(int n) { instruments_ = std::clamp(n, 1, kMaxInstruments); }
   void on_data_available(DataReader* reader) override {
     SampleInfo info;
     while (reader->take_next_sample(&incoming_, &info) == eprosima::fastrtps::types::ReturnCode_t::RETCODE_OK) {
       if (!info.valid_data) continue;
       std::lock_guard<std::mutex> lock(mutex_);
+      const std::uint32_t i = incoming_.instrument();
+      if (i >= static_cast<std::uint32_t>(instruments_)) {
+        ++stray_;
+        continue;
+      }
+      Slot& s = slots_[i];
       const auto& p = incoming_.pose();
-      pose_ = Pose5{p.pitch(), p.yaw(), p.insertion(), p.roll(), p.jaw()};
-      receive_ns_ = monotonic_ns();
-      ++received_;
+      s.pose = Pose5{p.pitch(), p.yaw(), p.insertion(), p.roll(), p.jaw()};
+      s.receive_ns = monotonic_ns();
+      ++s.received;
     }
   }
   /// Non-blocking: false when the slot is busy (the caller keeps its previous value).
-  bool try_get(Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) {
+  bool try_get(int i, Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) {
+    if (i < 0 || i >= instruments_) return false;
     std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
     if (!lock.owns_lock()) return false;
-    pose = pose_;
-    receive_ns = receive_ns_;
-    received = received_;
+    const Slot& s = slots_[static_cast<std::size_t>(i)];
+    pose = s.pose;
+    receive_ns = s.receive_ns;
+    received = s.received;
     return true;
+  }
+  std::uint64_t stray() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return stray_;
   }
 
  private:
+  struct Slot {
+    Pose5 pose;
+    std::uint64_t receive_ns = 0;
+    std::uint64_t received = 0;
+  };
   std::mutex mutex_;
   msg::ToolCommand incoming_;
-  Pose5 pose_;
-  std::uint64_t receive_ns_ = 0;
-  std::uint64_t received_ = 0;
+  int instruments_ = 1;
+  std::array<Slot, kMaxInstruments> slots_{};
+  std::uint64_t stray_ = 0;
 };
 
 }  // namespace
@@ -119,11 +139,14 @@ struct HapticDds::Impl {
   // Samples allocated once; the loop only overwrites their fields.
   msg::ContactFrame frame;
   msg::ForceFeedback force;
+  int instruments = 1;
 };
 
-HapticDds::HapticDds(const dds::DdsOptions& options, bool live, std::uint64_t scene_hash)
+HapticDds::HapticDds(const dds::DdsOptions& options, bool live, std::uint64_t scene_hash, int instruments)
     : impl_(std::make_unique<Impl>(options)) {
   Impl& d = *impl_;
+  d.tool_commands.set_instruments(instruments);
+  d.instruments = std::clamp(instruments, 1, kMaxInstruments);
   auto& p = d.participant;
   d.contact_writer = p.writer(p.topic(dds::kContactFrameTopic, new msg::ContactFramePubSubType()), dds::kContactWriter);
   d.force_writer = p.writer(p.topic(dds::kForceFeedbackTopic, new msg::ForceFeedbackPubSubType()), dds::kStreamWriter);
@@ -134,6 +157,7 @@ HapticDds::HapticDds(const dds::DdsOptions& options, bool live, std::uint64_t sc
   d.status_reader = p.reader(p.topic(dds::kVisualStatusTopic, new msg::VisualStatusPubSubType()), dds::kStreamReader,
                              &d.visual_status);
   d.frame.contacts().reserve(msg::kMaxContacts);
+  d.frame.instruments().resize(static_cast<std::size_t>(d.instruments));  // sized once: the loop never resizes it
   d.frame.scene_hash(scene_hash);
 }
 
@@ -156,15 +180,36 @@ void HapticDds::wait_for_reader(double seconds, const std::atomic<bool>& stop) {
   }
 }
 
-void HapticDds::latest_command(Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) noexcept {
-  impl_->tool_commands.try_get(pose, receive_ns, received);
+void HapticDds::latest_command(int instrument, Pose5& pose, std::uint64_t& receive_ns,
+                               std::uint64_t& received) noexcept {
+  impl_->tool_commands.try_get(instrument, pose, receive_ns, received);
 }
 
-static_assert(kMaxContactEntries == static_cast<int>(msg::kMaxContacts), "organ.h and the IDL disagree");
+std::uint64_t HapticDds::stray_commands() const { return impl_->tool_commands.stray(); }
 
-void HapticDds::write_force(std::uint64_t seq, std::uint64_t stamp_ns, const Eigen::Vector3d& force, bool saturated,
-                            std::uint32_t flags) noexcept {
+static_assert(kMaxContactEntries == static_cast<int>(msg::kMaxContacts), "organ.h and the IDL disagree");
+static_assert(kMaxInstruments == static_cast<int>(msg::kMaxInstruments), "tool/trajectory.h and the IDL disagree");
+
+void fill_instruments(const TickRecord& r, std::vector<msg::InstrumentState>& states) noexcept {
+  const std::size_t n = std::min(states.size(), static_cast<std::size_t>(std::clamp(r.instrument_count, 0,
+                                                                                      kMaxInstruments)));
+  for (std::size_t i = 0; i < n; ++i) {
+    const InstrumentRecord& ir = r.instruments[i];
+    msg::InstrumentState& m = states[i];
+    m.instrument(static_cast<std::uint32_t>(i));
+    m.pose(to_msg(ir.pose));
+    m.tip(to_msg(ir.tip));
+    m.direction(to_msg(ir.direction));
+    m.force(to_msg(ir.force));
+    m.contact_points(ir.contact_points);
+    m.flags(ir.flags);
+  }
+}
+
+void HapticDds::write_force(int instrument, std::uint64_t seq, std::uint64_t stamp_ns, const Eigen::Vector3d& force,
+                            bool saturated, std::uint32_t flags) noexcept {
   auto& ff = impl_->force;
+  ff.instrument(static_cast<std::uint32_t>(instrument));
   ff.seq(seq);
   ff.stamp_ns(stamp_ns);
   ff.force(to_msg(force));
@@ -177,8 +222,7 @@ void HapticDds::write_frame(const TickRecord& r, std::uint64_t stamp_ns) noexcep
   auto& frame = impl_->frame;
   frame.seq(r.seq);
   frame.sim_time(r.sim_time);
-  frame.pose(to_msg(r.pose));
-  frame.tip(to_msg(r.tip));
+  fill_instruments(r, frame.instruments());
   auto& entries = frame.contacts();
   const int count = std::min(std::max(r.organ.contact_count, 0), kMaxContactEntries);
   entries.resize(static_cast<std::size_t>(count));  // within the reserved capacity: no allocation
@@ -186,12 +230,10 @@ void HapticDds::write_frame(const TickRecord& r, std::uint64_t stamp_ns) noexcep
     const ContactEntry& c = r.organ.contacts[static_cast<std::size_t>(l)];
     auto& e = entries[static_cast<std::size_t>(l)];
     e.node(static_cast<std::uint32_t>(c.node));
+    e.instrument(static_cast<std::uint32_t>(c.instrument));
     e.lambda(to_msg(c.lambda));
     e.u_tilde(to_msg(c.u_tilde));
   }
-  frame.direction(to_msg(r.direction));
-  frame.force(to_msg(r.force));
-  frame.contact_points(r.contact_points);
   frame.flags(r.flags);
   frame.stamp_ns(stamp_ns);
   impl_->contact_writer->write(&frame);

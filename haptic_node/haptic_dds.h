@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/stats.h"
 #include "dds_support.h"
@@ -20,14 +21,19 @@ namespace surgsim {
 namespace msg {
 namespace v2 {
 class SceneInfo;
+class InstrumentState;
 }  // namespace v2
 using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 
+/// Publisher thread, no allocation: a tick's instruments into a ContactFrame's or BodyState's `instruments` (sized to
+/// the scene's instruments once, at init; only min(size, record.instrument_count) entries are written).
+void fill_instruments(const TickRecord& record, std::vector<msg::InstrumentState>& states) noexcept;
+
 class HapticDds final : public TickSink {
  public:
   /// Creates the participant and every endpoint; `live` adds the ToolCommand reader.
-  HapticDds(const dds::DdsOptions& options, bool live, std::uint64_t scene_hash);
+  HapticDds(const dds::DdsOptions& options, bool live, std::uint64_t scene_hash, int instruments = 1);
   ~HapticDds();
   HapticDds(const HapticDds&) = delete;
   HapticDds& operator=(const HapticDds&) = delete;
@@ -38,16 +44,18 @@ class HapticDds final : public TickSink {
   /// Waits up to `seconds` until a reader (a visual node) matches the ContactFrame writer, or `stop` is set.
   void wait_for_reader(double seconds, const std::atomic<bool>& stop);
 
-  /// Run phase, no allocation: the newest device command, its arrival time (monotonic ns) and how many have
-  /// arrived; keeps the previous ones when the listener holds the slot this instant.
-  void latest_command(Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) noexcept;
+  /// Run phase, no allocation: instrument i's newest device command (ToolCommand.instrument == i), its arrival time
+  /// (monotonic ns) and how many have arrived for it; keeps the previous ones when the listener holds the slot this
+  /// instant. Commands for an instrument the scene does not have are counted (stray_commands()) and dropped.
+  void latest_command(int instrument, Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) noexcept;
+  std::uint64_t stray_commands() const;
 
   /// Init: the organ whose own topics write_frame() writes after the ContactFrame (its write()).
   void attach_organ(HapticOrgan* organ) { organ_ = organ; }
 
   /// Publisher thread, no allocation: a ForceFeedback (for the device).
-  void write_force(std::uint64_t seq, std::uint64_t stamp_ns, const Eigen::Vector3d& force, bool saturated,
-                   std::uint32_t flags) noexcept override;
+  void write_force(int instrument, std::uint64_t seq, std::uint64_t stamp_ns, const Eigen::Vector3d& force,
+                   bool saturated, std::uint32_t flags) noexcept override;
   /// Publisher thread, no allocation: a tick's ContactFrame (for the visual node), then the organ's own topics.
   void write_frame(const TickRecord& record, std::uint64_t stamp_ns) noexcept override;
 

@@ -19,7 +19,7 @@
 
 namespace surgsim {
 
-constexpr int kMaxPatches = 32;                      // patches per solve (one per tool point)
+constexpr int kMaxPatches = 128;                     // patches per solve (one per tool point: 4 instruments x 32)
 constexpr int kMaxPatchRows = 3 * kMaxPatches;       // scalar rows per solve
 constexpr int kMaxPatchEntries = kMaxPatches * kMaxContacts;  // (patch, node) weights per solve
 

@@ -17,16 +17,32 @@ const TensorBlock& haptic_block(const Tensors& t) {
 }
 }  // namespace
 
+namespace {
+const std::vector<ToolSpec>& checked_tools(const std::vector<ToolSpec>& tools) {
+  if (tools.empty() || tools.size() > static_cast<std::size_t>(kMaxInstruments))
+    throw_error("LiverContacts: ", tools.size(), " instruments (1..", kMaxInstruments, ")");
+  return tools;
+}
+// The solve's node capacity: the instruments' capacities together, at most kMaxContacts.
+int total_capacity(const std::vector<ToolSpec>& tools) {
+  int sum = 0;
+  for (const ToolSpec& t : tools) sum += std::max(t.contact_capacity, 1);
+  return std::min(sum, kMaxContacts);
+}
+}  // namespace
+
 LiverContacts::LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors& tensors,
-                             const ToolSpec& tool, const NonlinearLaw* law)
+                             const std::vector<ToolSpec>& tools, const NonlinearLaw* law)
     : mesh_(mesh),
       tensors_(tensors),
       haptic_(haptic_block(tensors)),
-      tool_(tool),
+      tools_(checked_tools(tools)),
+      model_(tools.front().contact_model),
       law_(law),
       grid_(mesh, surface),
-      superposition_(tensors, "haptic", tool.contact_capacity) {
-  if (tool_.contact_model != ContactModel::kPatch) return;
+      superposition_(tensors, "haptic", total_capacity(tools)) {
+  if (model_ != ContactModel::kPatch) return;
+  const ToolSpec& tool_ = tools_.front();  // the tip radius of the patch surface: the first instrument's
   std::vector<std::uint8_t> free(static_cast<std::size_t>(mesh.nodes.rows()), 0);
   for (std::size_t n = 0; n < free.size(); ++n)
     free[n] = tensors.column_of_node[n] >= 0 && haptic_.row_of_node[n] >= 0 && tensors.fixed_mask[n] == 0 ? 1 : 0;
@@ -39,8 +55,31 @@ LiverContacts::LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, co
 void LiverContacts::reset() noexcept {
   for (auto& p : points_) p = PointContact{};
   for (auto& p : patches_) p.count = 0;
-  have_previous_ = false;
+  have_previous_.fill(false);
   solution_ = ContactSolution{};
+  instrument_nodes_.fill(0);
+}
+
+void LiverContacts::reset_instrument(int t) noexcept {
+  if (t < 0 || t >= kMaxInstruments) return;
+  for (int i = 0; i < kMaxShaftPoints; ++i) {
+    points_[static_cast<std::size_t>(t * kMaxShaftPoints + i)] = PointContact{};
+    patches_[static_cast<std::size_t>(t * kMaxShaftPoints + i)].count = 0;
+  }
+  have_previous_[static_cast<std::size_t>(t)] = false;
+}
+
+void LiverContacts::drop_solution() noexcept {
+  solution_ = ContactSolution{};
+  instrument_nodes_.fill(0);
+}
+
+void LiverContacts::count_instrument_nodes() noexcept {
+  instrument_nodes_.fill(0);
+  for (int l = 0; l < solution_.count; ++l) {
+    const int t = node_instrument_[static_cast<std::size_t>(l)];
+    if (t >= 0 && t < kMaxInstruments) ++instrument_nodes_[static_cast<std::size_t>(t)];
+  }
 }
 
 Eigen::Vector3d LiverContacts::deformed(int node) const noexcept {
@@ -62,161 +101,219 @@ Eigen::Vector3d LiverContacts::corrected(int l) const noexcept {
   return haptic_.block3(r, c) * solution_.lambda[static_cast<std::size_t>(l)];
 }
 
-void LiverContacts::step(const ToolGeometry& geometry, double jaw, ContactTick& out, double dt) noexcept {
-  out = ContactTick{};
+void LiverContacts::step(const InstrumentInput* inputs, int count, ContactTick* out, double dt) noexcept {
   status_ = ContactStatus::kOk;
-  const int n_points = geometry.point_count;
-
-  // A non-finite tool pose never reaches the physics: drop contacts, zero force, report.
-  bool finite = std::isfinite(jaw) && n_points >= 0 && n_points <= kMaxShaftPoints;
-  for (int i = 0; i < n_points && finite; ++i) finite = geometry.points[static_cast<std::size_t>(i)].allFinite();
-  if (tool_.contact_model == ContactModel::kPatch) finite = finite && geometry.trocar.allFinite();
-  if (!finite) {
-    reset();
-    out.nonfinite = true;
-    return;
+  count_ = std::clamp(count, 0, instruments());
+  const double h = std::isfinite(dt) && dt > 0 && dt < 1 ? dt : kDefaultDt;
+  for (int t = 0; t < count_; ++t) {
+    const auto st = static_cast<std::size_t>(t);
+    out[t] = ContactTick{};
+    geometry_[st] = nullptr;
+    const ToolGeometry* g = inputs[t].tool;
+    if (g == nullptr) {  // input lost: this instrument's contacts go, the others stay
+      reset_instrument(t);
+      continue;
+    }
+    // A non-finite tool pose never reaches the physics: drop its contacts, zero its force, report.
+    const int n_points = g->point_count;
+    bool finite = std::isfinite(inputs[t].jaw) && n_points >= 0 && n_points <= kMaxShaftPoints;
+    for (int i = 0; i < n_points && finite; ++i) finite = g->points[static_cast<std::size_t>(i)].allFinite();
+    if (model_ == ContactModel::kPatch) finite = finite && g->trocar.allFinite();
+    if (!finite) {
+      reset_instrument(t);
+      out[t].nonfinite = true;
+      continue;
+    }
+    geometry_[st] = g;
+    jaw_[st] = inputs[t].jaw;
   }
-  if (tool_.contact_model == ContactModel::kPatch) {
-    step_patch(geometry, jaw, std::isfinite(dt) && dt > 0 && dt < 1 ? dt : kDefaultDt, out);
+  for (int t = count_; t < instruments(); ++t) {  // instruments the caller did not give: as lost
+    geometry_[static_cast<std::size_t>(t)] = nullptr;
+    reset_instrument(t);
+  }
+  if (model_ == ContactModel::kPatch) {
+    step_patch(h, out);
   } else {
-    step_triangle(geometry, jaw, out);
+    step_triangle(h, out);
   }
+  count_instrument_nodes();
 }
 
-void LiverContacts::step_triangle(const ToolGeometry& geometry, double jaw, ContactTick& out) noexcept {
-  const int n_points = geometry.point_count;
+void LiverContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
+  // --- detection and contact update, per instrument and tool point (tip first) ---
+  for (int t = 0; t < count_; ++t) {
+    const ToolGeometry* geometry = geometry_[static_cast<std::size_t>(t)];
+    if (geometry == nullptr) continue;
+    const double jaw = jaw_[static_cast<std::size_t>(t)];
+    const bool have_previous = have_previous_[static_cast<std::size_t>(t)];
+    for (int i = 0; i < geometry->point_count; ++i) {
+      const auto si = static_cast<std::size_t>(t * kMaxShaftPoints + i);
+      const Eigen::Vector3d& p = geometry->points[static_cast<std::size_t>(i)];
+      const Eigen::Vector3d& p_prev = have_previous ? previous_[si] : p;
+      PointContact& c = points_[si];
 
-  // --- detection and contact update, per tool point (tip first) ---
-  for (int i = 0; i < n_points; ++i) {
-    const auto si = static_cast<std::size_t>(i);
-    const Eigen::Vector3d& p = geometry.points[si];
-    const Eigen::Vector3d& p_prev = have_previous_ ? previous_[si] : p;
-    PointContact& c = points_[si];
+      // New contact: the path since the last tick crosses the DEFORMED surface (continuous, so no tunnelling).
+      if (!c.active) {
+        const SurfaceHit hit = grid_.segment_query(p_prev, p, &LiverContacts::deformed_cb, this);
+        if (hit.hit) {
+          c.active = true;
+          c.grasp = false;
+          c.triangle = hit.triangle;
+          c.nodes = hit.nodes;
+          c.bary = hit.bary;
+          c.anchor = Eigen::Vector3d::Zero();
+          for (int v = 0; v < 3; ++v) c.anchor += hit.bary[v] * mesh_.nodes.row(hit.nodes[v]).transpose();
+          const Eigen::Vector3d a = mesh_.nodes.row(hit.nodes[0]).transpose();
+          const Eigen::Vector3d b = mesh_.nodes.row(hit.nodes[1]).transpose();
+          const Eigen::Vector3d d = mesh_.nodes.row(hit.nodes[2]).transpose();
+          c.normal = (b - a).cross(d - a).normalized();
+        }
+      }
+      if (!c.active) continue;
 
-    // New contact: the path since the last tick crosses the DEFORMED surface (continuous, so no tunnelling).
-    if (!c.active) {
-      const SurfaceHit hit = grid_.segment_query(p_prev, p, &LiverContacts::deformed_cb, this);
-      if (hit.hit) {
-        c.active = true;
-        c.grasp = false;
-        c.triangle = hit.triangle;
-        c.nodes = hit.nodes;
-        c.bary = hit.bary;
-        c.anchor = Eigen::Vector3d::Zero();
-        for (int v = 0; v < 3; ++v) c.anchor += hit.bary[v] * mesh_.nodes.row(hit.nodes[v]).transpose();
-        const Eigen::Vector3d a = mesh_.nodes.row(hit.nodes[0]).transpose();
-        const Eigen::Vector3d b = mesh_.nodes.row(hit.nodes[1]).transpose();
-        const Eigen::Vector3d d = mesh_.nodes.row(hit.nodes[2]).transpose();
-        c.normal = (b - a).cross(d - a).normalized();
+      if (c.grasp) {
+        // A grasp keeps its anchor (bilateral) until the jaw opens again.
+        if (jaw > kGraspOpenJaw) c.grasp = false;
+      }
+      if (!c.grasp) {
+        // Unilateral, frictionless: the anchor follows the closest point of the rest surface on the side the
+        // contact pressed (a tip pushed deeper than half the organ must not re-anchor on the opposite face).
+        const SurfaceProjection proj = grid_.project_rest(p, 3, &c.normal);
+        if (proj.found) {
+          c.triangle = proj.triangle;
+          c.nodes = proj.nodes;
+          c.bary = proj.bary;
+          c.anchor = proj.point;
+          c.normal = proj.normal;
+        }
+        // Released when the point is back outside the rest surface.
+        if ((p - c.anchor).dot(c.normal) >= 0) {
+          c.active = false;
+          continue;
+        }
+        // The tip's jaws closing on the tissue turn the contact into a grasp.
+        if (i == 0 && jaw <= kGraspCloseJaw) c.grasp = true;
       }
     }
-    if (!c.active) continue;
-
-    if (c.grasp) {
-      // A grasp keeps its anchor (bilateral) until the jaw opens again.
-      if (jaw > kGraspOpenJaw) c.grasp = false;
-    }
-    if (!c.grasp) {
-      // Unilateral, frictionless: the anchor follows the closest point of the rest surface on the side the contact
-      // pressed (a tip pushed deeper than half the organ must not re-anchor on the opposite face and let go).
-      const SurfaceProjection proj = grid_.project_rest(p, 3, &c.normal);
-      if (proj.found) {
-        c.triangle = proj.triangle;
-        c.nodes = proj.nodes;
-        c.bary = proj.bary;
-        c.anchor = proj.point;
-        c.normal = proj.normal;
-      }
-      // Released when the point is back outside the rest surface.
-      if ((p - c.anchor).dot(c.normal) >= 0) {
-        c.active = false;
-        continue;
-      }
-      // The tip's jaws closing on the tissue turn the contact into a grasp.
-      if (i == 0 && jaw <= kGraspCloseJaw) c.grasp = true;
-    }
+    for (int i = 0; i < geometry->point_count; ++i)
+      previous_[static_cast<std::size_t>(t * kMaxShaftPoints + i)] = geometry->points[static_cast<std::size_t>(i)];
+    have_previous_[static_cast<std::size_t>(t)] = true;
   }
-  previous_ = geometry.points;
-  have_previous_ = true;
 
   // --- constraints: each contact's displacement spread over its triangle, alpha_v = k_v / sum k^2 ---
   int m = 0;
-  Eigen::Vector3d dir_sum = Eigen::Vector3d::Zero();
+  std::array<Eigen::Vector3d, kMaxInstruments> dir_sum;
+  for (auto& d : dir_sum) d.setZero();
+  std::array<int, kMaxInstruments> used{};  // nodes requested per instrument (its contact capacity)
   const int capacity = superposition_.capacity();
-  for (int i = 0; i < n_points; ++i) {
-    const PointContact& c = points_[static_cast<std::size_t>(i)];
-    if (!c.active) continue;
-    const Eigen::Vector3d d = geometry.points[static_cast<std::size_t>(i)] - c.anchor;
-    // Two points dragging the same triangle would have their displacements averaged by the merge of duplicate
-    // nodes. This happens when a fast stab carries the tip and the shaft points behind it through the surface in one
-    // tick; a slow stab never activates the trailing points (they stay inside the tip's dent). The deepest point
-    // holds the triangle (ties: the first), so the force does not depend on the speed of the tool.
-    bool shadowed = false;
-    for (int j = 0; j < n_points && !shadowed; ++j) {
-      const PointContact& o = points_[static_cast<std::size_t>(j)];
-      if (j == i || !o.active || o.triangle != c.triangle) continue;
-      const double depth_i = -d.dot(c.normal);
-      const double depth_j = -(geometry.points[static_cast<std::size_t>(j)] - o.anchor).dot(o.normal);
-      shadowed = depth_j > depth_i || (depth_j == depth_i && j < i);
-    }
-    if (shadowed) continue;
-    const Eigen::Vector3d alpha = barycentric_weights(c.bary);
-    int added = 0;
-    for (int v = 0; v < 3; ++v) {
-      const int node = c.nodes[static_cast<std::size_t>(v)];
-      if (tensors_.column_of_node[static_cast<std::size_t>(node)] < 0) continue;  // fixed node: not constrained
-      if (m == capacity) {
-        out.over_capacity = true;
-        break;
+  for (int t = 0; t < count_; ++t) {
+    const ToolGeometry* geometry = geometry_[static_cast<std::size_t>(t)];
+    if (geometry == nullptr) continue;
+    const int own_capacity = std::min(tools_[static_cast<std::size_t>(t)].contact_capacity, kMaxContacts);
+    for (int i = 0; i < geometry->point_count; ++i) {
+      const PointContact& c = points_[static_cast<std::size_t>(t * kMaxShaftPoints + i)];
+      if (!c.active) continue;
+      const Eigen::Vector3d d = geometry->points[static_cast<std::size_t>(i)] - c.anchor;
+      // Two points dragging the same triangle would have their displacements averaged by the merge of duplicate
+      // nodes. This happens when a fast stab carries the tip and the shaft points behind it through the surface in
+      // one tick; a slow stab never activates the trailing points (they stay inside the tip's dent). The deepest
+      // point holds the triangle (ties: the first, instruments in order), so the force does not depend on the speed.
+      bool shadowed = false;
+      for (int u = 0; u < count_ && !shadowed; ++u) {
+        const ToolGeometry* gu = geometry_[static_cast<std::size_t>(u)];
+        if (gu == nullptr) continue;
+        for (int j = 0; j < gu->point_count && !shadowed; ++j) {
+          const PointContact& o = points_[static_cast<std::size_t>(u * kMaxShaftPoints + j)];
+          if ((u == t && j == i) || !o.active || o.triangle != c.triangle) continue;
+          const double depth_i = -d.dot(c.normal);
+          const double depth_j = -(gu->points[static_cast<std::size_t>(j)] - o.anchor).dot(o.normal);
+          shadowed = depth_j > depth_i || (depth_j == depth_i && (u < t || (u == t && j < i)));
+        }
       }
-      requests_[static_cast<std::size_t>(m++)] = Contact{node, alpha[v] * d};
-      ++added;
-    }
-    if (added > 0) {
-      ++out.points_in_contact;
-      dir_sum += d;
-      out.grasp = out.grasp || c.grasp;
+      if (shadowed) continue;
+      const Eigen::Vector3d alpha = barycentric_weights(c.bary);
+      int added = 0;
+      for (int v = 0; v < 3; ++v) {
+        const int node = c.nodes[static_cast<std::size_t>(v)];
+        if (tensors_.column_of_node[static_cast<std::size_t>(node)] < 0) continue;  // fixed node: not constrained
+        if (m == capacity || used[static_cast<std::size_t>(t)] == own_capacity) {
+          out[t].over_capacity = true;
+          break;
+        }
+        request_instrument_[static_cast<std::size_t>(m)] = t;
+        requests_[static_cast<std::size_t>(m++)] = Contact{node, alpha[v] * d};
+        ++used[static_cast<std::size_t>(t)];
+        ++added;
+      }
+      if (added > 0) {
+        ++out[t].points_in_contact;
+        dir_sum[static_cast<std::size_t>(t)] += d;
+        out[t].grasp = out[t].grasp || c.grasp;
+      }
     }
   }
 
-  // --- lambda = G_CC^-1 u*, force on the tool = -sum lambda ---
+  // --- lambda = G_CC^-1 u* for every instrument's constraints at once; each instrument's force = -sum of the
+  // lambdas of its nodes ---
   if (m == 0) {
-    solution_ = ContactSolution{};
+    drop_solution();
     return;
   }
   status_ = superposition_.solve(requests_.data(), m, solution_);
   const ContactStatus status = status_;
   if (status != ContactStatus::kOk) {
-    if (status == ContactStatus::kOverCapacity) out.over_capacity = true;
-    if (status == ContactStatus::kNonFinite) out.nonfinite = true;
-    solution_ = ContactSolution{};
+    for (int t = 0; t < count_; ++t) {
+      if (geometry_[static_cast<std::size_t>(t)] == nullptr) continue;
+      if (status == ContactStatus::kOverCapacity) out[t].over_capacity = true;
+      if (status == ContactStatus::kNonFinite) out[t].nonfinite = true;
+    }
+    drop_solution();
     return;
   }
-  finish(solution_.tool_force, dir_sum, out);
+  // The solution's nodes are in first-seen request order: each belongs to the instrument that requested it first.
+  std::array<Eigen::Vector3d, kMaxInstruments> force;
+  for (auto& f : force) f.setZero();
+  for (int l = 0; l < solution_.count; ++l) {
+    int owner = 0;
+    for (int r = 0; r < m; ++r) {
+      if (requests_[static_cast<std::size_t>(r)].node == solution_.nodes[static_cast<std::size_t>(l)]) {
+        owner = request_instrument_[static_cast<std::size_t>(r)];
+        break;
+      }
+    }
+    node_instrument_[static_cast<std::size_t>(l)] = owner;
+    force[static_cast<std::size_t>(owner)] -= solution_.lambda[static_cast<std::size_t>(l)];
+  }
+  if (count_ == 1) force[0] = solution_.tool_force;  // one instrument: exactly as before issue 19
+  for (int t = 0; t < count_; ++t) {
+    if (geometry_[static_cast<std::size_t>(t)] == nullptr) continue;
+    finish(t, force[static_cast<std::size_t>(t)], dir_sum[static_cast<std::size_t>(t)], out[t]);
+  }
 }
 
-void LiverContacts::finish(Eigen::Vector3d force, const Eigen::Vector3d& dir_sum, ContactTick& out) noexcept {
+void LiverContacts::finish(int t, Eigen::Vector3d force, const Eigen::Vector3d& dir_sum, ContactTick& out) noexcept {
   const double dn = dir_sum.norm();
   out.direction = dn > 0 ? Eigen::Vector3d(dir_sum / dn) : Eigen::Vector3d::Zero();
   if (!force.allFinite()) {
     out.nonfinite = true;
-    solution_ = ContactSolution{};
+    drop_solution();
     return;
   }
   // --- quasi non-linear law: Q on the force component along the mean imposed displacement ---
   if (law_ != nullptr && dn > 0 && !law_->apply_force(force, out.direction, force)) out.nonfinite = true;
   if (!force.allFinite()) {
     out.nonfinite = true;
-    solution_ = ContactSolution{};
+    drop_solution();
     return;
   }
   out.force = force;
 
-  // --- device clamp: never more than the device limit ---
+  // --- device clamp: never more than this instrument's device limit ---
+  const double limit = tools_[static_cast<std::size_t>(t)].force_limit;
   const double norm = force.norm();
-  if (norm > tool_.force_limit) {
+  if (norm > limit) {
     out.saturated = true;
-    force *= tool_.force_limit / norm;
+    force *= limit / norm;
   }
   out.device_force = force;
 }
@@ -238,9 +335,9 @@ enum Kind : int { kNone = 0, kSlide = 1, kStick = 2, kGrasp = 3, kFading = 4 };
 
 // Follows tool point i's closest point of the rest surface, or finds it: through the segment it moved along since
 // the last tick, or (resume: first tick after a reset) along the shaft from the trocar, then the closest point.
-void LiverContacts::track(const ToolGeometry& geometry, int i, bool resume) noexcept {
-  const auto si = static_cast<std::size_t>(i);
-  const Eigen::Vector3d& p = geometry.points[si];
+void LiverContacts::track(const ToolGeometry& geometry, int i, int g, bool resume) noexcept {
+  const auto si = static_cast<std::size_t>(g);
+  const Eigen::Vector3d& p = geometry.points[static_cast<std::size_t>(i)];
   PointContact& c = points_[si];
   const auto take = [&](const RestPoint& rp) {
     c.triangle = rp.triangle;
@@ -273,17 +370,26 @@ void LiverContacts::track(const ToolGeometry& geometry, int i, bool resume) noex
   }
 }
 
-void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double dt, ContactTick& out) noexcept {
-  const int n_points = geometry.point_count;
-  const bool resume = !have_previous_;
-  const double mu = tool_.friction;
-  const int capacity = std::min(tool_.contact_capacity, kMaxContacts);
+void LiverContacts::step_patch(double dt, ContactTick* out) noexcept {
+  // Every tool point of every instrument in one pass: point g = t * kMaxShaftPoints + i (instrument t, point i).
+  // An instrument without geometry this tick (lost, not finite) has no point here.
+  const auto each_point = [&](auto&& f) {
+    for (int t = 0; t < count_; ++t) {
+      const ToolGeometry* geometry = geometry_[static_cast<std::size_t>(t)];
+      if (geometry == nullptr) continue;
+      for (int i = 0; i < geometry->point_count; ++i) f(t, i, t * kMaxShaftPoints + i, *geometry);
+    }
+  };
+  const int capacity = superposition_.capacity();  // the union of all instruments' nodes
 
   // --- 1. where each point is relative to the rest surface; grasps closing and opening ---
-  for (int i = 0; i < n_points; ++i) {
-    const auto si = static_cast<std::size_t>(i);
+  each_point([&](int t, int i, int g, const ToolGeometry& geometry) {
+    const auto si = static_cast<std::size_t>(g);
+    const double jaw = jaw_[static_cast<std::size_t>(t)];
+    const double mu = tools_[static_cast<std::size_t>(t)].friction;
+    (void)mu;
     PointContact& c = points_[si];
-    track(geometry, i, resume);
+    track(geometry, i, g, !have_previous_[static_cast<std::size_t>(t)]);
     if (c.grasp && jaw > kGraspOpenJaw) {
       c.grasp = false;
       if (c.tracked) {
@@ -318,23 +424,32 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
       c.release_age = -1;
       c.cone_boost = 0;
     }
+  });
+  for (int t = 0; t < count_; ++t) {
+    const ToolGeometry* geometry = geometry_[static_cast<std::size_t>(t)];
+    if (geometry == nullptr) continue;
+    for (int i = 0; i < geometry->point_count; ++i)
+      previous_[static_cast<std::size_t>(t * kMaxShaftPoints + i)] = geometry->points[static_cast<std::size_t>(i)];
+    have_previous_[static_cast<std::size_t>(t)] = true;
   }
-  previous_ = geometry.points;
-  have_previous_ = true;
 
   // --- 2. one patch per contact (or candidate), its rows and their imposed values ---
   PatchConstraints& k = *constraints_;
   k.clear();
-  int dropped = 0;
-  for (int i = 0; i < n_points; ++i) {
-    const auto si = static_cast<std::size_t>(i);
+  std::array<int, kMaxInstruments> dropped{};
+  std::array<int, kMaxInstruments> used{};  // union nodes each instrument added (its own contact capacity)
+  for (auto& v : patch_of_point_) v = -1;
+  for (auto& v : kind_) v = kNone;
+  each_point([&](int t, int i, int g, const ToolGeometry& geometry) {
+    const auto si = static_cast<std::size_t>(g);
+    const auto st = static_cast<std::size_t>(t);
+    const double mu = tools_[st].friction;
+    const int own_capacity = std::min(tools_[st].contact_capacity, kMaxContacts);
     PointContact& c = points_[si];
     PointPatch& pp = patches_[si];
     pp.count = 0;
-    patch_of_point_[si] = -1;
-    kind_[si] = kNone;
     c.slipping = false;
-    const Eigen::Vector3d& p = geometry.points[si];
+    const Eigen::Vector3d& p = geometry.points[static_cast<std::size_t>(i)];
     int kind = kNone;
     if (c.grasp) {
       kind = kGrasp;
@@ -343,7 +458,7 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
     } else if (c.tracked) {
       kind = (mu > 0 || c.cone_boost > 0) ? kStick : kSlide;
     }
-    if (kind == kNone) continue;
+    if (kind == kNone) return;
     // The patch: around the grasped or stuck material point, or the point's own closest rest point.
     int tri = c.triangle;
     Eigen::Vector3d centre = c.anchor;
@@ -365,7 +480,7 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
     pp.fixed = fixed;
     pp.dropped = out_of_patch;
     pp.centre = centre;
-    if (pp.count == 0) continue;  // only fixed nodes under the tip: nothing to constrain
+    if (pp.count == 0) return;  // only fixed nodes under the tip: nothing to constrain
     pp.normal = surface_->patch_normal(pp.nodes.data(), pp.weights.data(), pp.count);
     const Eigen::Vector3d& n = pp.normal;
     const double depth = (c.anchor - p).dot(n);
@@ -380,7 +495,7 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
             mean += pp.weights[static_cast<std::size_t>(e)] * u;
         gap += n.dot(mean);
       }
-      if (!(gap > 0)) continue;
+      if (!(gap > 0)) return;
       c.onset_gap = c.resumed ? 0.0 : std::min(gap, depth);
       c.age = 0;
     }
@@ -395,11 +510,13 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
       int u = 0;
       while (u < k.node_count && k.nodes[static_cast<std::size_t>(u)] != node) ++u;
       if (u == k.node_count) {
-        if (k.node_count == capacity) {
-          ++dropped;
+        if (k.node_count == capacity || used[st] == own_capacity) {
+          ++dropped[st];
           continue;
         }
+        union_instrument_[static_cast<std::size_t>(k.node_count)] = t;
         k.nodes[static_cast<std::size_t>(k.node_count++)] = node;
+        ++used[st];
       }
       pp.nodes[static_cast<std::size_t>(kept)] = node;
       pp.weights[static_cast<std::size_t>(kept)] = pp.weights[static_cast<std::size_t>(e)];
@@ -409,7 +526,7 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
     }
     pp.dropped += pp.count - kept;
     pp.count = kept;
-    if (kept == 0) continue;
+    if (kept == 0) return;
     for (int e = 0; e < kept; ++e) {
       pp.weights[static_cast<std::size_t>(e)] /= sum;
       k.entry_weight[static_cast<std::size_t>(start + e)] = pp.weights[static_cast<std::size_t>(e)];
@@ -446,27 +563,33 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
       enabled_[kr] = 1;
       ++k.row_count;
     }
-  }
-  if (dropped > 0) {
-    out.over_capacity = true;
-    dropped_nodes_ += dropped;
+  });
+  for (int t = 0; t < count_; ++t) {
+    if (dropped[static_cast<std::size_t>(t)] > 0) {
+      out[t].over_capacity = true;
+      dropped_nodes_ += dropped[static_cast<std::size_t>(t)];
+    }
   }
 
   // --- 3. the solve, with an active set for the unilateral contacts and the friction cone for sticking ones ---
-  for (int i = 0; i < n_points; ++i) points_[static_cast<std::size_t>(i)].force.setZero();
+  each_point([&](int, int, int g, const ToolGeometry&) { points_[static_cast<std::size_t>(g)].force.setZero(); });
   if (k.row_count == 0) {
-    for (int i = 0; i < n_points; ++i) {
-      PointContact& c = points_[static_cast<std::size_t>(i)];
+    each_point([&](int, int, int g, const ToolGeometry&) {
+      PointContact& c = points_[static_cast<std::size_t>(g)];
       if (c.release_age >= 0) c.release_age += dt;
       if (!c.grasp) c.active = false;
-    }
-    solution_ = ContactSolution{};
+    });
+    drop_solution();
     return;
   }
+  const auto flag_all = [&](bool ContactTick::*flag) {
+    for (int t = 0; t < count_; ++t)
+      if (geometry_[static_cast<std::size_t>(t)] != nullptr) out[t].*flag = true;
+  };
   status_ = patch_solver_->prepare(k);
   if (status_ != ContactStatus::kOk) {
-    if (status_ == ContactStatus::kNonFinite) out.nonfinite = true;
-    solution_ = ContactSolution{};
+    if (status_ == ContactStatus::kNonFinite) flag_all(&ContactTick::nonfinite);
+    drop_solution();
     return;
   }
   const auto patch_force = [&](int p_index) {  // force on the ORGAN from patch p (N)
@@ -488,9 +611,9 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
       // does not matter: their constraints coincide) holds it.
       const int p_dep = k.row_patch[static_cast<std::size_t>(patch_solver_->dependent_row())];
       bool bilateral = false;
-      for (int i = 0; i < n_points; ++i)
-        if (patch_of_point_[static_cast<std::size_t>(i)] == p_dep)
-          bilateral = kind_[static_cast<std::size_t>(i)] == kGrasp || kind_[static_cast<std::size_t>(i)] == kFading;
+      for (int g = 0; g < kMaxPoints; ++g)
+        if (patch_of_point_[static_cast<std::size_t>(g)] == p_dep)
+          bilateral = kind_[static_cast<std::size_t>(g)] == kGrasp || kind_[static_cast<std::size_t>(g)] == kFading;
       if (bilateral) break;
       disable(p_dep);
       continue;
@@ -500,8 +623,8 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
     // Unilateral: a contact that would pull the tool in lets go (the most pulling one first).
     int worst = -1;
     double worst_fn = 0;
-    for (int i = 0; i < n_points; ++i) {
-      const auto si = static_cast<std::size_t>(i);
+    for (int g = 0; g < kMaxPoints; ++g) {
+      const auto si = static_cast<std::size_t>(g);
       if (kind_[si] != kSlide && kind_[si] != kStick) continue;
       const int pi = patch_of_point_[si];
       bool on = false;
@@ -523,16 +646,17 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
   }
   if (!solved) {
     if (status_ == ContactStatus::kOk) status_ = ContactStatus::kNearSingular;
-    solution_ = ContactSolution{};
+    drop_solution();
     return;
   }
   // Coulomb: a sticking patch whose tangential force exceeds mu_eff F_n slides: its tangential offset shrinks until
   // |F_t| = mu_eff F_n (a few fixed-point steps on the factored system: the normal-tangential coupling is weak).
   for (int iteration = 0; iteration < 4; ++iteration) {
     bool changed = false;
-    for (int i = 0; i < n_points; ++i) {
-      const auto si = static_cast<std::size_t>(i);
+    for (int g = 0; g < kMaxPoints; ++g) {
+      const auto si = static_cast<std::size_t>(g);
       if (kind_[si] != kStick) continue;
+      const double mu = tools_[static_cast<std::size_t>(g / kMaxShaftPoints)].friction;
       PointContact& c = points_[si];
       const int pi = patch_of_point_[si];
       const Eigen::Vector3d& n = patches_[si].normal;
@@ -560,6 +684,7 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
   for (int u = 0; u < k.node_count; ++u) {
     if (lambda_[static_cast<std::size_t>(u)].isZero(0)) continue;
     const auto l = static_cast<std::size_t>(count++);
+    node_instrument_[l] = union_instrument_[static_cast<std::size_t>(u)];
     s.nodes[l] = k.nodes[static_cast<std::size_t>(u)];
     s.lambda[l] = lambda_[static_cast<std::size_t>(u)];
     s.displacement[l] = patch_solver_->union_displacement(u, lambda_.data(), k.node_count);
@@ -569,9 +694,13 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
   s.count = count;
   s.status = ContactStatus::kOk;
   s.rcond = 1;
-  Eigen::Vector3d dir_sum = Eigen::Vector3d::Zero();
-  for (int i = 0; i < n_points; ++i) {
-    const auto si = static_cast<std::size_t>(i);
+  std::array<Eigen::Vector3d, kMaxInstruments> dir_sum, force;
+  for (auto& d : dir_sum) d.setZero();
+  for (auto& f : force) f.setZero();
+  each_point([&](int t, int, int g, const ToolGeometry& geometry) {
+    const auto si = static_cast<std::size_t>(g);
+    const auto st = static_cast<std::size_t>(t);
+    const double mu = tools_[st].friction;
     PointContact& c = points_[si];
     const int pi = patch_of_point_[si];
     bool on = false;
@@ -589,13 +718,14 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
         c.active = false;
         c.sticking = false;
       }
-      continue;
+      return;
     }
     c.force = -patch_force(pi);
-    if (kind_[si] == kFading) continue;  // a fading hold is not a contact
-    dir_sum += c.offset;
-    ++out.points_in_contact;
-    out.grasp = out.grasp || c.grasp;
+    force[st] += c.force;
+    if (kind_[si] == kFading) return;  // a fading hold is not a contact
+    dir_sum[st] += c.offset;
+    ++out[t].points_in_contact;
+    out[t].grasp = out[t].grasp || c.grasp;
     if (kind_[si] == kSlide || kind_[si] == kStick) c.active = true;
     if (kind_[si] == kStick) {
       c.sticking = true;
@@ -606,7 +736,8 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
         for (int r = 0; r < k.row_count; ++r)
           if (k.row_patch[static_cast<std::size_t>(r)] == pi && r > 0 && k.row_patch[static_cast<std::size_t>(r - 1)] == pi)
             t_off += b_[static_cast<std::size_t>(r)] * k.row_direction[static_cast<std::size_t>(r)];
-        const Eigen::Vector3d target = geometry.points[si] - t_off + c.depth * n;
+        const Eigen::Vector3d target = geometry.points[static_cast<std::size_t>(g - t * kMaxShaftPoints)] - t_off +
+                                       c.depth * n;
         const RestPoint rp = surface_->closest_local(target, c.stick_triangle);
         if (rp.found) {
           c.stick_anchor = rp.point;
@@ -614,8 +745,12 @@ void LiverContacts::step_patch(const ToolGeometry& geometry, double jaw, double 
         }
       }
     }
+  });
+  if (count_ == 1) force[0] = s.tool_force;  // one instrument: exactly as before issue 19
+  for (int t = 0; t < count_; ++t) {
+    if (geometry_[static_cast<std::size_t>(t)] == nullptr) continue;
+    finish(t, force[static_cast<std::size_t>(t)], dir_sum[static_cast<std::size_t>(t)], out[t]);
   }
-  finish(s.tool_force, dir_sum, out);
 }
 
 }  // namespace surgsim

@@ -21,12 +21,21 @@
 // triangle (the paper's model): continuous detection against the deformed surface, each contact displacement
 // distributed over the three vertices of its triangle (alpha_v d, all three components), lambda = G_CC^-1 u*.
 //
+// Several instruments (issue 19): every tool point of every instrument is a contact of ONE constrained solve (the
+// patch rows, or the triangle model's G_CC, of all instruments together), so the mutual-influence correction couples
+// them exactly as one direct solve with every constraint would. Instrument t's force is the sum of its own points'
+// contact forces, put through the law along its own mean imposed displacement and clamped to its own device limit.
+// Each instrument may add at most its own contact_capacity new nodes to the union; the union holds at most
+// kMaxContacts (64) nodes. A node shared by two instruments' patches is reported (ContactEntry::instrument) as the
+// first one's. An instrument whose input is lost (or whose pose is not finite) drops only its own contacts.
+//
 // step() allocates nothing and never returns a non-finite force.
 #pragma once
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "liver/bucket_grid.h"
 #include "liver/contact_surface.h"
@@ -93,24 +102,50 @@ class LiverContacts {
   static constexpr double kTipRadiusEdges = 2.5;  // tip_radius 0: this many mean surface edges
   static constexpr double kDefaultDt = 1e-3;      // s, tick length when the caller gives none
 
-  /// Init (allocates). `tensors` must hold the "haptic" block; all references must outlive this object.
+  static constexpr int kMaxPoints = kMaxInstruments * kMaxShaftPoints;  // tool points of all instruments
+
+  /// Init (allocates). `tensors` must hold the "haptic" block; all references must outlive this object. `tools`:
+  /// the instruments (1..kMaxInstruments, one contact model: the first's).
+  LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors& tensors,
+                const std::vector<ToolSpec>& tools, const NonlinearLaw* law = nullptr);
+  /// One instrument.
   LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors& tensors, const ToolSpec& tool,
-                const NonlinearLaw* law = nullptr);
+                const NonlinearLaw* law = nullptr)
+      : LiverContacts(mesh, surface, tensors, std::vector<ToolSpec>{tool}, law) {}
 
-  /// One haptic tick of `dt` s for the tool at `geometry` with jaw opening `jaw` (rad). noexcept, no allocation.
-  void step(const ToolGeometry& geometry, double jaw, ContactTick& out, double dt = kDefaultDt) noexcept;
-  /// Drops every contact (e.g. input lost) and forgets the previous tool position.
+  /// One haptic tick of `dt` s for `count` instruments (at most instruments()): inputs[t].tool is instrument t's
+  /// geometry (null: its input is lost, its contacts are dropped), inputs[t].jaw its jaw opening (rad); out[t] its
+  /// force. noexcept, no allocation.
+  void step(const InstrumentInput* inputs, int count, ContactTick* out, double dt = kDefaultDt) noexcept;
+  /// One instrument (instrument 0).
+  void step(const ToolGeometry& geometry, double jaw, ContactTick& out, double dt = kDefaultDt) noexcept {
+    const InstrumentInput in{&geometry, jaw};
+    step(&in, 1, &out, dt);
+  }
+  /// Drops every contact of every instrument and forgets the previous tool positions.
   void reset() noexcept;
+  /// Drops instrument t's contacts (its input is lost) and forgets its previous position.
+  void reset_instrument(int t) noexcept;
 
+  int instruments() const { return static_cast<int>(tools_.size()); }
   const ContactSolution& solution() const { return solution_; }
+  /// The instrument whose contact holds solution node l (the first, when shared).
+  int node_instrument(int l) const { return node_instrument_[static_cast<std::size_t>(l)]; }
+  /// Solution nodes held by instrument t this tick.
+  int instrument_nodes(int t) const { return instrument_nodes_[static_cast<std::size_t>(t)]; }
   /// The constrained solve's status in the last step() (kOk when it had nothing to solve).
   ContactStatus status() const { return status_; }
-  const PointContact& point(int i) const { return points_[static_cast<std::size_t>(i)]; }
-  /// Patch of tool point i in the last step (patch model; count 0 without one).
-  const PointPatch& patch(int i) const { return patches_[static_cast<std::size_t>(i)]; }
+  /// Tool point i of instrument t (tip first).
+  const PointContact& point(int i, int t = 0) const {
+    return points_[static_cast<std::size_t>(t * kMaxShaftPoints + i)];
+  }
+  /// Patch of tool point i of instrument t in the last step (patch model; count 0 without one).
+  const PointPatch& patch(int i, int t = 0) const {
+    return patches_[static_cast<std::size_t>(t * kMaxShaftPoints + i)];
+  }
   /// Tip radius in use (m; patch model).
   double tip_radius() const { return radius_; }
-  const ToolSpec& tool() const { return tool_; }
+  const ToolSpec& tool(int t = 0) const { return tools_[static_cast<std::size_t>(t)]; }
   /// Patch nodes left out for the contact capacity since construction.
   long dropped_nodes() const { return dropped_nodes_; }
   const BucketGrid& grid() const { return grid_; }
@@ -121,32 +156,47 @@ class LiverContacts {
 
  private:
   static void deformed_cb(const void* self, int node, Eigen::Vector3d& out);
-  void step_triangle(const ToolGeometry& geometry, double jaw, ContactTick& out) noexcept;
-  void step_patch(const ToolGeometry& geometry, double jaw, double dt, ContactTick& out) noexcept;
-  void track(const ToolGeometry& geometry, int i, bool resume) noexcept;
-  void finish(Eigen::Vector3d force, const Eigen::Vector3d& dir_sum, ContactTick& out) noexcept;
+  void step_triangle(double dt, ContactTick* out) noexcept;
+  void step_patch(double dt, ContactTick* out) noexcept;
+  void track(const ToolGeometry& geometry, int i, int g, bool resume) noexcept;
+  /// Instrument t's force from its contacts: the law along dir_sum, the clamp to its device limit.
+  void finish(int t, Eigen::Vector3d force, const Eigen::Vector3d& dir_sum, ContactTick& out) noexcept;
+  /// A failed solve: every instrument's force zero, the solution empty.
+  void drop_solution() noexcept;
+  /// instrument_nodes_ from node_instrument_.
+  void count_instrument_nodes() noexcept;
 
   const TetMesh& mesh_;
   const Tensors& tensors_;
   const TensorBlock& haptic_;
-  ToolSpec tool_;
+  std::vector<ToolSpec> tools_;
+  ContactModel model_ = ContactModel::kPatch;
   const NonlinearLaw* law_;
   BucketGrid grid_;
   Superposition superposition_;
   ContactSolution solution_;
   ContactStatus status_ = ContactStatus::kOk;
-  std::array<PointContact, kMaxShaftPoints> points_{};
-  std::array<Eigen::Vector3d, kMaxShaftPoints> previous_{};
-  bool have_previous_ = false;
-  std::array<Contact, 3 * kMaxShaftPoints> requests_{};
+  // This tick's instruments (step() sets them; null geometry: not stepped this tick).
+  int count_ = 0;
+  std::array<const ToolGeometry*, kMaxInstruments> geometry_{};
+  std::array<double, kMaxInstruments> jaw_{};
+  // Tool points of all instruments: instrument t's point i is index t * kMaxShaftPoints + i.
+  std::array<PointContact, kMaxPoints> points_{};
+  std::array<Eigen::Vector3d, kMaxPoints> previous_{};
+  std::array<bool, kMaxInstruments> have_previous_{};
+  std::array<Contact, 3 * kMaxPoints> requests_{};
+  std::array<int, 3 * kMaxPoints> request_instrument_{};
+  std::array<int, kMaxContacts> node_instrument_{};      // per solution node
+  std::array<int, kMaxInstruments> instrument_nodes_{};  // solution nodes per instrument
   // --- patch model ---
   double radius_ = 0;
   std::unique_ptr<ContactSurface> surface_;
   std::unique_ptr<PatchSolver> patch_solver_;
   std::unique_ptr<PatchConstraints> constraints_;
-  std::array<PointPatch, kMaxShaftPoints> patches_{};
-  std::array<int, kMaxShaftPoints> patch_of_point_{};  // index in constraints_ (-1: none)
-  std::array<int, kMaxShaftPoints> kind_{};            // 0 none, 1 slide, 2 stick, 3 grasp, 4 fading grasp
+  std::array<PointPatch, kMaxPoints> patches_{};
+  std::array<int, kMaxPoints> patch_of_point_{};  // index in constraints_ (-1: none)
+  std::array<int, kMaxPoints> kind_{};            // 0 none, 1 slide, 2 stick, 3 grasp, 4 fading grasp
+  std::array<int, kMaxContacts> union_instrument_{};  // instrument that added union node u
   std::array<double, kMaxPatchRows> b_{}, mu_{};
   std::array<unsigned char, kMaxPatchRows> enabled_{};
   std::array<Eigen::Vector3d, kMaxContacts> lambda_{};

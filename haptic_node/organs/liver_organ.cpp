@@ -15,22 +15,20 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
   tensors_ = load_liver_tensors(setup, mesh_, scene.material, {"haptic"}, progress, nullptr, scene.file);
   tensor_hash_ = setup.key.combined();
   law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene.nonlinear, scene.material));
-  contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene.tool,
+  contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene.tools,
                                               law_->identity() ? nullptr : law_.get());
 }
 
-void LiverOrgan::step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept {
-  if (tool != nullptr) {
-    contacts_->step(*tool, jaw, out, dt);
-  } else {
-    contacts_->reset();  // input lost: every contact dropped, the force zero
-  }
+void LiverOrgan::step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept {
+  // An instrument whose input is lost drops its own contacts and gets zero force; the others are solved as usual.
+  contacts_->step(inputs, count, out, dt);
 }
 
 ContactEntry LiverOrgan::contact_entry(int l) const noexcept {
   const ContactSolution& s = contacts_->solution();
   ContactEntry e;
   e.node = s.nodes[static_cast<std::size_t>(l)];
+  e.instrument = contacts_->node_instrument(l);
   e.lambda = s.lambda[static_cast<std::size_t>(l)];
   e.u_tilde = contacts_->corrected(l);
   return e;

@@ -18,8 +18,10 @@ class LiverOrgan final : public HapticOrgan {
   LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress);
 
   const char* model_name() const override { return "liver"; }
-  void step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept override;
-  int contacts(const ContactTick&) const noexcept override { return contacts_->solution().count; }
+  using HapticOrgan::step;
+  void step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept override;
+  int contacts() const noexcept override { return contacts_->solution().count; }
+  int instrument_contacts(int i) const noexcept override { return contacts_->instrument_nodes(i); }
   int contact_entries() const noexcept override { return contacts_->solution().count; }
   ContactEntry contact_entry(int l) const noexcept override;
   std::uint64_t mesh_hash() const override { return mesh_hash_; }
