@@ -78,18 +78,18 @@ TEST(SceneLoad, MinimalSceneGetsHeaderDefaults) {
   EXPECT_TRUE(s.fixed.empty());
   EXPECT_FALSE(s.nonlinear.enabled());
   EXPECT_EQ(s.nonlinear.degree, NonlinearSpec().degree);
-  EXPECT_EQ(s.tool.trocar, tool.trocar);
-  EXPECT_EQ(s.tool.axis, tool.axis);
-  EXPECT_EQ(s.tool.shaft_length, tool.shaft_length);
-  EXPECT_EQ(s.tool.shaft_radius, tool.shaft_radius);
-  EXPECT_EQ(s.tool.shaft_points, tool.shaft_points);
-  EXPECT_EQ(s.tool.shaft_spacing, tool.shaft_spacing);
-  EXPECT_EQ(s.tool.jaw_length, tool.jaw_length);
-  EXPECT_EQ(s.tool.force_limit, tool.force_limit);
-  EXPECT_EQ(s.tool.contact_capacity, tool.contact_capacity);
-  EXPECT_EQ(s.tool.contact_model, ContactModel::kPatch);  // issue 14: the smooth patch contact by default
-  EXPECT_EQ(s.tool.tip_radius, 0.0);                     // 0: 2.5 mean surface edges
-  EXPECT_EQ(s.tool.friction, 0.0);                       // frictionless
+  EXPECT_EQ(s.tools[0].trocar, tool.trocar);
+  EXPECT_EQ(s.tools[0].axis, tool.axis);
+  EXPECT_EQ(s.tools[0].shaft_length, tool.shaft_length);
+  EXPECT_EQ(s.tools[0].shaft_radius, tool.shaft_radius);
+  EXPECT_EQ(s.tools[0].shaft_points, tool.shaft_points);
+  EXPECT_EQ(s.tools[0].shaft_spacing, tool.shaft_spacing);
+  EXPECT_EQ(s.tools[0].jaw_length, tool.jaw_length);
+  EXPECT_EQ(s.tools[0].force_limit, tool.force_limit);
+  EXPECT_EQ(s.tools[0].contact_capacity, tool.contact_capacity);
+  EXPECT_EQ(s.tools[0].contact_model, ContactModel::kPatch);  // issue 14: the smooth patch contact by default
+  EXPECT_EQ(s.tools[0].tip_radius, 0.0);                     // 0: 2.5 mean surface edges
+  EXPECT_EQ(s.tools[0].friction, 0.0);                       // frictionless
   EXPECT_EQ(s.haptic.rate_hz, haptic.rate_hz);
   EXPECT_EQ(s.haptic.passivity, haptic.passivity);
   EXPECT_TRUE(s.haptic.passivity);  // the passivity controller is on unless a scene turns it off
@@ -171,13 +171,13 @@ trajectory: ../traj/poke.csv
   EXPECT_EQ(s.nonlinear.degree, 8);
   // Normals and axes come back normalized.
   EXPECT_NEAR((s.fixed.plane_normal - Eigen::Vector3d(0, 0, -1)).norm(), 0.0, 1e-15);
-  EXPECT_NEAR((s.tool.axis - Eigen::Vector3d(0, 0.6, -0.8)).norm(), 0.0, 1e-15);
+  EXPECT_NEAR((s.tools[0].axis - Eigen::Vector3d(0, 0.6, -0.8)).norm(), 0.0, 1e-15);
   EXPECT_NEAR((s.visual.camera.up - Eigen::Vector3d(0, 0, 1)).norm(), 0.0, 1e-15);
-  EXPECT_EQ(s.tool.shaft_points, 5);
-  EXPECT_EQ(s.tool.contact_capacity, 32);
-  EXPECT_EQ(s.tool.contact_model, ContactModel::kTriangle);
-  EXPECT_EQ(s.tool.tip_radius, 0.004);
-  EXPECT_EQ(s.tool.friction, 0.25);
+  EXPECT_EQ(s.tools[0].shaft_points, 5);
+  EXPECT_EQ(s.tools[0].contact_capacity, 32);
+  EXPECT_EQ(s.tools[0].contact_model, ContactModel::kTriangle);
+  EXPECT_EQ(s.tools[0].tip_radius, 0.004);
+  EXPECT_EQ(s.tools[0].friction, 0.25);
   EXPECT_EQ(s.haptic.rate_hz, 1000.0);
   EXPECT_FALSE(s.haptic.passivity);
   EXPECT_EQ(s.haptic.coupling_damping, 1.5);
@@ -211,7 +211,7 @@ TEST(SceneLoad, IntestineNeedsNoMesh) {
   const intestine::IntestineParams defaults;
   EXPECT_EQ(s.intestine.params.columns, defaults.columns);
   EXPECT_EQ(s.intestine.params.rows, defaults.rows);
-  EXPECT_EQ(s.intestine.params.probe_force_limit, s.tool.force_limit);
+  EXPECT_EQ(s.intestine.params.probe_force_limit, s.tools[0].force_limit);
   EXPECT_EQ(s.visual.target_fps, 0.0);  // = the visual rate
 }
 
@@ -265,6 +265,64 @@ TEST(SceneLoad, IntestineKeysFillTheModelParameters) {
   EXPECT_NO_THROW(intestine::IntestineModel model(p));  // what the scene says, the model accepts
 }
 
+// Several instruments (issue 19): a `tools:` list, each with its own settings; the single `tool:` key is one
+// instrument named "tool".
+TEST(SceneTools, ListGivesEachInstrumentItsOwnSettings) {
+  const fs::path dir = test_dir();
+  const Scene s = load_scene(write(dir / "two.yaml", std::string(kMinimal) + R"(tools:
+  - name: grasper
+    trocar: [-0.05, 0.04, 0.18]
+    axis: [0.3, -0.2, -1]
+    force_limit: 8
+    friction: 0.3
+    contact_capacity: 32
+    jaw_length: 0.015
+  - name: probe_2
+    trocar: [0.08, -0.02, 0.19]
+    axis: [0, 0, -2]
+    force_limit: 5
+    contact_capacity: 24
+    tip_radius: 0.003
+)"));
+  ASSERT_EQ(s.tools.size(), 2u);
+  const ToolSpec defaults;
+  const ToolSpec& g = s.tools[0];
+  const ToolSpec& p = s.tools[1];
+  EXPECT_EQ(g.name, "grasper");
+  EXPECT_EQ(p.name, "probe_2");
+  EXPECT_EQ(g.trocar, Eigen::Vector3d(-0.05, 0.04, 0.18));
+  EXPECT_EQ(p.trocar, Eigen::Vector3d(0.08, -0.02, 0.19));
+  EXPECT_NEAR((g.axis - Eigen::Vector3d(0.3, -0.2, -1).normalized()).norm(), 0.0, 1e-15);
+  EXPECT_NEAR((p.axis - Eigen::Vector3d(0, 0, -1)).norm(), 0.0, 1e-15);
+  EXPECT_EQ(g.force_limit, 8.0);
+  EXPECT_EQ(p.force_limit, 5.0);
+  EXPECT_EQ(g.friction, 0.3);
+  EXPECT_EQ(p.friction, defaults.friction);
+  EXPECT_EQ(g.contact_capacity, 32);
+  EXPECT_EQ(p.contact_capacity, 24);
+  EXPECT_EQ(g.jaw_length, 0.015);
+  EXPECT_EQ(p.jaw_length, defaults.jaw_length);
+  EXPECT_EQ(g.tip_radius, defaults.tip_radius);
+  EXPECT_EQ(p.tip_radius, 0.003);
+  EXPECT_EQ(g.contact_model, ContactModel::kPatch);
+  EXPECT_EQ(p.contact_model, ContactModel::kPatch);
+}
+
+TEST(SceneTools, SingleToolKeyIsOneInstrumentNamedTool) {
+  const fs::path dir = test_dir();
+  const Scene none = load_scene(write(dir / "none.yaml", kMinimal));
+  ASSERT_EQ(none.tools.size(), 1u);
+  EXPECT_EQ(none.tools[0].name, "tool");
+  const Scene one = load_scene(write(dir / "one.yaml", std::string(kMinimal) + "tool: {trocar: [0.01, 0.02, 0.3]}\n"));
+  ASSERT_EQ(one.tools.size(), 1u);
+  EXPECT_EQ(one.tools[0].name, "tool");
+  EXPECT_EQ(one.tools[0].trocar, Eigen::Vector3d(0.01, 0.02, 0.3));
+  // A one-entry list is one instrument with its own name.
+  const Scene listed = load_scene(write(dir / "listed.yaml", std::string(kMinimal) + "tools: [{name: hook}]\n"));
+  ASSERT_EQ(listed.tools.size(), 1u);
+  EXPECT_EQ(listed.tools[0].name, "hook");
+}
+
 TEST(FixedRegion, FixesListedNodesBoxesAndPlaneSide) {
   FixedRegion f;
   EXPECT_TRUE(f.empty());
@@ -297,7 +355,7 @@ TEST(ShippedScenes, AllThreeLoadAndMatchTheirGeometry) {
   EXPECT_TRUE(liver.fixed.has_plane);
   EXPECT_TRUE(liver.fixed.fixes(0, Eigen::Vector3d(0, 0, -0.03)));
   EXPECT_FALSE(liver.fixed.fixes(0, Eigen::Vector3d(0, 0, 0.0)));
-  EXPECT_EQ(liver.tool.trocar, Eigen::Vector3d(0.03, 0, 0.2));
+  EXPECT_EQ(liver.tools[0].trocar, Eigen::Vector3d(0.03, 0, 0.2));
   EXPECT_GE(liver.haptic.rate_hz, 300.0);
 
   const Scene plate = load_scene((cfg / "plate.yaml").string());
@@ -311,7 +369,7 @@ TEST(ShippedScenes, AllThreeLoadAndMatchTheirGeometry) {
   }
   EXPECT_FALSE(plate.fixed.fixes(-1, Eigen::Vector3d(0, -0.1, 0)));
   EXPECT_FALSE(plate.fixed.fixes(-1, Eigen::Vector3d(0, 0, 0.005)));
-  EXPECT_EQ(plate.tool.trocar, Eigen::Vector3d(0.04, 0.03, 0.15));
+  EXPECT_EQ(plate.tools[0].trocar, Eigen::Vector3d(0.04, 0.03, 0.15));
 
   const Scene cyl = load_scene((cfg / "cylinder.yaml").string());
   EXPECT_EQ(cyl.mesh.generate, "cylinder");
@@ -344,7 +402,7 @@ TEST(ShippedScenes, IntestineLoadsAndItsTrajectoriesReachTheFolds) {
   for (const char* name : {"intestine_push.csv", "intestine_lift.csv"}) {
     SCOPED_TRACE(name);
     const Trajectory traj = Trajectory::load((fs::path(shipped_config_dir()) / "trajectories" / name).string());
-    const auto tip = [&](const Pose5& p) { return tool_geometry(s.tool, p).tip; };
+    const auto tip = [&](const Pose5& p) { return tool_geometry(s.tools[0], p).tip; };
     const Eigen::Vector3d first = tip(traj.samples().front().pose);
     EXPECT_GT(first.y(), 0.13 + s.intestine.params.intestine_radius);  // starts clear of the folds
     double deepest_y = 1e9;
@@ -367,14 +425,14 @@ TEST(ShippedScenes, TrajectoriesReachTheStatedDepth) {
     double deepest = 1e9;
     double prev = traj.samples().front().pose.insertion;
     for (const auto& smp : traj.samples()) {
-      const double tip_z = s.tool.trocar.z() + smp.pose.insertion * s.tool.axis.z();
+      const double tip_z = s.tools[0].trocar.z() + smp.pose.insertion * s.tools[0].axis.z();
       deepest = std::min(deepest, tip_z);
       EXPECT_LT(std::abs(smp.pose.insertion - prev), 0.001) << "jump at t = " << smp.t;  // smooth: < 1 mm / sample
       prev = smp.pose.insertion;
     }
     const auto& first = traj.samples().front().pose;
     const auto& last = traj.samples().back().pose;
-    EXPECT_GT(s.tool.trocar.z() - first.insertion, c.top_z + 0.01);  // starts clear of the surface
+    EXPECT_GT(s.tools[0].trocar.z() - first.insertion, c.top_z + 0.01);  // starts clear of the surface
     EXPECT_EQ(first.insertion, last.insertion);                      // retracts to where it started
     EXPECT_NEAR(deepest, c.top_z - c.depth, 1e-9);
   }
@@ -413,6 +471,25 @@ TEST(SceneHash, IgnoresVisualSettingsButNotPhysics) {
                                  "name: mini\nmesh: {generate: liver, target_nodes: 1400}\n"
                                  "material: {young_modulus: 3000}\n"))
                     .hash());
+}
+
+TEST(SceneHash, EveryInstrumentEntersTheHash) {
+  const fs::path dir = test_dir();
+  const std::string base = std::string(kMinimal) + "material: {young_modulus: 3000}\n";
+  const std::string a = "{name: a, trocar: [0, 0, 0.2]}";
+  const std::string b = "{name: b, trocar: [0.05, 0, 0.2]}";
+  const std::uint64_t one = load_scene(write(dir / "one.yaml", base + "tools: [" + a + "]\n")).hash();
+  const std::uint64_t two = load_scene(write(dir / "two.yaml", base + "tools: [" + a + ", " + b + "]\n")).hash();
+  EXPECT_NE(one, two);
+  // One instrument hashes as the single `tool:` key does (its name aside): scenes from before issue 19 keep theirs.
+  EXPECT_EQ(one, load_scene(write(dir / "tool.yaml", base + "tool: {trocar: [0, 0, 0.2]}\n")).hash());
+  // The second instrument's settings, its name and the order count.
+  EXPECT_NE(two, load_scene(write(dir / "f.yaml", base + "tools: [" + a + ", {name: b, trocar: [0.05, 0, 0.2], "
+                                                   "force_limit: 4}]\n"))
+                     .hash());
+  EXPECT_NE(two, load_scene(write(dir / "n.yaml", base + "tools: [" + a + ", {name: c, trocar: [0.05, 0, 0.2]}]\n"))
+                     .hash());
+  EXPECT_NE(two, load_scene(write(dir / "o.yaml", base + "tools: [" + b + ", " + a + "]\n")).hash());
 }
 
 TEST(SceneHash, IntestineParametersEnterTheHash) {
@@ -569,6 +646,28 @@ INSTANTIATE_TEST_SUITE_P(
         ErrorCase{"TipRadiusHigh", kHead + "tool: {tip_radius: 1}\n", 3, "key 'tool.tip_radius'", "out of range"},
         ErrorCase{"FrictionNegative", kHead + "tool: {friction: -0.1}\n", 3, "key 'tool.friction'", "[0, 10]"},
         ErrorCase{"FrictionText", kHead + "tool: {friction: sticky}\n", 3, "key 'tool.friction'"},
+        // Several instruments
+        ErrorCase{"ToolAndTools", kHead + "tool: {force_limit: 4}\ntools: [{name: a}]\n", 4, "key 'tools'",
+                  "given together with 'tool' (line 3)"},
+        ErrorCase{"ToolsEmpty", kHead + "tools: []\n", 3, "key 'tools': lists 0 instruments", "a list of 1..4"},
+        ErrorCase{"ToolsFive", kHead + "tools: [{name: a}, {name: b}, {name: c}, {name: d}, {name: e}]\n", 3,
+                  "key 'tools': lists 5 instruments", "a list of 1..4"},
+        ErrorCase{"ToolsNotAList", kHead + "tools: {name: a}\n", 3, "key 'tools': expected a list"},
+        ErrorCase{"ToolsMissingName", kHead + "tools:\n  - {name: a}\n  - {force_limit: 4}\n", 5,
+                  "key 'tools[1].name': missing", "needs a name"},
+        ErrorCase{"ToolsDuplicateName", kHead + "tools:\n  - {name: a}\n  - name: a\n", 5, "key 'tools[1].name'",
+                  "'a' is also instrument 0"},
+        ErrorCase{"ToolsBadNameCharacter", kHead + "tools:\n  - name: left.hand\n", 4, "key 'tools[0].name'",
+                  "has the character '.'"},
+        ErrorCase{"ToolBadNameCharacter", kHead + "tool: {name: 'a b'}\n", 3, "key 'tool.name'",
+                  "has the character ' '"},
+        ErrorCase{"ToolsDifferentContactModel",
+                  kHead + "tools:\n  - {name: a}\n  - name: b\n    contact_model: triangle\n", 6,
+                  "key 'tools[1].contact_model'", "same contact_model"},
+        ErrorCase{"ToolsUnknownKey", kHead + "tools:\n  - {name: a, forcelimit: 3}\n", 4, "key 'tools[0].forcelimit'",
+                  "did you mean 'force_limit'"},
+        ErrorCase{"ToolsBadValue", kHead + "tools:\n  - {name: a}\n  - {name: b, force_limit: 0}\n", 5,
+                  "key 'tools[1].force_limit'", "out of range"},
         ErrorCase{"ShaftLength", kHead + "tool: {shaft_length: 0}\n", 3, "key 'tool.shaft_length'", "out of range"},
         ErrorCase{"ShaftRadius", kHead + "tool: {shaft_radius: -1}\n", 3, "key 'tool.shaft_radius'", "out of range"},
         ErrorCase{"ShaftSpacing", kHead + "tool: {shaft_spacing: 0}\n", 3, "key 'tool.shaft_spacing'", "out of range"},
