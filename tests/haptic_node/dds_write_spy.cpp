@@ -48,6 +48,7 @@ bool DataWriter::write(void* data) {
     if (w.topic == surgsim::dds::kForceFeedbackTopic) {
       const auto* f = static_cast<const surgsim::msg::ForceFeedback*>(data);
       w.seq = f->seq();
+      w.instrument = static_cast<int>(f->instrument());
       w.force[0] = f->force().x();
       w.force[1] = f->force().y();
       w.force[2] = f->force().z();

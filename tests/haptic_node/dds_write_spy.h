@@ -14,6 +14,7 @@ struct DdsWrite {
   std::string topic;
   std::uint64_t seq = 0;        // ForceFeedback and ContactFrame
   double force[3] = {0, 0, 0};  // ForceFeedback
+  int instrument = 0;            // ForceFeedback's key
   std::uint32_t flags = 0;      // ForceFeedback and ContactFrame
 };
 

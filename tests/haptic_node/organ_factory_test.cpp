@@ -38,7 +38,7 @@ TEST(OrganFactory, LiverBuildsTensorsAndContactsWithoutTheTool) {
   // Input lost (no tool): contacts dropped, zero force.
   ContactTick out;
   organ->step(nullptr, 0.0, 1e-3, out);
-  EXPECT_EQ(organ->contacts(out), 0);
+  EXPECT_EQ(organ->contacts(), 0);
   EXPECT_TRUE(out.device_force.isZero(0));
 }
 

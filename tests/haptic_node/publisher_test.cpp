@@ -26,19 +26,20 @@ struct Event {
   std::thread::id thread;
   int points;
   double first_point;
+  int instrument = 0;
 };
 
 class RecordingSink : public TickSink {
  public:
-  void write_force(std::uint64_t seq, std::uint64_t, const Eigen::Vector3d& force, bool, std::uint32_t flags) noexcept
-      override {
+  void write_force(int instrument, std::uint64_t seq, std::uint64_t, const Eigen::Vector3d& force, bool,
+                   std::uint32_t flags) noexcept override {
     gate();
     std::lock_guard<std::mutex> lock(mutex_);
-    events_.push_back({'F', seq, force, flags, std::this_thread::get_id(), 0, 0});
+    events_.push_back({'F', seq, force, flags, std::this_thread::get_id(), 0, 0, instrument});
   }
   void write_frame(const TickRecord& r, std::uint64_t) noexcept override {
     std::lock_guard<std::mutex> lock(mutex_);
-    events_.push_back({'C', r.seq, r.force, r.flags, std::this_thread::get_id(), r.organ.point_count,
+    events_.push_back({'C', r.seq, r.instruments[0].force, r.flags, std::this_thread::get_id(), r.organ.point_count,
                        r.organ.point_count > 0 ? r.organ.points[0] : 0.0});
   }
   /// The next write_force blocks until release() (and signals blocked()).
@@ -82,14 +83,19 @@ class RecordingSink : public TickSink {
 };
 
 void push(Publisher& p, std::uint64_t seq, double fx, std::uint64_t due_ns = 0, std::uint64_t period_ns = 0,
-          bool last = false) {
+          bool last = false, int instruments = 1) {
   TickRecord& r = p.begin();
   r.seq = seq;
   r.sim_time = static_cast<double>(seq) * 1e-3;
   r.due_ns = due_ns;
   r.period_ns = period_ns;
-  r.device_force = Eigen::Vector3d(fx, 0, 0);
-  r.force = r.device_force;
+  r.instrument_count = instruments;
+  for (int i = 0; i < instruments; ++i) {  // instrument i pushes with (i + 1) fx
+    InstrumentRecord& ir = r.instruments[static_cast<std::size_t>(i)];
+    ir.device_force = Eigen::Vector3d((i + 1) * fx, 0, 0);
+    ir.force = ir.device_force;
+    ir.flags = 0;
+  }
   r.flags = 0;
   r.last_tick = last;
   for (int i = 0; i < r.organ.point_capacity; ++i) {
@@ -286,6 +292,47 @@ TEST(Publisher, NoHoldAfterTheLastTick) {
   std::string order;
   for (const auto& e : sink.events()) order += e.kind + std::to_string(e.seq) + " ";
   EXPECT_EQ(order, "F0 C0 F1 ");
+}
+
+// Issue 19: each instrument's force goes out as its own ForceFeedback (its key), in instrument order before the frame;
+// an overrun holds and fades every instrument's force, and the final zero releases every device.
+TEST(Publisher, EveryInstrumentGetsItsOwnForceHoldAndFinalZero) {
+  RecordingSink sink;
+  PublisherOptions o;
+  o.lossless = true;
+  {
+    Publisher p(sink, o);
+    push(p, 0, 1.0, 0, 0, false, 2);
+    push(p, 1, 3.0, 0, 0, true, 2);
+    p.finish();
+  }
+  std::string order;
+  for (const auto& e : sink.events())
+    order += e.kind + std::to_string(e.seq) + (e.kind == 'F' ? "/" + std::to_string(e.instrument) : "") + " ";
+  EXPECT_EQ(order, "F0/0 F0/1 C0 F1/0 F1/1 C1 F2/0 F2/1 ");
+  const auto ev = sink.events();
+  EXPECT_EQ(ev[0].force.x(), 1.0);
+  EXPECT_EQ(ev[1].force.x(), 2.0) << "instrument 1's own force";
+  EXPECT_EQ(ev[4].force.x(), 6.0);
+  EXPECT_EQ(ev[6].force, Eigen::Vector3d::Zero());
+  EXPECT_EQ(ev[7].force, Eigen::Vector3d::Zero());
+  EXPECT_NE(ev[7].flags & kFlagHeld, 0u);
+
+  RecordingSink late;
+  PublisherOptions f;
+  f.fade_ns = 10'000'000;
+  Publisher q(late, f);
+  push(q, 4, 2.0, monotonic_ns(), 2'000'000, false, 2);
+  for (int i = 0; i < 2000 && q.overrun_faded_to_zero() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_EQ(q.overrun_faded_to_zero(), 1u);
+  q.finish();
+  std::vector<double> held[2];
+  for (const auto& e : late.events())
+    if (e.kind == 'F' && (e.flags & kFlagHeld) != 0 && e.seq == 4) held[e.instrument].push_back(e.force.x());
+  ASSERT_EQ(held[0].size(), q.overrun_hold_ticks());
+  ASSERT_EQ(held[1].size(), held[0].size());
+  for (std::size_t i = 0; i < held[0].size(); ++i) EXPECT_EQ(held[1][i], 2 * held[0][i]) << "step " << i;
+  EXPECT_EQ(held[1].back(), 0.0);
 }
 
 }  // namespace

@@ -61,7 +61,9 @@ class Recorder : public DataReaderListener {
     if (topic == dds::kContactFrameTopic) {
       while (reader->take_next_sample(&frame_, &info) == ReturnCode_t::RETCODE_OK) {
         if (info.valid_data) {
-          frames.push_back({frame_.seq(), frame_.stamp_ns(), frame_.sim_time(), vec(frame_.tip()), vec(frame_.force()), frame_.flags()});
+          const msg::InstrumentState& in = frame_.instruments().at(0);  // the scene's one instrument
+          frames.push_back({frame_.seq(), frame_.stamp_ns(), frame_.sim_time(), vec(in.tip()), vec(in.force()),
+                            frame_.flags()});
         }
       }
     } else if (topic == dds::kForceFeedbackTopic) {
@@ -78,7 +80,7 @@ class Recorder : public DataReaderListener {
         bool finite = !body_.positions().empty();
         for (const auto& p : body_.positions()) finite = finite && std::isfinite(p.x()) && std::isfinite(p.y()) &&
                                                          std::isfinite(p.z());
-        bodies.push_back({body_.seq(), finite, vec(body_.tip())});
+        bodies.push_back({body_.seq(), finite, vec(body_.instruments().at(0).tip())});
       }
     }
   }
