@@ -189,7 +189,7 @@ IntestineState::IntestineState(const IntestineModel& model, std::uint64_t seed)
       work_(model.mass_spring()),
       detector_(model.topology(), model.params().detection),
       contacts_(model.params().contact_capacity),
-      probe_contacts_(static_cast<std::size_t>(model.params().probe_capacity)),
+      probe_contacts_(static_cast<std::size_t>(kMaxProbes) * static_cast<std::size_t>(model.params().probe_capacity)),
       x_entry_(model.rest()),
       v_entry_(Eigen::Matrix3Xd::Zero(3, model.node_count())) {
   reset(model, seed);
@@ -205,23 +205,18 @@ void IntestineState::reset(const IntestineModel& model, std::uint64_t seed) noex
   detector_.reset(seed != 0 ? seed : model.params().detection.seed);
 }
 
-void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
-                   StepReport& report) noexcept {
-  report = StepReport{};
-  const IntestineParams& p = model.params();
-  if (!(dt > 0) || !std::isfinite(dt)) {
-    report.status = StepStatus::kBadInput;
-    return;
-  }
-  state.x_entry_ = state.x;
-  state.v_entry_ = state.v;
+namespace {
 
-  // Probe contacts (penalty, at the positions on entry): intestine segments as capsules, mesentery triangles as
-  // slabs of half the thickness. The force on the tool is minus the sum of the forces on the body.
+// One probe's penalty contacts with the body at positions x (on step entry): intestine segments as capsules, mesentery
+// triangles as slabs of half the thickness, written to out[0..capacity) (more are counted in r.overflow). Its force
+// on the tool is minus the sum of the forces on the body, clamped to `limit`. Returns the contacts written.
+int touch(const IntestineModel& model, const Eigen::Matrix3Xd& x, const Probe& probe, double limit,
+          PenaltyContact* out, int capacity, ProbeReport& r) noexcept {
+  const IntestineParams& p = model.params();
   int np = 0;
   Eigen::Vector3d body_force = Eigen::Vector3d::Zero();
   const bool probe_ok = probe.center.allFinite() && std::isfinite(probe.radius) && probe.radius >= 0;
-  if (probe.active && !probe_ok) report.probe_rejected = true;
+  if (probe.active && !probe_ok) r.rejected = true;
   if (probe.active && probe_ok && p.probe_stiffness > 0) {
     const CollisionTopology& topo = model.topology();
     const Eigen::Vector3d& c = probe.center;
@@ -230,11 +225,11 @@ void step_dynamics(const IntestineModel& model, IntestineState& state, const Pro
       const double dist = d.norm();
       const double depth = reach - dist;
       if (!(depth > 0)) return;
-      if (np >= p.probe_capacity) {
-        ++report.probe_overflow;
+      if (np >= capacity) {
+        ++r.overflow;
         return;
       }
-      PenaltyContact& pc = state.probe_contacts_[static_cast<std::size_t>(np++)];
+      PenaltyContact& pc = out[np++];
       pc.count = count;
       for (int k = 0; k < 3; ++k) {
         pc.nodes[static_cast<std::size_t>(k)] = k < count ? nodes[k] : -1;
@@ -250,7 +245,7 @@ void step_dynamics(const IntestineModel& model, IntestineState& state, const Pro
     const double reach_m = probe.radius + 0.5 * p.mesentery_thickness;
     for (int s = 0; s < topo.segments(); ++s) {
       const int nodes[2] = {topo.node(0, s), topo.node(0, s + 1)};
-      const Eigen::Vector3d a = state.x.col(nodes[0]), b = state.x.col(nodes[1]);
+      const Eigen::Vector3d a = x.col(nodes[0]), b = x.col(nodes[1]);
       if (((a.cwiseMin(b) - c).array() > reach_i).any() || ((c - a.cwiseMax(b)).array() > reach_i).any()) continue;
       const Eigen::Vector3d ab = b - a;
       const double t = std::clamp(ab.dot(c - a) / std::max(ab.squaredNorm(), 1e-18), 0.0, 1.0);
@@ -260,7 +255,7 @@ void step_dynamics(const IntestineModel& model, IntestineState& state, const Pro
     for (int tri = 0; tri < 2 * topo.cells(); ++tri) {
       int nodes[3];
       topo.triangle(tri, nodes);
-      const Eigen::Vector3d A = state.x.col(nodes[0]), B = state.x.col(nodes[1]), C = state.x.col(nodes[2]);
+      const Eigen::Vector3d A = x.col(nodes[0]), B = x.col(nodes[1]), C = x.col(nodes[2]);
       if (((A.cwiseMin(B).cwiseMin(C) - c).array() > reach_m).any() ||
           ((c - A.cwiseMax(B).cwiseMax(C)).array() > reach_m).any()) {
         continue;
@@ -271,17 +266,56 @@ void step_dynamics(const IntestineModel& model, IntestineState& state, const Pro
       add(3, nodes, w, q, reach_m);
     }
   }
-  report.probe_contacts = np;
+  r.contacts = np;
   const Eigen::Vector3d tool = -body_force;
-  report.probe_force_raw = tool.norm();
+  r.force_raw = tool.norm();
   if (!tool.allFinite()) {
-    report.probe_force.setZero();
-  } else if (report.probe_force_raw > p.probe_force_limit) {
-    report.probe_force = tool * (p.probe_force_limit / report.probe_force_raw);
-    report.probe_saturated = true;
+    r.force.setZero();
+  } else if (r.force_raw > limit) {
+    r.force = tool * (limit / r.force_raw);
+    r.saturated = true;
   } else {
-    report.probe_force = tool;
+    r.force = tool;
   }
+  return np;
+}
+
+// The one-probe fields of the report: probe 0's values (zero without probes).
+void mirror_probe0(StepReport& report) noexcept {
+  const ProbeReport& r0 = report.probes[0];
+  report.probe_rejected = r0.rejected;
+  report.probe_contacts = r0.contacts;
+  report.probe_overflow = r0.overflow;
+  report.probe_force = r0.force;
+  report.probe_force_raw = r0.force_raw;
+  report.probe_saturated = r0.saturated;
+}
+
+}  // namespace
+
+void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
+                   StepReport& report) noexcept {
+  report = StepReport{};
+  const IntestineParams& p = model.params();
+  if (!(dt > 0) || !std::isfinite(dt) || probe_count < 0 || probe_count > kMaxProbes ||
+      (probes == nullptr && probe_count > 0)) {
+    report.status = StepStatus::kBadInput;
+    return;
+  }
+  state.x_entry_ = state.x;
+  state.v_entry_ = state.v;
+
+  // Every probe's contacts (at the positions on entry), one after the other in the preallocated storage, each probe
+  // with its own capacity and its own force limit.
+  report.probe_count = probe_count;
+  int np = 0;
+  for (int i = 0; i < probe_count; ++i) {
+    const Probe& probe = probes[i];
+    const double limit = probe.force_limit > 0 ? probe.force_limit : p.probe_force_limit;
+    np += touch(model, state.x, probe, limit, state.probe_contacts_.data() + np, p.probe_capacity,
+                report.probes[static_cast<std::size_t>(i)]);
+  }
+  mirror_probe0(report);
 
   const IntegrateStatus s =
       integrate(model.mass_spring(), p.integrator, state.probe_contacts_.data(), np, dt, state.x, state.v, state.work_);
@@ -303,9 +337,9 @@ void step_response(const IntestineModel& model, IntestineState& state, StepRepor
           report.response);
 }
 
-void step(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
+void step(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
           StepReport& report) noexcept {
-  step_dynamics(model, state, probe, dt, report);
+  step_dynamics(model, state, probes, probe_count, dt, report);
   step_detection(model, state, report);
   step_response(model, state, report);
   if (report.status == StepStatus::kOk && (!state.x.allFinite() || !state.v.allFinite())) {
@@ -319,7 +353,8 @@ void step(const IntestineModel& model, IntestineState& state, const Probe& probe
   }
   if (report.status != StepStatus::kOk) {
     ++state.faults;
-    report.probe_force.setZero();  // never send a force computed from a refused state
+    for (ProbeReport& r : report.probes) r.force.setZero();  // never send a force computed from a refused state
+    report.probe_force.setZero();
     return;
   }
   state.time += dt;

@@ -10,10 +10,13 @@
 //
 // Callers:
 //   haptic node (1 kHz): IntestineModel once (init; throws surgsim::Error on bad parameters), one IntestineState
-//     (init; allocates everything), then per tick
-//       Probe probe{true, tool_tip, radius};
-//       intestine::step(model, state, probe, dt, report);        // noexcept, allocates nothing
-//       force feedback  = report.probe_force (N, on the tool, clamped to probe_force_limit; report.probe_saturated)
+//     (init; allocates everything), then per tick one probe per instrument (issue 19, at most kMaxProbes)
+//       Probe probes[n] = {{true, tip_i, radius, force_limit_i}, ...};   // active = false: instrument i's input lost
+//       intestine::step(model, state, probes, n, dt, report);    // noexcept, allocates nothing
+//       force feedback i = report.probes[i].force (N, on instrument i, clamped to its force_limit; .saturated)
+//     Every probe has its own penalty contacts (up to probe_capacity each), force, clamp and counts; all of them push
+//     the same body in one integration step. The one-probe step(model, state, probe, dt, report) is the same with
+//     n = 1, and report.probe_force, probe_contacts, ... repeat probes[0].
 //       BodyState       = state.positions(), state.point_count() points (x, y, z), <= kMaxIntestineNodes
 //       faults          = report.status != StepStatus::kOk (the state was restored, nothing non-finite escapes)
 //     Cost on this machine (intestine_bench, default parameters, n = 10): p50 about 0.4 ms, thread-CPU p99 about
@@ -28,6 +31,7 @@
 //     that the brute-force reference can look at the same positions as the stochastic detector.
 #pragma once
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -39,6 +43,8 @@ namespace surgsim::intestine {
 
 /// Most nodes a model may have: the bound of a BodyState's positions.
 constexpr int kMaxIntestineNodes = 2048;
+/// Most probes one step takes: one per instrument of the scene (kMaxInstruments of tool/trajectory.h).
+constexpr int kMaxProbes = 4;
 
 struct IntestineParams {
   // Rest shape.
@@ -67,8 +73,8 @@ struct IntestineParams {
 
   // Probe (the tool tip as a sphere).
   double probe_stiffness = 300;      // N/m, penalty stiffness of the probe contact
-  double probe_force_limit = 8.0;    // N, the reported force on the tool is clamped to this
-  int probe_capacity = 32;           // simultaneous probe contacts (elements), more are counted and ignored
+  double probe_force_limit = 8.0;    // N, a probe's force is clamped to this unless the probe gives its own limit
+  int probe_capacity = 32;           // simultaneous contacts (elements) of EACH probe, more are counted and ignored
 
   // Collisions.
   bool self_collisions = true;
@@ -105,11 +111,12 @@ class IntestineModel {
   CollisionTopology topology_;
 };
 
-/// The probe driven by the tool: a sphere at the tool tip.
+/// A probe driven by an instrument: a sphere at its tool tip.
 struct Probe {
   bool active = false;
   Eigen::Vector3d center = Eigen::Vector3d::Zero();  // m
   double radius = 0.005;                             // m
+  double force_limit = 0;  // N, this probe's clamp (its instrument's device limit); not > 0: params().probe_force_limit
 };
 
 enum class StepStatus : std::uint8_t {
@@ -120,13 +127,26 @@ enum class StepStatus : std::uint8_t {
 };
 const char* to_string(StepStatus status);
 
+/// What one step did for one probe. Plain data.
+struct ProbeReport {
+  bool rejected = false;            // an active probe with a non-finite centre or radius: ignored
+  int contacts = 0;                 // elements it touches
+  int overflow = 0;                 // its contacts beyond probe_capacity (ignored)
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();  // N, on its tool, clamped to its limit (zero on a refused step)
+  double force_raw = 0;             // N, magnitude before the clamp
+  bool saturated = false;           // force_raw exceeded its limit
+};
+
 /// What one step did. Plain data.
 struct StepReport {
   StepStatus status = StepStatus::kOk;
+  int probe_count = 0;              // probes the step took: probes[0..probe_count)
+  std::array<ProbeReport, kMaxProbes> probes{};
+  // Probe 0 (what the one-probe callers read): the same values as probes[0].
   bool probe_rejected = false;      // the probe had a non-finite centre or radius and was ignored
   int probe_contacts = 0;           // elements touched by the probe
   int probe_overflow = 0;           // probe contacts beyond probe_capacity (ignored)
-  Eigen::Vector3d probe_force = Eigen::Vector3d::Zero();  // N, on the tool, clamped to probe_force_limit
+  Eigen::Vector3d probe_force = Eigen::Vector3d::Zero();  // N, on the tool, clamped to the probe's limit
   double probe_force_raw = 0;       // N, magnitude before the clamp
   bool probe_saturated = false;
   DetectStats detection;            // active pairs, new, merged, dropped, distance tests
@@ -162,25 +182,36 @@ class IntestineState {
   const MassSpringWorkspace& workspace() const { return work_; }
 
  private:
-  friend void step_dynamics(const IntestineModel&, IntestineState&, const Probe&, double, StepReport&) noexcept;
+  friend void step_dynamics(const IntestineModel&, IntestineState&, const Probe*, int, double, StepReport&) noexcept;
   friend void step_detection(const IntestineModel&, IntestineState&, StepReport&) noexcept;
   friend void step_response(const IntestineModel&, IntestineState&, StepReport&) noexcept;
-  friend void step(const IntestineModel&, IntestineState&, const Probe&, double, StepReport&) noexcept;
+  friend void step(const IntestineModel&, IntestineState&, const Probe*, int, double, StepReport&) noexcept;
   MassSpringWorkspace work_;
   StochasticDetector detector_;
   ContactList contacts_;
-  std::vector<PenaltyContact> probe_contacts_;
+  std::vector<PenaltyContact> probe_contacts_;  // kMaxProbes x probe_capacity, each step's probes' contacts in order
   Eigen::Matrix3Xd x_entry_, v_entry_;  // the state at step entry (guard)
 };
 
-/// Run phase: one step of dt (s) at the haptic rate: mass-spring (probe included), stochastic detection, response.
-/// Allocates nothing; on a non-finite result or a failed solve the state is restored and report.status says why.
-void step(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
+/// Run phase: one step of dt (s) at the haptic rate with probes[0..probe_count) (0..kMaxProbes; inactive ones touch
+/// nothing): mass-spring (every probe's contacts included), stochastic detection, response. Allocates nothing; on a
+/// non-finite result or a failed solve the state is restored, every probe force is zero and report.status says why;
+/// a probe_count out of range (or null probes with probe_count > 0) is kBadInput (nothing done).
+void step(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
           StepReport& report) noexcept;
+/// One probe: step(model, state, &probe, 1, dt, report).
+inline void step(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
+                 StepReport& report) noexcept {
+  step(model, state, &probe, 1, dt, report);
+}
 
 /// The phases of step(), in order (report is reset by step_dynamics). For tests and benchmarks.
-void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
+void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
                    StepReport& report) noexcept;
+inline void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
+                          StepReport& report) noexcept {
+  step_dynamics(model, state, &probe, 1, dt, report);
+}
 void step_detection(const IntestineModel& model, IntestineState& state, StepReport& report) noexcept;
 void step_response(const IntestineModel& model, IntestineState& state, StepReport& report) noexcept;
 

@@ -15,11 +15,12 @@ namespace surgsim {
 ///     (rows x columns <= 2048, the BodyState bound), intestine_radius, mesentery_thickness;
 ///   masses and springs: intestine_node_mass, mesentery_node_mass, structural_stiffness, shear_stiffness,
 ///     bending_stiffness, spring_damping, drag, gravity, integrator (implicit_euler | symplectic_euler);
-///   probe (a sphere at the tool tip): probe_radius, probe_stiffness; its force is clamped to tool.force_limit;
+///   probe (a sphere at each instrument's tool tip): probe_radius, probe_stiffness; each probe's force is clamped to
+///     its own instrument's force_limit;
 ///   collisions: self_collisions, random_pairs (the paper's n), random_mesentery_pairs, seed, response_iterations,
 ///     contact_capacity.
 struct IntestineSpec {
-  intestine::IntestineParams params;  // ready for IntestineModel: probe_force_limit = tool.force_limit
+  intestine::IntestineParams params;  // ready for IntestineModel: probe_force_limit = tools[0].force_limit
   double probe_radius = 0.01;         // m
 };
 

@@ -14,6 +14,34 @@
 namespace surgsim::intestine {
 namespace {
 
+// A probe of radius 5 mm `depth` (m) inside the intestine's surface at the middle of rest segment `segment`, from
+// outside the cylinder; `out` is the radial direction there, away from the vessel.
+Probe pressing(const IntestineModel& model, int segment, double depth, Eigen::Vector3d& out) {
+  const IntestineParams& p = model.params();
+  const Eigen::Vector3d mid = 0.5 * (model.rest().col(segment) + model.rest().col(segment + 1));
+  const Eigen::Vector3d axis = p.axis_direction.normalized();
+  out = mid - p.axis_origin;
+  out = (out - out.dot(axis) * axis).normalized();
+  Probe probe;
+  probe.active = true;
+  probe.radius = 0.005;
+  probe.center = mid + out * (p.intestine_radius + probe.radius - depth);
+  return probe;
+}
+
+// No gravity, no self-collisions: the body moves only where a probe pushes it.
+IntestineParams still_params() {
+  IntestineParams p;
+  p.gravity.setZero();
+  p.self_collisions = false;
+  return p;
+}
+
+bool same_state(const IntestineState& a, const IntestineState& b) {
+  const auto bytes = sizeof(double) * static_cast<std::size_t>(a.x.size());
+  return std::memcmp(a.x.data(), b.x.data(), bytes) == 0 && std::memcmp(a.v.data(), b.v.data(), bytes) == 0;
+}
+
 TEST(IntestineModelTest, RestShapeIsTheFoldedCurveOnTheCylinder) {
   const IntestineParams p;
   const IntestineModel model(p);
@@ -108,6 +136,211 @@ TEST(IntestineModelTest, StepAllocatesNothing) {
   EXPECT_EQ(state.steps, 1000u);
 }
 
+TEST(IntestineModelTest, StepWithFourProbesAllocatesNothing) {
+  const IntestineModel model(IntestineParams{});
+  IntestineState state(model, 2);
+  StepReport report;
+  auto probes_at = [](double t, Probe* probes) {
+    for (int i = 0; i < kMaxProbes; ++i) probes[i] = test::scripted_probe(t + 0.35 * i);  // four places on the path
+  };
+  Probe probes[kMaxProbes];
+  for (int s = 0; s < 500; ++s) {
+    probes_at(s * 1e-3, probes);
+    step(model, state, probes, kMaxProbes, 1e-3, report);
+  }
+  surgsim::test::AllocationCounter counter;
+  int touching[kMaxProbes] = {0, 0, 0, 0};
+  for (int s = 500; s < 1500; ++s) {
+    probes_at(s * 1e-3, probes);
+    step(model, state, probes, kMaxProbes, 1e-3, report);
+    for (int i = 0; i < kMaxProbes; ++i) touching[i] += report.probes[static_cast<std::size_t>(i)].contacts > 0;
+  }
+  EXPECT_EQ(counter.count(), 0);
+  EXPECT_EQ(report.probe_count, kMaxProbes);
+  for (int i = 0; i < kMaxProbes; ++i) EXPECT_GT(touching[i], 0) << "probe " << i << " never touched the body";
+  EXPECT_EQ(state.faults, 0u);
+}
+
+// A second probe that is inactive (at the same place as the first: it would touch the same elements) or active but
+// away from the body changes nothing: the state and the first probe's force are bit-identical to the one-probe step,
+// whichever slot the first probe takes; the other probe reports nothing.
+TEST(IntestineModelTest, AnIdleSecondProbeLeavesTheStepBitIdentical) {
+  const IntestineModel model(IntestineParams{});
+  IntestineState one(model, 7), idle_second(model, 7), away_first(model, 7);
+  StepReport r1, r2, r3;
+  int touching = 0;
+  for (int s = 0; s < 800; ++s) {
+    const Probe probe = test::scripted_probe(0.2 + s * 1e-3);
+    Probe idle = probe;
+    idle.active = false;
+    Probe away = probe;
+    away.active = true;
+    away.center = Eigen::Vector3d(0, 0, 5);
+    const Probe pair_idle[2] = {probe, idle};
+    const Probe pair_away[2] = {away, probe};
+    step(model, one, probe, 1e-3, r1);
+    step(model, idle_second, pair_idle, 2, 1e-3, r2);
+    step(model, away_first, pair_away, 2, 1e-3, r3);
+    ASSERT_EQ(r2.probes[0].force, r1.probe_force) << "step " << s;
+    ASSERT_EQ(r2.probe_force, r1.probe_force) << "step " << s;
+    ASSERT_EQ(r3.probes[1].force, r1.probe_force) << "step " << s;
+    ASSERT_EQ(r3.probes[1].contacts, r1.probe_contacts) << "step " << s;
+    ASSERT_EQ(r2.probes[1].contacts, 0) << "step " << s;
+    ASSERT_EQ(r2.probes[1].force, Eigen::Vector3d::Zero()) << "step " << s;
+    ASSERT_EQ(r3.probes[0].contacts, 0) << "step " << s;
+    ASSERT_EQ(r3.probe_force, Eigen::Vector3d::Zero()) << "step " << s;  // probe 0's, the one away
+    touching += r1.probe_contacts > 0;
+  }
+  EXPECT_GT(touching, 100);  // the run did press the body
+  EXPECT_EQ(r2.probe_count, 2);
+  EXPECT_TRUE(same_state(one, idle_second));
+  EXPECT_TRUE(same_state(one, away_first));
+}
+
+// Two probes pressing the intestine at two places (different depths): each gets the force of its own contacts, the
+// one-probe force of the same press (1e-12: the contacts are found at the positions on entry), pointing away from the
+// body; both push the body at once, and go on being pushed back while they hold (the body bounces and slides under
+// them: within 45 degrees of the outward radial).
+TEST(IntestineModelTest, TwoProbesPressingApartEachGetTheirOwnForce) {
+  IntestineParams p = still_params();
+  const IntestineModel model(p);
+  Eigen::Vector3d out_a, out_b;
+  const Probe a = pressing(model, 20, 0.008, out_a);
+  const Probe b = pressing(model, 70, 0.004, out_b);
+  StepReport ra, rb, r;
+  IntestineState alone_a(model), alone_b(model), both(model);
+  step(model, alone_a, a, 1e-3, ra);
+  step(model, alone_b, b, 1e-3, rb);
+  const Probe probes[2] = {a, b};
+  step(model, both, probes, 2, 1e-3, r);
+  ASSERT_EQ(r.status, StepStatus::kOk);
+  ASSERT_GE(ra.probe_contacts, 1);
+  ASSERT_GE(rb.probe_contacts, 1);
+  EXPECT_EQ(r.probes[0].contacts, ra.probe_contacts);
+  EXPECT_EQ(r.probes[1].contacts, rb.probe_contacts);
+  EXPECT_LE((r.probes[0].force - ra.probe_force).norm(), 1e-12);
+  EXPECT_LE((r.probes[1].force - rb.probe_force).norm(), 1e-12);
+  EXPECT_GT(r.probes[0].force.norm(), 1.5 * r.probes[1].force.norm());  // deeper, more force: not one shared value
+  // The body moved at both places, as far as each alone moved it there.
+  const double moved_a = (both.x.col(20) - model.rest().col(20)).dot(-out_a);
+  const double moved_b = (both.x.col(70) - model.rest().col(70)).dot(-out_b);
+  EXPECT_GT(moved_a, 0);
+  EXPECT_GT(moved_b, 0);
+  EXPECT_NEAR(moved_a, (alone_a.x.col(20) - model.rest().col(20)).dot(-out_a), 1e-3 * moved_a);
+  EXPECT_NEAR(moved_b, (alone_b.x.col(70) - model.rest().col(70)).dot(-out_b), 1e-3 * moved_b);
+  // Held for 0.2 s: each probe keeps (nearly always) touching and its force points outwards (away from the body at
+  // its place).
+  int touching[2] = {0, 0};
+  for (int s = 0; s < 200; ++s) {
+    step(model, both, probes, 2, 1e-3, r);
+    ASSERT_EQ(r.status, StepStatus::kOk);
+    for (int i = 0; i < 2; ++i) {
+      const ProbeReport& pr = r.probes[static_cast<std::size_t>(i)];
+      const Eigen::Vector3d& out = i == 0 ? out_a : out_b;
+      if (pr.contacts == 0) continue;
+      ++touching[i];
+      ASSERT_GT(pr.force.dot(out), 0.7 * pr.force.norm()) << "probe " << i << " step " << s;
+    }
+  }
+  EXPECT_GE(touching[0], 180);
+  EXPECT_GE(touching[1], 180);
+}
+
+// Deep presses: each probe's force is clamped to its own limit (a limit not > 0 takes params().probe_force_limit).
+TEST(IntestineModelTest, EachProbeIsClampedToItsOwnLimit) {
+  IntestineParams p = still_params();
+  const IntestineModel model(p);
+  IntestineState state(model);
+  Eigen::Vector3d out;
+  const double deep = p.intestine_radius + 0.005 - 0.002;  // the centre 2 mm off the intestine's axis
+  Probe probes[3] = {pressing(model, 20, deep, out), pressing(model, 45, deep, out), pressing(model, 70, deep, out)};
+  probes[0].force_limit = 2.0;
+  probes[1].force_limit = 5.0;
+  probes[2].force_limit = 0;  // the model's 8 N
+  StepReport r;
+  step(model, state, probes, 3, 1e-3, r);
+  ASSERT_EQ(r.status, StepStatus::kOk);
+  const double limits[3] = {2.0, 5.0, p.probe_force_limit};
+  for (int i = 0; i < 3; ++i) {
+    const ProbeReport& pr = r.probes[static_cast<std::size_t>(i)];
+    ASSERT_GT(pr.force_raw, limits[i]) << "probe " << i << " presses too little to test its clamp";
+    EXPECT_TRUE(pr.saturated) << "probe " << i;
+    EXPECT_NEAR(pr.force.norm(), limits[i], 1e-9) << "probe " << i;
+  }
+  EXPECT_EQ(r.probe_force, r.probes[0].force);
+  EXPECT_EQ(r.probe_saturated, true);
+  EXPECT_EQ(r.probe_force_raw, r.probes[0].force_raw);
+}
+
+// probe_capacity is per probe: two deep probes each keep `capacity` contacts and count their own overflow.
+TEST(IntestineModelTest, EachProbeHasItsOwnContactCapacity) {
+  IntestineParams p = still_params();
+  p.probe_capacity = 2;
+  const IntestineModel model(p);
+  Eigen::Vector3d out;
+  const double deep = p.intestine_radius + 0.005 - 0.002;
+  const Probe probes[2] = {pressing(model, 20, deep, out), pressing(model, 70, deep, out)};
+  IntestineState alone(model), both(model);
+  StepReport ra, r;
+  step(model, alone, probes[1], 1e-3, ra);
+  ASSERT_GT(ra.probe_overflow, 0) << "the probe touches too few elements to test the capacity";
+  step(model, both, probes, 2, 1e-3, r);
+  ASSERT_EQ(r.status, StepStatus::kOk);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_EQ(r.probes[static_cast<std::size_t>(i)].contacts, 2) << "probe " << i;
+    EXPECT_GT(r.probes[static_cast<std::size_t>(i)].overflow, 0) << "probe " << i;
+  }
+  EXPECT_EQ(r.probes[1].overflow, ra.probe_overflow);
+  EXPECT_EQ(r.probes[1].force, ra.probe_force);
+}
+
+// A step refused for a non-finite result (an absurdly long explicit step: the pressed nodes fly off to infinity)
+// sends no probe any force, though every probe touched the body and had a finite force before the integration.
+TEST(IntestineModelTest, ARefusedStepZeroesEveryProbeForce) {
+  IntestineParams p = still_params();
+  p.integrator = Integrator::kSymplecticEuler;
+  const IntestineModel model(p);
+  IntestineState state(model);
+  Eigen::Vector3d out;
+  const double deep = p.intestine_radius + 0.005 - 0.002;
+  const Probe probes[2] = {pressing(model, 20, deep, out), pressing(model, 70, deep, out)};
+  StepReport r;
+  step(model, state, probes, 2, 1e300, r);
+  ASSERT_EQ(r.status, StepStatus::kNonFinite);
+  EXPECT_EQ(state.x, model.rest());
+  for (int i = 0; i < 2; ++i) {
+    const ProbeReport& pr = r.probes[static_cast<std::size_t>(i)];
+    EXPECT_GT(pr.contacts, 0) << "probe " << i;
+    EXPECT_TRUE(std::isfinite(pr.force_raw) && pr.force_raw > 0) << "probe " << i;
+    EXPECT_EQ(pr.force, Eigen::Vector3d::Zero()) << "probe " << i;
+  }
+  EXPECT_EQ(r.probe_force, Eigen::Vector3d::Zero());
+}
+
+TEST(IntestineModelTest, ProbeCountOutOfRangeIsBadInput) {
+  const IntestineModel model(IntestineParams{});
+  IntestineState state(model);
+  const Eigen::Matrix3Xd before = state.x;
+  Probe probes[kMaxProbes + 1];
+  StepReport report;
+  step(model, state, probes, kMaxProbes + 1, 1e-3, report);
+  EXPECT_EQ(report.status, StepStatus::kBadInput);
+  step(model, state, probes, -1, 1e-3, report);
+  EXPECT_EQ(report.status, StepStatus::kBadInput);
+  step(model, state, nullptr, 1, 1e-3, report);
+  EXPECT_EQ(report.status, StepStatus::kBadInput);
+  EXPECT_EQ(state.x, before);
+  EXPECT_EQ(state.faults, 3u);
+  EXPECT_EQ(state.steps, 0u);
+  // No probe at all: the body steps (gravity), nothing is reported for any probe.
+  step(model, state, nullptr, 0, 1e-3, report);
+  EXPECT_EQ(report.status, StepStatus::kOk);
+  EXPECT_EQ(report.probe_count, 0);
+  EXPECT_EQ(report.probe_force, Eigen::Vector3d::Zero());
+  EXPECT_NE(state.x, before);
+  EXPECT_EQ(state.steps, 1u);
+}
+
 TEST(IntestineModelTest, SameSeedGivesBitIdenticalStates) {
   const IntestineModel model(IntestineParams{});
   IntestineState a(model, 7), b(model, 7);
@@ -117,31 +350,23 @@ TEST(IntestineModelTest, SameSeedGivesBitIdenticalStates) {
     step(model, a, probe, 1e-3, ra);
     step(model, b, probe, 1e-3, rb);
   }
-  EXPECT_EQ(std::memcmp(a.x.data(), b.x.data(), sizeof(double) * static_cast<std::size_t>(a.x.size())), 0);
-  EXPECT_EQ(std::memcmp(a.v.data(), b.v.data(), sizeof(double) * static_cast<std::size_t>(a.v.size())), 0);
+  EXPECT_TRUE(same_state(a, b));
   EXPECT_EQ(ra.probe_force, rb.probe_force);
   // reset() brings back the initial state: the same run again is identical too.
   b.reset(model, 7);
   for (int s = 0; s < 800; ++s) step(model, b, test::scripted_probe(0.2 + s * 1e-3), 1e-3, rb);
-  EXPECT_EQ(std::memcmp(a.x.data(), b.x.data(), sizeof(double) * static_cast<std::size_t>(a.x.size())), 0);
+  EXPECT_TRUE(same_state(a, b));
 }
 
 TEST(IntestineModelTest, ProbeForcePushesTheToolOutAndIsClamped) {
-  IntestineParams p;
-  p.gravity.setZero();
-  p.self_collisions = false;
+  IntestineParams p = still_params();
   const IntestineModel model(p);
   IntestineState state(model);
   StepReport report;
   // The probe 1 cm inside the intestine's surface at the middle of segment 40, from outside the cylinder.
-  const Eigen::Vector3d a = model.rest().col(40), b = model.rest().col(41), mid = 0.5 * (a + b);
-  const Eigen::Vector3d axis = p.axis_direction.normalized();
-  Eigen::Vector3d out = mid - p.axis_origin;
-  out = (out - out.dot(axis) * axis).normalized();  // radial, away from the vessel
-  Probe probe;
-  probe.active = true;
-  probe.radius = 0.005;
-  probe.center = mid + out * (p.intestine_radius + probe.radius - 0.01);
+  Eigen::Vector3d out;
+  Probe probe = pressing(model, 40, 0.01, out);
+  const Eigen::Vector3d mid = 0.5 * (model.rest().col(40) + model.rest().col(41));
   step(model, state, probe, 1e-3, report);
   ASSERT_EQ(report.status, StepStatus::kOk);
   EXPECT_GE(report.probe_contacts, 1);
