@@ -3,6 +3,9 @@
 
 Liver geometry (config/liver.yaml): trocar at (0.03, 0, 0.20), shaft straight down at pitch = yaw = 0; the generated
 liver's top surface under the trocar is at z ~ 0.042, i.e. insertion ~ 0.158 m touches it.
+Two hands (config/liver_two_tools.yaml): at pitch = yaw = 0 the grasper's tip touches the rest surface of the free left
+lobe at insertion 0.1727 m (at (-0.100, 0.010, 0.020)) and the probe's at 0.1770 m (at (-0.071, 0.011, 0.027)), found
+by casting each shaft's ray on the generated 1500-node liver; tests/common/scene/scene_test.cpp checks them.
 Intestine geometry (config/intestine.yaml): vessel along x through the origin, the folds hang below it once gravity
 has acted (about 0.5 s): x in [-0.19, 0.20], y in [-0.12, 0.13], z in [-0.15, 0.04] m, intestine radius 2 cm. Trocar
 at (0, 0.40, -0.12), shaft along -y at pitch = yaw = 0 (tip at y = 0.40 - insertion); positive pitch raises the tip,
@@ -27,18 +30,23 @@ def ramp(t, t0, t1, a, b):
     return a + (b - a) * s
 
 
-def write(name, duration, pose, note):
+def write(name, duration, pose, note, instruments=None):
+    """One instrument (v1: pose(t) gives 5 values), or several named ones (v2: pose(t) gives one 5-tuple each)."""
     path = os.path.join(OUT, name)
     n = int(round(duration * RATE))
+    dof = ("pitch", "yaw", "insertion", "roll", "jaw")
     with open(path, "w") as f:
-        f.write("# surgsim-trajectory v1\n")
+        f.write("# surgsim-trajectory %s\n" % ("v1" if instruments is None else "v2"))
         f.write("# %s\n" % note)
         f.write("# made by scripts/make_trajectories.py\n")
-        f.write("t,pitch,yaw,insertion,roll,jaw\n")
+        if instruments is None:
+            f.write("t,%s\n" % ",".join(dof))
+        else:
+            f.write("t,%s\n" % ",".join("%s.%s" % (i, d) for i in instruments for d in dof))
         for i in range(n + 1):
             t = i / RATE
-            p = pose(t)
-            f.write("%.2f,%.6f,%.6f,%.6f,%.6f,%.6f\n" % ((t,) + tuple(p)))
+            groups = [pose(t)] if instruments is None else pose(t)
+            f.write("%.2f" % t + "".join(",%.6f,%.6f,%.6f,%.6f,%.6f" % tuple(p) for p in groups) + "\n")
     print("wrote", path)
 
 
@@ -94,6 +102,29 @@ def intestine_lift(t):
     return (pitch, 0.0, ins, 0.0, 0.5)
 
 
+# Two hands (config/liver_two_tools.yaml): insertions where each tip touches the rest surface (module docstring).
+GRASPER_TOUCH = 0.1727
+PROBE_TOUCH = 0.1770
+
+
+def two_hands(t):
+    # The grasper comes down on the free lobe with the jaw open, goes 2 mm in, closes the jaw (grasp), pulls back
+    # 6 mm (lifting the lobe 4 mm above rest) and holds; meanwhile the probe comes down 3 cm away, presses 8 mm
+    # along its shaft, holds, comes back out; then the grasper opens (letting go) and withdraws.
+    g_start, g_grasp, g_pull = GRASPER_TOUCH - 0.0227, GRASPER_TOUCH + 0.002, GRASPER_TOUCH - 0.004
+    if t < 1.8:
+        g_ins = ramp(t, 0.3, 1.3, g_start, g_grasp)
+    elif t < 4.2:
+        g_ins = ramp(t, 1.8, 2.5, g_grasp, g_pull)
+    else:
+        g_ins = ramp(t, 4.2, 4.9, g_pull, g_start)
+    g_jaw = ramp(t, 1.35, 1.65, 0.5, 0.0) if t < 3.9 else ramp(t, 3.9, 4.2, 0.0, 0.5)
+    p_start, p_press = PROBE_TOUCH - 0.022, PROBE_TOUCH + 0.008
+    p_ins = ramp(t, 1.6, 2.8, p_start, p_press) if t < 3.2 else ramp(t, 3.2, 3.8, p_press, p_start)
+    # The probe's jaw stays open: a closed jaw on the tissue would grasp.
+    return [(0.0, 0.0, g_ins, 0.0, g_jaw), (0.0, 0.0, p_ins, 0.0, 0.5)]
+
+
 if __name__ == "__main__":
     import sys
     which = sys.argv[1] if len(sys.argv) > 1 else "all"
@@ -108,3 +139,6 @@ if __name__ == "__main__":
     write("liver_grasp_pull.csv", 5.5, grasp_and_pull, "press, close the jaw (grasp), pull 1.5 cm up, open, withdraw")
     write("liver_sweep.csv", 6.0, sweep, "three 8 mm dips at different pitch/yaw")
     write("liver_fast_stab.csv", 3.0, fast_stab, "stab at 3.5 m/s to 1.2 cm deep, hold, withdraw")
+    write("liver_two_hands.csv", 5.0, two_hands,
+          "liver_two_tools: the grasper holds the free lobe and lifts it 4 mm while the probe presses 8 mm 3 cm away",
+          instruments=("grasper", "probe"))

@@ -2,12 +2,16 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
 
 #include "core/error.h"
+#include "mesh/geometry.h"
+#include "mesher/scene_mesh.h"
 #include "tool/tool.h"
 #include "tool/trajectory.h"
 
@@ -436,6 +440,123 @@ TEST(ShippedScenes, TrajectoriesReachTheStatedDepth) {
     EXPECT_EQ(first.insertion, last.insertion);                      // retracts to where it started
     EXPECT_NEAR(deepest, c.top_z - c.depth, 1e-9);
   }
+}
+
+// Two hands (issue 19): config/liver_two_tools.yaml and its trajectory against the scene's own mesh (generated, from
+// the test cache). Each tip is followed along its shaft: it goes below the rest surface when the shaft's ray from the
+// trocar meets the boundary before the tip.
+struct RayHit {
+  bool found = false;
+  double s = 0;  // m from the trocar
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();
+};
+
+RayHit first_hit(const TetMesh& mesh, const SurfaceMesh& surface, const Eigen::Vector3d& from,
+                 const Eigen::Vector3d& direction) {
+  RayHit hit;
+  const double reach = 1.0;  // m, far beyond the organ
+  for (int f = 0; f < surface.tris.rows(); ++f) {
+    double s = 0;
+    Eigen::Vector3d bary;
+    if (segment_triangle(from, from + reach * direction, mesh.nodes.row(surface.tris(f, 0)).transpose(),
+                         mesh.nodes.row(surface.tris(f, 1)).transpose(), mesh.nodes.row(surface.tris(f, 2)).transpose(),
+                         s, bary) &&
+        (!hit.found || s * reach < hit.s)) {
+      hit.found = true;
+      hit.s = s * reach;
+      hit.point = from + hit.s * direction;
+    }
+  }
+  return hit;
+}
+
+TEST(ShippedTwoToolScene, GrasperHoldsTheFreeLobeWhileTheProbePressesNearby) {
+  const Scene s = load_scene(resolve_scene_path("liver_two_tools"));
+  ASSERT_EQ(s.tools.size(), 2u);
+  const ToolSpec& grasper = s.tools[0];
+  const ToolSpec& probe = s.tools[1];
+  EXPECT_EQ(grasper.name, "grasper");
+  EXPECT_EQ(probe.name, "probe");
+  EXPECT_GT((grasper.trocar - probe.trocar).norm(), 0.08);  // two ports
+  for (const ToolSpec& t : s.tools) {
+    EXPECT_EQ(t.force_limit, 8.0);
+    EXPECT_EQ(t.contact_capacity, 32);  // together the solve's 64 contact nodes
+    EXPECT_EQ(t.contact_model, ContactModel::kPatch);
+  }
+  // The organ is the shipped liver's (same mesh, material, law, fixed set).
+  const Scene liver = load_scene(resolve_scene_path("liver"));
+  EXPECT_EQ(s.mesh.generate, liver.mesh.generate);
+  EXPECT_EQ(s.mesh.target_nodes, liver.mesh.target_nodes);
+  EXPECT_EQ(s.material.young_modulus, liver.material.young_modulus);
+  EXPECT_EQ(fs::path(s.nonlinear.force_curve), fs::path(liver.nonlinear.force_curve));
+  EXPECT_EQ(s.fixed.plane_point, liver.fixed.plane_point);
+
+  // The trajectory names the scene's instruments, in order; 10 ms samples, smooth, every input present.
+  ASSERT_FALSE(s.trajectory.empty());
+  const MultiTrajectory traj = MultiTrajectory::load(s.trajectory);
+  ASSERT_EQ(traj.names(), (std::vector<std::string>{"grasper", "probe"}));
+  EXPECT_GE(traj.duration(), 4.0);
+  EXPECT_LE(traj.duration(), 5.0);
+  for (std::size_t k = 0; k < traj.size(); ++k) {
+    for (int i = 0; i < 2; ++i) {
+      ASSERT_TRUE(traj.valid(k, i));
+      if (k > 0) {
+        ASSERT_NEAR(traj.times()[k] - traj.times()[k - 1], 0.01, 1e-9);
+        ASSERT_LT(std::abs(traj.pose(k, i).insertion - traj.pose(k - 1, i).insertion), 0.001) << k;
+      }
+    }
+  }
+
+  const TetMesh mesh = load_scene_mesh(s, SURGSIM_TEST_CACHE_DIR);
+  const SurfaceMesh surface = boundary_surface(mesh);
+  // Per instrument and sample: how far the tip is below the rest surface along its shaft (m; < 0: above).
+  std::vector<std::vector<double>> depth(2, std::vector<double>(traj.size()));
+  std::vector<Eigen::Vector3d> spot(2);
+  for (int i = 0; i < 2; ++i) {
+    SCOPED_TRACE(s.tools[static_cast<std::size_t>(i)].name);
+    for (std::size_t k = 0; k < traj.size(); ++k) {
+      const Pose5& p = traj.pose(k, i);
+      const ToolGeometry g = tool_geometry(s.tools[static_cast<std::size_t>(i)], p);
+      const RayHit hit = first_hit(mesh, surface, g.trocar, g.direction);
+      ASSERT_TRUE(hit.found) << "the shaft misses the organ at t = " << traj.times()[k];
+      depth[static_cast<std::size_t>(i)][k] = p.insertion - hit.s;
+      spot[static_cast<std::size_t>(i)] = hit.point;
+    }
+    const auto& d = depth[static_cast<std::size_t>(i)];
+    EXPECT_LT(d.front(), -0.01) << "starts clear of the surface";
+    EXPECT_LT(d.back(), -0.01) << "ends clear of the surface";
+    const double deepest = *std::max_element(d.begin(), d.end());
+    EXPECT_GT(deepest, 0.001) << "the tip goes below the rest surface";
+    EXPECT_LT(deepest, 0.010);
+  }
+  // The grasp spot is on the free lobe: no fixed node within 1.5 cm of it. The probe presses 2 to 4 cm from it.
+  for (int n = 0; n < mesh.nodes.rows(); ++n) {
+    const Eigen::Vector3d x = mesh.nodes.row(n).transpose();
+    if ((x - spot[0]).norm() < 0.015) {
+      EXPECT_FALSE(s.fixed.fixes(n, x)) << "node " << n << " near the grasp is fixed";
+    }
+  }
+  const double apart = (spot[0] - spot[1]).norm();
+  EXPECT_GT(apart, 0.02);
+  EXPECT_LT(apart, 0.04);
+
+  // The story: the grasper's jaw closes (<= 0.05 rad grasps) while its tip is 1 to 3 mm in; the probe presses while
+  // the grasp is held; the probe's jaw never closes (it would grasp); the grasper opens before it withdraws.
+  double grasp_depth = -1;
+  bool pressed_while_held = false;
+  for (std::size_t k = 0; k < traj.size(); ++k) {
+    const bool held = traj.pose(k, 0).jaw <= 0.05;
+    if (held && grasp_depth < 0) grasp_depth = depth[0][k];
+    if (held && depth[1][k] > 0.005) pressed_while_held = true;
+    EXPECT_GE(traj.pose(k, 1).jaw, 0.15) << "the probe's jaw closes at t = " << traj.times()[k];
+    if (depth[0][k] < -0.01) {
+      EXPECT_GT(traj.pose(k, 0).jaw, 0.15) << "withdrawn closed at t = " << traj.times()[k];
+    }
+  }
+  EXPECT_GT(grasp_depth, 0.001);
+  EXPECT_LT(grasp_depth, 0.003);
+  EXPECT_TRUE(pressed_while_held);
+  EXPECT_LT(traj.pose(traj.size() - 1, 0).insertion, traj.pose(traj.size() / 2, 0).insertion);
 }
 
 // ---------------------------------------------------------------------------------------------------------------
