@@ -71,6 +71,54 @@ TEST_F(HapticProcess, RecordThenReplayGivesTheSameLog) {
   EXPECT_GT(lines, 1000);
 }
 
+// Issue 19: the shipped two-instrument liver (a grasper holding the free lobe, a probe pressing beside it) replays
+// bit-identically at --speed max, both instruments touch, the stats list each instrument, and --record writes a v2
+// trajectory (one column group per instrument) whose replay logs the same ticks.
+TEST_F(HapticProcess, TwoInstrumentReplayIsBitIdenticalAndItsRecordingReplays) {
+  for (const char* run : {"a", "b"}) {
+    std::vector<std::string> args = {"--scene", "liver_two_tools", "--speed", "max", "--rt-priority", "0",
+                                     "--log", path(std::string("two_") + run + ".csv"), "--stats",
+                                     path(std::string("two_") + run + ".json")};
+    if (std::string(run) == "a") {
+      args.push_back("--record");
+      args.push_back(path("two_recorded.csv"));
+    }
+    ASSERT_EQ(run_haptic(args, std::string("two_out_") + run + ".txt"), 0)
+        << testing::read_file(path(std::string("two_out_") + run + ".txt"));
+  }
+  const std::string a = testing::read_file(path("two_a.csv"));
+  EXPECT_TRUE(a == testing::read_file(path("two_b.csv"))) << "the two --speed max replays differ";
+  EXPECT_EQ(a.substr(0, a.find('\n')),
+            "tick,t,fx,fy,fz,contacts,grasper.fx,grasper.fy,grasper.fz,grasper.contacts,probe.fx,probe.fy,probe.fz,"
+            "probe.contacts");
+  const auto stats = nlohmann::json::parse(testing::read_file(path("two_a.json")));
+  ASSERT_EQ(stats["tools"].size(), 2u);
+  EXPECT_EQ(stats["instrument_count"], 2);
+  for (const auto& tool : stats["tools"]) {
+    EXPECT_GT(tool["contacts_max"].get<int>(), 0) << tool.dump();
+    EXPECT_GT(tool["force_max_n"].get<double>(), 0.05) << tool.dump();
+    EXPECT_EQ(tool["input_lost_ticks"].get<long>(), 0) << tool.dump();
+  }
+  EXPECT_EQ(stats["tools"][0]["name"], "grasper");
+  EXPECT_EQ(stats["tools"][1]["name"], "probe");
+  const std::string recorded = testing::read_file(path("two_recorded.csv"));
+  ASSERT_EQ(recorded.substr(0, recorded.find('\n')), "# surgsim-trajectory v2");
+  ASSERT_EQ(run_haptic({"--scene", "liver_two_tools", "--replay", path("two_recorded.csv"), "--speed", "max",
+                        "--rt-priority", "0", "--log", path("two_c.csv")},
+                       "two_out_c.txt"),
+            0)
+      << testing::read_file(path("two_out_c.txt"));
+  std::istringstream la(a), lc(testing::read_file(path("two_c.csv")));
+  std::string x, y;
+  int lines = 0;
+  while (std::getline(la, x)) {
+    ASSERT_TRUE(std::getline(lc, y)) << "the replay of the recording is shorter, at line " << lines;
+    ASSERT_EQ(x, y) << "first difference at line " << lines;
+    ++lines;
+  }
+  EXPECT_GT(lines, 1000);
+}
+
 TEST_F(HapticProcess, LiveDevicePathMatchesReplay) {
   // Replay of the poke.
   ASSERT_EQ(run_haptic({"--scene", "liver", "--replay", traj("liver_poke.csv"), "--speed", "max", "--rt-priority", "0",

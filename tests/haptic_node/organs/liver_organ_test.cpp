@@ -40,7 +40,7 @@ TEST_F(LiverOrganTest, StraightPressGrowsMonotonicallyToTheDeviceLimit) {
   int first_contact = -1, saturated_ticks = 0;
   for (int k = 0; k < 1000 && saturated_ticks < 50; ++k) {
     p.insertion = 0.15 + v * dt * k;
-    const ToolGeometry g = tool_geometry(scene_->tool, p);
+    const ToolGeometry g = tool_geometry(scene_->tools[0], p);
     ContactTick t;
     organ.step(&g, p.jaw, dt, t);
     const double f = t.device_force.norm();
@@ -68,7 +68,7 @@ TEST_F(LiverOrganTest, InputReturningInsideGetsTheForceBackInOneTick) {
   p.jaw = 0.5;
   for (int k = 0; k <= 400; ++k) {
     p.insertion = 0.15 + std::min(0.03, 1e-4 * k);  // to about 2 cm below the top, then hold
-    const ToolGeometry g = tool_geometry(scene_->tool, p);
+    const ToolGeometry g = tool_geometry(scene_->tools[0], p);
     organ.step(&g, p.jaw, 1e-3, t);
   }
   const double before = t.device_force.norm();
@@ -76,7 +76,7 @@ TEST_F(LiverOrganTest, InputReturningInsideGetsTheForceBackInOneTick) {
   ContactTick lost;
   organ.step(nullptr, p.jaw, 1e-3, lost);
   EXPECT_EQ(lost.device_force.norm(), 0.0);
-  const ToolGeometry g = tool_geometry(scene_->tool, p);
+  const ToolGeometry g = tool_geometry(scene_->tools[0], p);
   organ.step(&g, p.jaw, 1e-3, t);
   std::cout << "[resume] shipped liver: " << t.device_force.norm() << " N in the first tick back (before the loss "
             << before << " N)\n";
