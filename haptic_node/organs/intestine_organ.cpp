@@ -9,6 +9,7 @@
 #include "surgsim_types.h"
 #include "core/clock.h"
 #include "core/error.h"
+#include "haptic_dds.h"
 #include "publisher.h"
 
 namespace surgsim {
@@ -17,10 +18,17 @@ IntestineOrgan::IntestineOrgan(const Scene& scene, std::uint64_t ticks)
     : model_(scene.intestine.params),
       state_(model_),
       probe_radius_(scene.intestine.probe_radius),
+      instruments_(static_cast<int>(std::clamp<std::size_t>(scene.tools.size(), 1, intestine::kMaxProbes))),
       step_us_(static_cast<std::size_t>(ticks) + 16) {
+  static_assert(intestine::kMaxProbes == kMaxInstruments, "one intestine probe per instrument");
   if (model_.node_count() > static_cast<int>(msg::kMaxBodyPoints)) {
     throw_error(scene.file, ": the intestine has ", model_.node_count(), " masses, a BodyState carries at most ",
                 msg::kMaxBodyPoints);
+  }
+  for (int i = 0; i < intestine::kMaxProbes; ++i) {
+    const auto si = static_cast<std::size_t>(i);
+    force_limits_[si] = si < scene.tools.size() ? scene.tools[si].force_limit : model_.params().probe_force_limit;
+    if (si < scene.tools.size()) names_.push_back(scene.tools[si].name);
   }
 }
 
@@ -28,35 +36,62 @@ void IntestineOrgan::create_writers(dds::Participant& participant, std::uint64_t
   writer_ = participant.writer(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()),
                                dds::kStreamWriter);
   sample_.scene_hash(scene_hash);
-  sample_.positions().resize(static_cast<std::size_t>(state_.point_count()));  // the only allocation of the sample
+  // The only allocations of the sample: write() changes values only.
+  sample_.positions().resize(static_cast<std::size_t>(state_.point_count()));
+  sample_.instruments().resize(static_cast<std::size_t>(instruments_));
 }
 
-void IntestineOrgan::step(const ToolGeometry* tool, double /*jaw*/, double dt, ContactTick& out) noexcept {
-  intestine::Probe probe;
-  if (tool != nullptr) {
-    probe.active = true;
-    probe.center = tool->tip;
+void IntestineOrgan::step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept {
+  // --- one probe per instrument at its tool tip; none for an instrument whose input is lost ---
+  const int n = std::clamp(count, 0, intestine::kMaxProbes);
+  for (int i = 0; i < n; ++i) {
+    const auto si = static_cast<std::size_t>(i);
+    intestine::Probe& probe = probes_[si];
+    const ToolGeometry* tool = inputs != nullptr ? inputs[i].tool : nullptr;
+    probe = intestine::Probe{};
+    probe.force_limit = force_limits_[si];
     probe.radius = probe_radius_;
+    if (tool != nullptr) {
+      probe.active = true;
+      probe.center = tool->tip;
+    }
   }
-  // --- the model: mass-spring (probe included), stochastic detection, response ---
+  // --- the model: mass-spring (every probe included), stochastic detection, response ---
   const std::uint64_t t0 = monotonic_ns();
-  intestine::step(model_, state_, probe, dt, report_);
+  intestine::step(model_, state_, probes_.data(), n, dt, report_);
   step_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
   ++steps_;
 
-  // --- the force on the tool: the step clamps it to tool.force_limit and zeroes it when the step was refused ---
+  // --- each instrument's force: the step clamps it to the instrument's limit and zeroes it when it was refused ---
   const intestine::StepReport& r = report_;
   const bool ok = r.status == intestine::StepStatus::kOk;
-  out = ContactTick{};
-  out.device_force = r.probe_force.allFinite() ? r.probe_force : Eigen::Vector3d::Zero();
-  const double clamped = out.device_force.norm();
-  out.force = r.probe_saturated && clamped > 0 && std::isfinite(r.probe_force_raw)
-                  ? Eigen::Vector3d(out.device_force * (r.probe_force_raw / clamped))
-                  : out.device_force;
-  out.saturated = r.probe_saturated;
-  out.over_capacity = r.probe_overflow > 0 || r.contacts_overflow > 0;
-  out.nonfinite = !ok || r.probe_rejected;
-  out.points_in_contact = r.probe_contacts;
+  int touched = 0;
+  bool overflow = false, saturated = false;
+  for (int i = 0; i < count && out != nullptr; ++i) {
+    ContactTick& o = out[i];
+    o = ContactTick{};
+    if (i >= n) continue;  // beyond kMaxProbes: no probe, no force
+    const intestine::ProbeReport& pr = r.probes[static_cast<std::size_t>(i)];
+    o.device_force = pr.force.allFinite() ? pr.force : Eigen::Vector3d::Zero();
+    const double clamped = o.device_force.norm();
+    o.force = pr.saturated && clamped > 0 && std::isfinite(pr.force_raw)
+                  ? Eigen::Vector3d(o.device_force * (pr.force_raw / clamped))
+                  : o.device_force;
+    o.saturated = pr.saturated;
+    o.over_capacity = pr.overflow > 0 || r.contacts_overflow > 0;
+    o.nonfinite = !ok || pr.rejected;
+    o.points_in_contact = pr.contacts;
+
+    ProbeStats& ps = probe_stats_[static_cast<std::size_t>(i)];
+    ps.contacts_max = std::max(ps.contacts_max, pr.contacts);
+    if (pr.contacts > 0) ++ps.contact_ticks;
+    if (pr.overflow > 0) ++ps.overflow_ticks;
+    if (pr.saturated) ++ps.saturated_ticks;
+    ps.force_max_n = std::max(ps.force_max_n, clamped);
+    touched += pr.contacts;
+    overflow = overflow || pr.overflow > 0;
+    saturated = saturated || pr.saturated;
+  }
 
   // --- statistics (fixed storage) ---
   const auto status = static_cast<std::size_t>(r.status);
@@ -64,13 +99,23 @@ void IntestineOrgan::step(const ToolGeometry* tool, double /*jaw*/, double dt, C
   if (!ok) ++faults_;
   self_contacts_max_ = std::max(self_contacts_max_, r.contacts);
   self_contacts_sum_ += r.contacts;
-  probe_contacts_max_ = std::max(probe_contacts_max_, r.probe_contacts);
-  if (r.probe_contacts > 0) ++probe_contact_ticks_;
-  if (r.probe_overflow > 0) ++probe_overflow_ticks_;
+  probe_contacts_max_ = std::max(probe_contacts_max_, touched);
+  if (touched > 0) ++probe_contact_ticks_;
+  if (overflow) ++probe_overflow_ticks_;
   if (r.contacts_overflow > 0) ++contacts_overflow_ticks_;
-  if (r.probe_saturated) ++saturated_ticks_;
+  if (saturated) ++saturated_ticks_;
   penetration_after_max_ = std::max(penetration_after_max_, r.response.max_penetration_after);
   active_pairs_max_ = std::max(active_pairs_max_, r.detection.segment_pairs + r.detection.cell_pairs);
+}
+
+int IntestineOrgan::contacts() const noexcept {
+  int sum = 0;
+  for (int i = 0; i < report_.probe_count; ++i) sum += report_.probes[static_cast<std::size_t>(i)].contacts;
+  return sum;
+}
+
+int IntestineOrgan::instrument_contacts(int i) const noexcept {
+  return i >= 0 && i < report_.probe_count ? report_.probes[static_cast<std::size_t>(i)].contacts : 0;
 }
 
 void IntestineOrgan::fill_outputs(OrganOutputs& out) const noexcept {
@@ -88,16 +133,8 @@ void IntestineOrgan::write(const TickRecord& r, std::uint64_t stamp_ns) noexcept
   if (writer_ == nullptr) return;
   sample_.seq(r.seq);
   sample_.sim_time(r.sim_time);
-  auto& pose = sample_.pose();
-  pose.pitch(r.pose.pitch);
-  pose.yaw(r.pose.yaw);
-  pose.insertion(r.pose.insertion);
-  pose.roll(r.pose.roll);
-  pose.jaw(r.pose.jaw);
-  sample_.tip().x(r.tip.x());
-  sample_.tip().y(r.tip.y());
-  sample_.tip().z(r.tip.z());
   // Sized at create_writers(): only the values change.
+  fill_instruments(r, sample_.instruments());
   auto& out = sample_.positions();
   const std::size_t n = std::min(out.size(), static_cast<std::size_t>(std::max(r.organ.point_count, 0)));
   const double* x = r.organ.points;
@@ -131,6 +168,18 @@ nlohmann::json IntestineOrgan::stats() const {
   j["probe_contact_ticks"] = probe_contact_ticks_;
   j["probe_overflow_ticks"] = probe_overflow_ticks_;
   j["saturated_ticks"] = saturated_ticks_;
+  nlohmann::json probes = nlohmann::json::array();
+  for (int i = 0; i < instruments_; ++i) {
+    const ProbeStats& ps = probe_stats_[static_cast<std::size_t>(i)];
+    probes.push_back({{"instrument", i},
+                      {"name", i < static_cast<int>(names_.size()) ? names_[static_cast<std::size_t>(i)] : ""},
+                      {"contacts_max", ps.contacts_max},
+                      {"contact_ticks", ps.contact_ticks},
+                      {"overflow_ticks", ps.overflow_ticks},
+                      {"saturated_ticks", ps.saturated_ticks},
+                      {"force_max_n", ps.force_max_n}});
+  }
+  j["probes"] = probes;
   j["body_states_published"] = published_.load(std::memory_order_relaxed);
   j["energy_j"] = intestine::energy(model_, state_);
   j["positions_finite"] = state_.x.allFinite();
