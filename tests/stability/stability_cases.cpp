@@ -482,7 +482,7 @@ std::vector<CaseResult> liver_contact_cases() {
   };
   for (const Touch& t : touches) {
     out.push_back(guarded(make("liver", "contacts_fixed", t.parameter), [&](CaseResult& r) {
-      ToolSpec spec = liver.tool;
+      ToolSpec spec = liver.tools[0];
       spec.trocar = t.trocar;
       spec.axis = t.axis;
       spec.shaft_points = 1;
@@ -566,7 +566,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
   stiff_material.young_modulus *= 10;
   LiverSetup stiff_setup(box.mesh, stiff_material, box.fixed);
   const NonlinearLaw linear;
-  ToolSpec spec = liver.tool;
+  ToolSpec spec = liver.tools[0];
   spec.trocar = Eigen::Vector3d(0.0831, 0.0577, 0.3);  // off the grid lines: the tip lands inside a triangle
   spec.axis = -Eigen::Vector3d::UnitZ();
   const double top = kBoxSize.z();
