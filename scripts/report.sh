@@ -39,7 +39,7 @@ fi
   echo "report: /usr/bin/python3 lacks numpy/matplotlib: run SURGSIM_WITH_REPORT=1 scripts/setup.sh" >&2; exit 1; }
 for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench \
          bench/liver_error_bench bench/intestine_error_bench bench/tube_skinning_bench bench/stability_report \
-         bench/rt_bench; do
+         bench/rt_bench bench/two_hands_bench; do
   [ -x "$build/$p" ] || { echo "report: $build/$p not found: run scripts/build.sh first" >&2; exit 1; }
 done
 build_s=$(( $(date +%s) - start_all ))
@@ -163,6 +163,18 @@ device_loop() {
   "$root/scripts/device_grid.sh" --out "$out/raw/device" --points "0.05,0.1,3 0.05,1,0.5 0.2,0.1,3 0.2,1,0.5 0.1,0.5,2"
 }
 step device_loop device_loop
+# Issue 19: both hands. The tick with two instruments x 10 contacts on the shipped two-tool liver and the grasper's
+# force while the probe presses, against the grasper alone and a direct solve (two_hands.csv, two_hands_trace.csv);
+# then the machine's floor for as long as the live run, just before it (a row of its own in rt_floor.csv: rt_bench
+# appends), and both nodes live at 1 kHz on that scene replaying the two-instrument trajectory (5 s, held 0.5 s).
+two_hands_s=5.5
+step two_hands "$bench/two_hands_bench" --out "$csv"
+step rt_floor_two_hands "$bench/rt_bench" --seconds "$two_hands_s" --label before_live_two_hands --out "$csv"
+live_two_hands() {
+  SURGSIM_OUT=$out/raw/live_two_hands HAPTIC_ARGS="--rate 1000 --duration $two_hands_s" VISUAL_ARGS="--png-every 50" \
+    "$root/scripts/run_local.sh" liver_two_tools "$root/config/trajectories/liver_two_hands.csv"
+}
+step live_two_hands live_two_hands
 # Issue 7's round trips: one host (shared memory, UDP), two hosts over veth and through the user-space impairment.
 if [ $quick = 1 ]; then step network "$root/scripts/network_figures.sh" 2 1000
 else step network "$root/scripts/network_figures.sh" 5 1000; fi
