@@ -36,7 +36,7 @@ FrameOutput::FrameOutput(const FrameOutputOptions& options) : options_(options),
     // Index of the written frames, so a reader knows what each PNG shows.
     index_ = std::fopen((options_.out + "/frames.csv").c_str(), "w");
     if (index_ == nullptr) throw_error(options_.out, "/frames.csv: cannot create the frame index");
-    std::fprintf(index_, "png,seq,sim_time,contacts,max_displacement_m\n");
+    std::fprintf(index_, "png,seq,sim_time,contacts,max_displacement_m,instruments\n");
   }
 }
 
@@ -49,7 +49,7 @@ void FrameOutput::flush() {
 }
 
 void FrameOutput::write(const Image& image, std::uint64_t frame, std::uint64_t seq, double sim_time,
-                        const OrganView& organ) {
+                        const OrganView& organ, int instruments) {
   char name[64];
   std::snprintf(name, sizeof name, "frame_%06llu.png", static_cast<unsigned long long>(frame));
   const std::string path = options_.out + "/" + name;
@@ -58,8 +58,8 @@ void FrameOutput::write(const Image& image, std::uint64_t frame, std::uint64_t s
     write_png(path, image);
     if (options_.vtk && organ.write_vtk(path.substr(0, path.size() - 4) + ".vtk")) ++vtk_written_;
     if (index_ != nullptr) {
-      std::fprintf(index_, "%s,%llu,%.6f,%d,%.9g\n", name, static_cast<unsigned long long>(seq), sim_time,
-                   organ.contacts_shown(), organ.max_displacement());
+      std::fprintf(index_, "%s,%llu,%.6f,%d,%.9g,%d\n", name, static_cast<unsigned long long>(seq), sim_time,
+                   organ.contacts_shown(), organ.max_displacement(), instruments);
     }
     if (first_png_.empty()) first_png_ = path;
     last_png_ = path;

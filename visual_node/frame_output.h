@@ -1,6 +1,7 @@
 // What the visual node writes besides the display: every n-th rendered frame as a PNG (out/frame_NNNNNN.png), the
-// index out/frames.csv saying which contact frame each PNG shows, the organ's surface as VTK next to each PNG when
-// the scene asks (visual.vtk), and at shutdown the PNGs as out/video.mp4 when asked and ffmpeg is installed.
+// index out/frames.csv saying which contact frame each PNG shows and how many instruments it draws, the organ's
+// surface as VTK next to each PNG when the scene asks (visual.vtk), and at shutdown the PNGs as out/video.mp4 when
+// asked and ffmpeg is installed.
 // A failed write (e.g. a full disk) must not stop the display: it is counted, the first one printed on stderr.
 #pragma once
 #include <cstdint>
@@ -39,9 +40,10 @@ class FrameOutput {
     return png_every_ > 0 && options_.enabled && frame % static_cast<std::uint64_t>(png_every_) == 0;
   }
   /// Writes `image` as frame_NNNNNN.png (NNNNNN = `frame`), the organ's VTK beside it when asked, and the index row
-  /// (contact frame `seq`, its `sim_time`, the organ's contacts and largest displacement). A surgsim::Error on the
-  /// way is counted (png_errors) and the frame skipped; the first is printed.
-  void write(const Image& image, std::uint64_t frame, std::uint64_t seq, double sim_time, const OrganView& organ);
+  /// (contact frame `seq`, its `sim_time`, the organ's contacts and largest displacement, the `instruments` drawn).
+  /// A surgsim::Error on the way is counted (png_errors) and the frame skipped; the first is printed.
+  void write(const Image& image, std::uint64_t frame, std::uint64_t seq, double sim_time, const OrganView& organ,
+             int instruments);
   /// Shutdown: the video, when asked and more than one PNG was written (says where, unless quiet).
   void finish();
 

@@ -1,7 +1,7 @@
 // What the visual node draws for one organ (issue 13: one organ interface per node). The app (visual_app.h) knows
-// only this interface: it receives contact frames, paces the loop, draws the tool and writes the outputs; everything
-// that depends on the organ model is behind an OrganView. make_organ_view() is the only place that looks at
-// scene.model: adding an organ is one implementation (visual_node/views/) and one line there.
+// only this interface: it receives contact frames, paces the loop, draws the instruments and writes the outputs;
+// everything that depends on the organ model is behind an OrganView. make_organ_view() is the only place that looks
+// at scene.model: adding an organ is one implementation (visual_node/views/) and one line there.
 //
 // Implementations: LiverView (views/liver_view.h: the visual rows of the precomputed tensors, the non-linear law,
 // the deformed boundary or an embedded finer surface, contact markers) and IntestineOrganView
@@ -32,6 +32,7 @@ class ContactFrame;
 using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 class Renderer;
+struct InstrumentPoses;
 
 class OrganView {
  public:
@@ -55,9 +56,12 @@ class OrganView {
   /// since the last call (and belongs to this scene). Returns the deformation time (us) when the organ did
   /// deformation work this frame (stats "deform_us"), else a negative value.
   virtual double update(const msg::ContactFrame* frame, bool fresh) noexcept = 0;
-  /// Draws the organ (before the tool).
+  /// Draws the organ (before the instruments).
   virtual void draw(Renderer& renderer) const = 0;
-  /// Draws the contact markers (after the tool).
+  /// The instruments the organ's own state carries (e.g. the intestine's newest BodyState: the probes at the body's
+  /// tick), or null: the app draws those of the newest contact frame (instruments.h).
+  virtual const InstrumentPoses* instruments() const { return nullptr; }
+  /// Draws the contact markers (after the instruments).
   virtual void draw_markers(Renderer&) const {}
   /// This frame's work time (s: update, draws, end_frame), for a level-of-detail controller.
   virtual void frame_done(double /*work_seconds*/) noexcept {}

@@ -1,5 +1,6 @@
 #include "visual_app.h"
 
+#include <array>
 #include <chrono>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -11,25 +12,22 @@
 #include "core/error.h"
 #include "dds_support.h"
 #include "frame_output.h"
+#include "instruments.h"
 #include "mesher/scene_mesh.h"
 #include "organ_view.h"
 #include "os/thread_priority.h"
 #include "render/renderer.h"
-#include "tool/tool.h"
 #include "visual_dds.h"
 
 namespace surgsim {
 
 namespace {
 
-Pose5 from_msg(const msg::ToolPose& p) {
-  Pose5 o;
-  o.pitch = p.pitch();
-  o.yaw = p.yaw();
-  o.insertion = p.insertion();
-  o.roll = p.roll();
-  o.jaw = p.jaw();
-  return o;
+/// "'grasper', 'probe'": the scene's tool names, for messages.
+std::string tool_names(const Scene& scene) {
+  std::string out;
+  for (const ToolSpec& t : scene.tools) out += (out.empty() ? "'" : ", '") + t.name + "'";
+  return out;
 }
 
 }  // namespace
@@ -87,8 +85,9 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
 
   if (!options_.quiet) {
     std::cerr << "visual_node: scene '" << scene_.name << "', " << organ_->surface_triangles() << " surface triangles, "
-              << renderer_->name() << " renderer " << scene_.visual.width << "x" << scene_.visual.height << " at "
-              << rate_hz_ << " Hz\n";
+              << scene_.tools.size() << (scene_.tools.size() == 1 ? " instrument" : " instruments") << " ("
+              << tool_names(scene_) << "), " << renderer_->name() << " renderer " << scene_.visual.width << "x"
+              << scene_.visual.height << " at " << rate_hz_ << " Hz\n";
     organ_->print_init(std::cerr);
   }
 }
@@ -102,9 +101,16 @@ void VisualApp::check_scene_identity() {
   hash_checked_ = true;
   const bool scene_ok = info.scene_hash() == scene_hash_;
   const bool tensors_ok = info.tensor_hash() == organ_->tensor_hash();
-  hash_ok_ = scene_ok && tensors_ok;
+  const bool instruments_ok = info.instrument_count() == scene_.tools.size();
+  hash_ok_ = scene_ok && tensors_ok && instruments_ok;
   scene_confirmed_ = hash_ok_;
   frames_before_scene_info_ = dds_->frames_accepted();
+  if (!instruments_ok) {
+    std::cerr << "visual_node: the haptic node drives " << info.instrument_count() << " instrument(s) in scene '"
+              << info.scene_name() << "' but this node's scene '" << scene_.name << "' (" << scene_.file << ") has "
+              << scene_.tools.size() << " (" << tool_names(scene_) << "): start both nodes with the same scene file; "
+              << "contact frames are ignored\n";
+  }
   if (!scene_ok) {
     std::cerr << "visual_node: the haptic node runs scene '" << info.scene_name() << "' (hash " << info.scene_hash()
               << ", mesh hash " << info.mesh_hash() << ") but this node loaded '" << scene_.name << "' (hash "
@@ -126,22 +132,49 @@ void VisualApp::report_wrong_scene() {
             << "frames_wrong_scene, " << count << " so far)\n";
 }
 
+void VisualApp::take_frame_instruments(const msg::ContactFrame& frame) {
+  take_instruments(frame.instruments(), static_cast<int>(scene_.tools.size()), instruments_);
+  if (instruments_.ignored == 0) return;
+  instrument_states_ignored_ += static_cast<std::uint64_t>(instruments_.ignored);
+  if (instrument_states_reported_) return;
+  instrument_states_reported_ = true;
+  std::uint32_t index = 0;  // the first state ignored, for the message
+  std::array<bool, kMaxInstruments> seen{};
+  for (const msg::InstrumentState& st : frame.instruments()) {
+    const std::uint32_t i = st.instrument();
+    if (i >= scene_.tools.size() || seen[i]) {
+      index = i;
+      break;
+    }
+    seen[i] = true;
+  }
+  std::cerr << "visual_node: contact frame " << frame.seq() << " carries a state for instrument " << index
+            << " (out of range or repeated) but scene '" << scene_.name << "' (" << scene_.file << ") has "
+            << scene_.tools.size() << " instrument(s) (" << tool_names(scene_) << "): such states are ignored "
+            << "(counted in stats instrument_states_ignored)\n";
+}
+
 void VisualApp::render_frame(const msg::ContactFrame& frame, bool have_frame, bool fresh) {
   // The organ from the newest contacts (or its own state, e.g. the intestine's newest BodyState).
   const std::uint64_t work0 = monotonic_ns();
   const double deform_us = organ_->update(have_frame ? &frame : nullptr, fresh);
   if (deform_us >= 0) deform_us_.add(deform_us);
+  if (fresh) take_frame_instruments(frame);
 
   const std::uint64_t r0 = monotonic_ns();
   renderer_->begin_frame(scene_.visual.camera);
   organ_->draw(*renderer_);
-  if (have_frame) renderer_->draw_tool(tool_geometry(scene_.tool, from_msg(frame.pose())), scene_.tool.shaft_radius);
+  // Every instrument: those of the organ's own state when it has them (the intestine's BodyState), else the newest
+  // contact frame's.
+  const InstrumentPoses* instruments = organ_->instruments();
+  if (instruments == nullptr && have_frame) instruments = &instruments_;
+  const int drawn = instruments != nullptr ? draw_instruments(*renderer_, scene_.tools, *instruments) : 0;
   organ_->draw_markers(*renderer_);
   renderer_->end_frame();
   organ_->frame_done(static_cast<double>(monotonic_ns() - work0) * 1e-9);
   ++frames_rendered_;
   if (output_->due(frames_rendered_) && renderer_->read_image(image_)) {
-    output_->write(image_, frames_rendered_, frame.seq(), have_frame ? frame.sim_time() : -1.0, *organ_);
+    output_->write(image_, frames_rendered_, frame.seq(), have_frame ? frame.sim_time() : -1.0, *organ_, drawn);
   }
   render_ms_.add(static_cast<double>(monotonic_ns() - r0) * 1e-6);
 }
@@ -219,6 +252,9 @@ void VisualApp::shutdown() {
   j["scene_info_received"] = have_info;
   j["scene_hash_ok"] = have_info && info.scene_hash() == scene_hash_;
   j["tensor_hash_ok"] = have_info && info.tensor_hash() == organ_->tensor_hash();
+  j["instruments"] = scene_.tools.size();  // the scene's instruments, drawn from the frames' InstrumentStates
+  j["instrument_count_ok"] = have_info && info.instrument_count() == scene_.tools.size();
+  j["instrument_states_ignored"] = instrument_states_ignored_;  // states naming no instrument of the scene
   j["dds_participant"] = dds_->participant().profile();
   j["dds_threads"] = dds_threads_note_;
   watch_.add_stats(j);

@@ -10,6 +10,7 @@
 #include "core/stats.h"
 #include "frame_rate.h"
 #include "haptic_watch.h"
+#include "instruments.h"
 #include "render/image.h"
 #include "scene/scene.h"
 
@@ -57,13 +58,17 @@ class VisualApp {
   void shutdown();
 
  private:
-  /// Once the haptic side's SceneInfo is known: whether it runs this scene with the same tensors (else frames are
-  /// ignored and run() returns 3). Until it is known no contact frame is taken: the newest one waits in VisualDds.
+  /// Once the haptic side's SceneInfo is known: whether it runs this scene with the same tensors and as many
+  /// instruments as the scene's tools (else frames are ignored, one stderr line says why, and run() returns 3).
+  /// Until it is known no contact frame is taken: the newest one waits in VisualDds.
   void check_scene_identity();
   /// One stderr line per foreign scene hash seen on contact frames (those frames are dropped by VisualDds).
   void report_wrong_scene();
-  /// Deformation, drawing and the PNG of one frame: `frame` is the newest frame taken (shown when `have_frame`),
-  /// `fresh` when it arrived since the last one.
+  /// The instruments of a fresh contact frame (instruments_); states naming no instrument of the scene are counted
+  /// and the first such frame is named on stderr.
+  void take_frame_instruments(const msg::ContactFrame& frame);
+  /// Deformation, drawing (the organ, every instrument, the markers) and the PNG of one frame: `frame` is the newest
+  /// frame taken (shown when `have_frame`), `fresh` when it arrived since the last one.
   void render_frame(const msg::ContactFrame& frame, bool have_frame, bool fresh);
 
   VisualOptions options_;
@@ -85,6 +90,9 @@ class VisualApp {
   std::uint64_t frames_shown_ = 0;               // fresh frames handed to the organ
   std::uint64_t wrong_scene_reported_hash_ = 0;  // the foreign hash last named on stderr
   std::uint64_t frames_rendered_ = 0;
+  InstrumentPoses instruments_;                   // of the newest contact frame taken
+  std::uint64_t instrument_states_ignored_ = 0;   // InstrumentStates naming no instrument of the scene (or repeated)
+  bool instrument_states_reported_ = false;       // the first such frame was named on stderr
   FrameRateMeter frame_rate_;                    // measured rate, sent as VisualStatus.fps
   Image image_;  // read-back buffer, reused every frame
   double wall_seconds_ = 0;

@@ -93,8 +93,8 @@ TEST(FrameOutput, WritesEveryNthFrameWithItsIndexRowAndVtk) {
 
   const FakeOrgan organ(true);
   const Image image = small_image();
-  out.write(image, 2, 17, 0.5, organ);
-  out.write(image, 4, 18, -1.0, organ);
+  out.write(image, 2, 17, 0.5, organ, 2);  // two instruments drawn
+  out.write(image, 4, 18, -1.0, organ, 0);  // before the first frame: none
   out.flush();
 
   const Image back = read_png(o.out + "/frame_000002.png");
@@ -104,9 +104,9 @@ TEST(FrameOutput, WritesEveryNthFrameWithItsIndexRowAndVtk) {
   EXPECT_TRUE(fs::exists(o.out + "/frame_000002.vtk"));
   EXPECT_TRUE(fs::exists(o.out + "/frame_000004.vtk"));
   EXPECT_EQ(read_text(o.out + "/frames.csv"),
-            "png,seq,sim_time,contacts,max_displacement_m\n"
-            "frame_000002.png,17,0.500000,3,0.004\n"
-            "frame_000004.png,18,-1.000000,3,0.004\n");
+            "png,seq,sim_time,contacts,max_displacement_m,instruments\n"
+            "frame_000002.png,17,0.500000,3,0.004,2\n"
+            "frame_000004.png,18,-1.000000,3,0.004,0\n");
   EXPECT_EQ(out.pngs_written(), 2u);
   EXPECT_EQ(out.vtk_written(), 2u);
   EXPECT_EQ(out.png_errors(), 0u);
@@ -130,14 +130,14 @@ TEST(FrameOutput, NoVtkWhenTheSceneDoesNotAskOrTheOrganHasNoSurface) {
   o.vtk = true;
   {
     FrameOutput out(o);
-    out.write(small_image(), 1, 1, 0.0, FakeOrgan(false));  // the organ has no surface (e.g. the intestine)
+    out.write(small_image(), 1, 1, 0.0, FakeOrgan(false), 1);  // the organ has no surface (e.g. the intestine)
     EXPECT_EQ(out.pngs_written(), 1u);
     EXPECT_EQ(out.vtk_written(), 0u);
   }
   o.vtk = false;
   {
     FrameOutput out(o);
-    out.write(small_image(), 1, 1, 0.0, FakeOrgan(true));
+    out.write(small_image(), 1, 1, 0.0, FakeOrgan(true), 1);
     EXPECT_EQ(out.vtk_written(), 0u);
   }
   EXPECT_FALSE(fs::exists(o.out + "/frame_000001.vtk"));
@@ -153,15 +153,15 @@ TEST(FrameOutput, AFailedWriteIsCountedAndTheNextOneStillWrites) {
   fs::create_directories(o.out + "/frame_000001.png");
   fs::create_directories(o.out + "/frame_000002.png");
   const FakeOrgan organ(true);
-  EXPECT_NO_THROW(out.write(small_image(), 1, 1, 0.0, organ));
-  EXPECT_NO_THROW(out.write(small_image(), 2, 2, 0.0, organ));
+  EXPECT_NO_THROW(out.write(small_image(), 1, 1, 0.0, organ, 1));
+  EXPECT_NO_THROW(out.write(small_image(), 2, 2, 0.0, organ, 1));
   EXPECT_EQ(out.png_errors(), 2u);
   EXPECT_EQ(out.pngs_written(), 0u);
-  out.write(small_image(), 3, 3, 0.0, organ);
+  out.write(small_image(), 3, 3, 0.0, organ, 1);
   EXPECT_EQ(out.pngs_written(), 1u);
   out.flush();
   EXPECT_EQ(read_text(o.out + "/frames.csv"),
-            "png,seq,sim_time,contacts,max_displacement_m\nframe_000003.png,3,0.000000,3,0.004\n");
+            "png,seq,sim_time,contacts,max_displacement_m,instruments\nframe_000003.png,3,0.000000,3,0.004,1\n");
   nlohmann::json j;
   out.add_stats(j);
   EXPECT_EQ(j["first_png"], o.out + "/frame_000003.png");
@@ -185,7 +185,7 @@ TEST(FrameOutput, NoVideoFromFewerThanTwoPngs) {
   o.video = true;
   o.quiet = true;
   FrameOutput out(o);
-  out.write(small_image(), 1, 1, 0.0, FakeOrgan(false));
+  out.write(small_image(), 1, 1, 0.0, FakeOrgan(false), 1);
   out.finish();
   EXPECT_EQ(out.video(), "");
   EXPECT_FALSE(fs::exists(o.out + "/video.mp4"));

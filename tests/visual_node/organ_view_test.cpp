@@ -9,10 +9,11 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "instruments.h"
+#include "render/renderer.h"
 #include "surgsim_types.h"
 #include "views/intestine_view.h"
 #include "views/liver_view.h"
-#include "render/renderer.h"
 
 namespace surgsim {
 namespace {
@@ -43,9 +44,11 @@ TEST(OrganView, IntestineSceneGetsTheIntestineView) {
   EXPECT_EQ(organ->lod(), static_cast<std::uint32_t>(intestine::kTubeMaxLod));
   EXPECT_EQ(intestine->view().skinning(), intestine::TubeSkinning::kGpu);
 
-  // Contact frames do not deform it; without DDS there is no body state to take.
+  // Contact frames do not deform it; without DDS there is no body state to take (nor its instruments: the app draws
+  // those of the contact frame).
   msg::ContactFrame frame;
   EXPECT_LT(organ->update(&frame, true), 0.0);
+  EXPECT_EQ(organ->instruments(), nullptr);
   EXPECT_EQ(organ->contacts_shown(), 0);
   EXPECT_EQ(organ->max_displacement(), 0.0);
   EXPECT_FALSE(organ->write_vtk("/nonexistent/never.vtk"));
@@ -99,15 +102,21 @@ TEST(OrganView, LiverSceneGetsTheLiverViewThatDeformsAndMarksContacts) {
   EXPECT_EQ(organ->contacts_shown(), 0);
   EXPECT_EQ(organ->max_displacement(), 0.0);
 
-  // One contact on a visible node, pressing down.
+  // One contact on a visible node, pressing down, of the scene's one instrument.
   const int node = liver->deformer().visible_nodes()[liver->deformer().visible_nodes().size() / 2];
   msg::ContactFrame frame;
   msg::ContactEntry e;
   e.node(static_cast<std::uint32_t>(node));
+  e.instrument(0);
   e.lambda().z(-0.2);
   frame.contacts().push_back(e);
-  frame.direction().z(-1.0);
+  msg::InstrumentState tool;
+  tool.instrument(0);
+  tool.direction().z(-1.0);
+  tool.pose().insertion(0.1);
+  frame.instruments().push_back(tool);
   EXPECT_GE(organ->update(&frame, true), 0.0);
+  EXPECT_EQ(organ->instruments(), nullptr);  // the app draws the contact frame's instruments
   EXPECT_EQ(organ->contacts_shown(), 1);
   EXPECT_GT(organ->max_displacement(), 0.0);
   EXPECT_EQ(organ->deform_errors(), 0u);
@@ -137,6 +146,156 @@ TEST(OrganView, LiverSceneGetsTheLiverViewThatDeformsAndMarksContacts) {
   EXPECT_EQ(j["visible_nodes"].get<std::size_t>(), liver->deformer().visible_nodes().size());
   EXPECT_GT(j["tensor_rows"].get<int>(), 0);
   EXPECT_FALSE(j.contains("intestine"));
+}
+
+// Two instruments on the plate (issue 19): the contacts of both deform it together, both are marked.
+TEST(OrganView, LiverViewTakesTheContactsOfEveryInstrument) {
+  Scene scene = shipped("plate.yaml");
+  scene.tools.push_back(scene.tools[0]);
+  scene.tools[1].name = "probe";
+  std::unique_ptr<OrganView> organ = make_organ_view(scene, test_options());
+  const auto& visible = dynamic_cast<LiverView&>(*organ).deformer().visible_nodes();
+  msg::ContactFrame frame;
+  for (std::uint32_t i = 0; i < 2; ++i) {
+    msg::ContactEntry e;
+    e.node(static_cast<std::uint32_t>(visible[visible.size() / 3 + i * visible.size() / 3]));
+    e.instrument(i);
+    e.lambda().z(-0.2);
+    frame.contacts().push_back(e);
+    msg::InstrumentState tool;
+    tool.instrument(i);
+    tool.direction().z(-1.0);
+    frame.instruments().push_back(tool);
+  }
+  EXPECT_GE(organ->update(&frame, true), 0.0);
+  EXPECT_EQ(organ->contacts_shown(), 2);
+  EXPECT_EQ(organ->deform_errors(), 0u);
+  const double both = organ->max_displacement();
+  EXPECT_GT(both, 0.0);
+  auto renderer = make_renderer("null", 64, 48);
+  organ->draw_markers(*renderer);
+  EXPECT_EQ(renderer->counts().points, 2u);
+
+  // Instrument 1 alone dents the plate less than both together (the plate has no non-linear law: a linear sum).
+  frame.contacts().erase(frame.contacts().begin());
+  EXPECT_GE(organ->update(&frame, true), 0.0);
+  EXPECT_EQ(organ->contacts_shown(), 1);
+  EXPECT_GT(organ->max_displacement(), 0.0);
+  EXPECT_LT(organ->max_displacement(), both);
+}
+
+msg::InstrumentState instrument_state(std::uint32_t index, double insertion, double pitch = 0) {
+  msg::InstrumentState s;
+  s.instrument(index);
+  s.pose().insertion(insertion);
+  s.pose().pitch(pitch);
+  s.pose().jaw(0.3);
+  s.direction().z(-1.0);
+  return s;
+}
+
+TEST(Instruments, TakesTheStatesOfTheScenesToolsAndCountsTheOthers) {
+  msg::ContactFrame frame;
+  frame.instruments().push_back(instrument_state(1, 0.12, 0.2));
+  frame.instruments().push_back(instrument_state(0, 0.10));
+  frame.instruments().push_back(instrument_state(2, 0.10));  // a third instrument: the scene has two
+  frame.instruments().push_back(instrument_state(1, 0.05));  // instrument 1 again
+  InstrumentPoses poses;
+  take_instruments(frame.instruments(), 2, poses);
+  EXPECT_TRUE(poses.present[0]);
+  EXPECT_TRUE(poses.present[1]);
+  EXPECT_FALSE(poses.present[2]);
+  EXPECT_EQ(poses.count(), 2);
+  EXPECT_EQ(poses.ignored, 2);
+  EXPECT_EQ(poses.pose[0].insertion, 0.10);
+  EXPECT_EQ(poses.pose[1].insertion, 0.12);  // the first state of instrument 1
+  EXPECT_EQ(poses.pose[1].pitch, 0.2);
+  EXPECT_EQ(poses.pose[1].jaw, 0.3);
+  EXPECT_EQ(poses.direction[1], Eigen::Vector3d(0, 0, -1));
+
+  // The next frame replaces them: an instrument it does not carry is absent, with no direction.
+  frame.instruments().resize(1);
+  take_instruments(frame.instruments(), 2, poses);
+  EXPECT_FALSE(poses.present[0]);
+  EXPECT_TRUE(poses.present[1]);
+  EXPECT_EQ(poses.direction[0], Eigen::Vector3d::Zero());
+  EXPECT_EQ(poses.ignored, 0);
+  // An empty frame: nothing to draw.
+  frame.instruments().clear();
+  take_instruments(frame.instruments(), 2, poses);
+  EXPECT_EQ(poses.count(), 0);
+}
+
+// A frame with two instruments draws both, each with its own tool spec (trocar, shaft radius) and colour, on the
+// real OSMesa renderer; an instrument the frame does not carry is not drawn.
+TEST(Instruments, EveryInstrumentOfAFrameIsDrawnInItsOwnColour) {
+  std::vector<ToolSpec> tools(2);
+  tools[0].name = "grasper";
+  tools[0].trocar = {-0.06, 0.0, 0.20};
+  tools[0].shaft_radius = 0.004;
+  tools[1].name = "probe";
+  tools[1].trocar = {0.06, 0.0, 0.20};
+  tools[1].shaft_radius = 0.004;
+  Camera camera;
+  camera.eye = {0.0, -0.5, 0.12};
+  camera.target = {0.0, 0.0, 0.12};
+  camera.up = {0, 0, 1};
+  camera.fov_deg = 35;
+  constexpr int kW = 320, kH = 240;
+
+  msg::ContactFrame frame;
+  frame.instruments().push_back(instrument_state(0, 0.16));
+  frame.instruments().push_back(instrument_state(1, 0.12, 0.25));  // tilted
+  frame.instruments().push_back(instrument_state(3, 0.12));        // no such tool: ignored
+  InstrumentPoses poses;
+  take_instruments(frame.instruments(), static_cast<int>(tools.size()), poses);
+  ASSERT_EQ(poses.ignored, 1);
+
+  auto renderer = make_renderer("osmesa", kW, kH);
+  const auto render = [&](Image& image) {
+    renderer->begin_frame(camera);
+    const int drawn = draw_instruments(*renderer, tools, poses);
+    renderer->end_frame();
+    EXPECT_TRUE(renderer->read_image(image));
+    return drawn;
+  };
+  // Pixels across instrument i's shaft halfway from its trocar to its tip: drawn, grey, blue.
+  struct Across {
+    int drawn = 0, grey = 0, blue = 0;
+  };
+  const auto across = [&](const Image& image, int i) {
+    const ToolGeometry g = tool_geometry(tools[static_cast<std::size_t>(i)], poses.pose[static_cast<std::size_t>(i)]);
+    const Eigen::Vector2f c = project_to_pixel(camera, kW, kH, (0.5 * (g.trocar + g.tip)).cast<float>());
+    Across a;
+    for (int dx = -10; dx <= 10; ++dx) {
+      const std::uint8_t* p = image.at(static_cast<int>(c.x()) + dx, static_cast<int>(c.y()));
+      if (p[0] == kBackgroundRgb[0] && p[1] == kBackgroundRgb[1] && p[2] == kBackgroundRgb[2]) continue;
+      ++a.drawn;
+      a.grey += std::abs(p[0] - p[2]) < 40 ? 1 : 0;
+      a.blue += p[2] > p[0] + 60 ? 1 : 0;
+    }
+    return a;
+  };
+
+  Image image;
+  EXPECT_EQ(render(image), 2);
+  EXPECT_EQ(renderer->counts().tools, 2u);
+  EXPECT_EQ(renderer->counts().rejected, 0u);
+  const Across first = across(image, 0), second = across(image, 1);
+  EXPECT_GT(first.drawn, 3) << "instrument 0's shaft";
+  EXPECT_EQ(first.grey, first.drawn) << "instrument 0 in grey";
+  EXPECT_GT(second.drawn, 3) << "instrument 1's shaft";
+  EXPECT_GE(second.blue, second.drawn - 1) << "instrument 1 in blue: " << second.blue << " of " << second.drawn;
+
+  // Instrument 1 absent from the next frame: only instrument 0 is drawn.
+  frame.instruments().erase(frame.instruments().begin() + 1);
+  const Pose5 shown1 = poses.pose[1];
+  take_instruments(frame.instruments(), static_cast<int>(tools.size()), poses);
+  poses.pose[1] = shown1;  // where it was, to look there
+  Image one;
+  EXPECT_EQ(render(one), 1);
+  EXPECT_EQ(across(one, 1).drawn, 0) << "an instrument the frame does not carry is not drawn";
+  EXPECT_EQ(across(one, 0).drawn, first.drawn);
 }
 
 }  // namespace

@@ -185,7 +185,6 @@ constexpr float kPi = 3.14159265358979323846f;
 constexpr int kCylinderSegments = 24;
 constexpr int kSphereSubdivisions = 2;  // 320 triangles
 constexpr float kJawRadiusRatio = 0.55f;  // jaw radius / shaft radius
-const Eigen::Vector3f kToolRgb(0.66f, 0.68f, 0.71f);
 
 struct Material {
   Eigen::Vector3f rgb;
@@ -375,14 +374,14 @@ class OsMesaRenderer final : public Renderer {
     draw(slot.mesh, Eigen::Matrix4f::Identity(), {rgb, Eigen::Vector3f::Constant(0.22f), 40.0f});
   }
 
-  void draw_tool(const ToolGeometry& tool, float radius) override {
+  void draw_tool(const ToolGeometry& tool, float radius, const Eigen::Vector3f& rgb) override {
     if (!(tool.trocar.allFinite() && tool.tip.allFinite() && tool.jaw_tips[0].allFinite() &&
-          tool.jaw_tips[1].allFinite() && std::isfinite(radius) && radius > 0.0f)) {
+          tool.jaw_tips[1].allFinite() && std::isfinite(radius) && radius > 0.0f && rgb.allFinite())) {
       ++counts_.rejected;
       return;
     }
     ++counts_.tools;
-    const Material metal{kToolRgb, Eigen::Vector3f::Constant(0.75f), 60.0f};
+    const Material metal{rgb, Eigen::Vector3f::Constant(0.75f), 60.0f};
     const Eigen::Vector3f tip = tool.tip.cast<float>();
     draw_cylinder(tool.trocar.cast<float>(), tip, radius, metal);
     for (const auto& jaw : tool.jaw_tips) draw_cylinder(tip, jaw.cast<float>(), kJawRadiusRatio * radius, metal);

@@ -22,9 +22,9 @@ class NullRenderer final : public Renderer {
     const bool ok = positions.allFinite() && (tris.size() == 0 || (tris.minCoeff() >= 0 && tris.maxCoeff() < positions.rows()));
     ++(ok ? counts_.surfaces : counts_.rejected);
   }
-  void draw_tool(const ToolGeometry& tool, float radius) override {
+  void draw_tool(const ToolGeometry& tool, float radius, const Eigen::Vector3f& rgb) override {
     const bool ok = tool.trocar.allFinite() && tool.tip.allFinite() && tool.jaw_tips[0].allFinite() &&
-                    tool.jaw_tips[1].allFinite() && std::isfinite(radius);
+                    tool.jaw_tips[1].allFinite() && std::isfinite(radius) && rgb.allFinite();
     ++(ok ? counts_.tools : counts_.rejected);
   }
   void draw_points(const Eigen::Ref<const Eigen::MatrixX3f>& points, float radius, const Eigen::Vector3f&) override {

@@ -6,6 +6,7 @@
 // cannot draw (out-of-range indices, non-finite coordinates) is skipped and counted in counts().rejected.
 #pragma once
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -21,6 +22,14 @@ namespace surgsim {
 /// Default colours, linear RGB in [0, 1].
 inline const Eigen::Vector3f kLiverRgb(0.58f, 0.20f, 0.15f);    // red-brown liver
 inline const Eigen::Vector3f kMarkerRgb(0.95f, 0.85f, 0.20f);   // contact-point markers
+/// Instruments (issue 19: several tools told apart in a picture), by index in the scene's tools list: 0 metallic
+/// grey (the one-tool colour), 1 blue, 2 green, 3 violet. instrument_rgb() cycles beyond them.
+inline const std::array<Eigen::Vector3f, 4> kInstrumentRgb = {
+    Eigen::Vector3f(0.66f, 0.68f, 0.71f), Eigen::Vector3f(0.22f, 0.42f, 0.86f), Eigen::Vector3f(0.22f, 0.70f, 0.36f),
+    Eigen::Vector3f(0.62f, 0.34f, 0.80f)};
+inline const Eigen::Vector3f& instrument_rgb(int instrument) {
+  return kInstrumentRgb[static_cast<std::size_t>(instrument < 0 ? 0 : instrument) % kInstrumentRgb.size()];
+}
 /// Background, as stored in the image (a dark neutral, not black, so a test can tell foreground apart).
 constexpr std::uint8_t kBackgroundRgb[3] = {40, 42, 48};
 
@@ -48,9 +57,11 @@ class Renderer {
   virtual void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions,
                             const Eigen::Ref<const Eigen::MatrixX3i>& tris, const Eigen::Vector3f& rgb) = 0;
 
-  /// The tool in metallic grey: the shaft as a cylinder of `radius` (m) from tool.trocar to tool.tip, and the two
-  /// jaws as thinner cylinders from the tip to jaw_tips[0] and jaw_tips[1].
-  virtual void draw_tool(const ToolGeometry& tool, float radius) = 0;
+  /// A tool in metallic `rgb` (instrument_rgb(i) for instrument i): the shaft as a cylinder of `radius` (m) from
+  /// tool.trocar to tool.tip, and the two jaws as thinner cylinders from the tip to jaw_tips[0] and jaw_tips[1].
+  virtual void draw_tool(const ToolGeometry& tool, float radius, const Eigen::Vector3f& rgb) = 0;
+  /// The same in the first instrument's grey.
+  void draw_tool(const ToolGeometry& tool, float radius) { draw_tool(tool, radius, instrument_rgb(0)); }
 
   /// Small spheres of `radius` (m) at each row of `points` (#P x 3, m), e.g. contact points.
   virtual void draw_points(const Eigen::Ref<const Eigen::MatrixX3f>& points, float radius,

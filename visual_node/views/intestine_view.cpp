@@ -32,9 +32,10 @@ class BodyStateListener : public DataReaderListener {
       ++received_;
     }
   }
-  /// Copies the newest state's positions into `xyz` (room for kMaxBodyPoints points) if it is newer than the last
-  /// one taken: returns its point count, else -1.
-  int take(double* xyz, std::uint64_t& seq, std::uint64_t& scene_hash, std::uint64_t& received) {
+  /// Copies the newest state's positions into `xyz` (room for kMaxBodyPoints points) and its instruments (for a
+  /// scene of `tools` instruments) if it is newer than the last one taken: returns its point count, else -1.
+  int take(double* xyz, int tools, InstrumentPoses& instruments, std::uint64_t& seq, std::uint64_t& scene_hash,
+           std::uint64_t& received) {
     std::lock_guard<std::mutex> lock(mutex_);
     received = received_;
     if (received_ == taken_) return -1;
@@ -45,6 +46,7 @@ class BodyStateListener : public DataReaderListener {
       xyz[3 * i + 1] = p[i].y();
       xyz[3 * i + 2] = p[i].z();
     }
+    take_instruments(newest_.instruments(), tools, instruments);
     seq = newest_.seq();
     scene_hash = newest_.scene_hash();
     return static_cast<int>(p.size());
@@ -80,6 +82,7 @@ intestine::FrameRateParams rate_params(const Scene& scene) {
 IntestineView::IntestineView(const Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning)
     : rows_(scene.intestine.params.rows),
       cols_(scene.intestine.params.columns),
+      tools_(static_cast<int>(scene.tools.size())),
       scene_hash_(scene_hash),
       target_fps_(rate_params(scene).target_hz),
       points_(static_cast<std::size_t>(3 * rows_ * cols_), 0.0),
@@ -119,12 +122,16 @@ void IntestineView::subscribe(dds::Participant& participant) {
                      listener_.get());
 }
 
-bool IntestineView::accept(const double* xyz, int count) noexcept {
+bool IntestineView::accept(const double* xyz, int count, const InstrumentPoses* instruments) noexcept {
   if (count != rows_ * cols_) return false;
   for (int i = 0; i < 3 * count; ++i) {
     if (!std::isfinite(xyz[i])) return false;
   }
   std::copy(xyz, xyz + 3 * count, points_.begin());
+  if (instruments != nullptr) {
+    instruments_ = *instruments;
+    instrument_states_ignored_ += static_cast<std::uint64_t>(instruments->ignored);
+  }
   have_body_ = true;
   ++states_shown_;
   return true;
@@ -134,9 +141,9 @@ bool IntestineView::update() noexcept {
   bool fresh = false;
   if (listener_ != nullptr) {
     std::uint64_t seq = 0, hash = 0;
-    const int count = listener_->take(incoming_.data(), seq, hash, states_received_);
+    const int count = listener_->take(incoming_.data(), tools_, incoming_instruments_, seq, hash, states_received_);
     if (count >= 0) {
-      if (hash == scene_hash_ && accept(incoming_.data(), count)) {
+      if (hash == scene_hash_ && accept(incoming_.data(), count, &incoming_instruments_)) {
         fresh = true;
         last_seq_ = seq;
       } else {
@@ -149,8 +156,8 @@ bool IntestineView::update() noexcept {
   return fresh;
 }
 
-bool IntestineView::set_positions(const double* xyz, int count) noexcept {
-  if (!accept(xyz, count)) {
+bool IntestineView::set_positions(const double* xyz, int count, const InstrumentPoses* instruments) noexcept {
+  if (!accept(xyz, count, instruments)) {
     ++states_rejected_;
     return false;
   }
@@ -215,6 +222,7 @@ nlohmann::json IntestineView::stats() const {
   j["body_states_received"] = states_received_;
   j["body_states_shown"] = states_shown_;
   j["body_states_rejected"] = states_rejected_;
+  j["instrument_states_ignored"] = instrument_states_ignored_;
   j["last_seq"] = last_seq_;
   j["build_failures"] = build_failures_;
   std::uint64_t frames = 0;

@@ -31,6 +31,7 @@
 
 #include "core/stats.h"
 #include "dds_support.h"
+#include "instruments.h"
 #include "intestine/frame_rate_controller.h"
 #include "intestine/tube_geometry.h"
 #include "organ_view.h"
@@ -63,12 +64,17 @@ class IntestineView {
   /// Init: the BodyState reader (stream profile: best effort, keep last 1; the listener keeps the newest).
   void subscribe(dds::Participant& participant);
 
-  /// Per frame, no allocation: takes the newest BodyState when there is a newer one, and rebuilds the tube and the
-  /// mesentery when the body or the controller's LOD changed. True when a new body state was taken.
+  /// Per frame, no allocation: takes the newest BodyState when there is a newer one (its positions and its
+  /// instruments, the probes at the body's tick), and rebuilds the tube and the mesentery when the body or the
+  /// controller's LOD changed. True when a new body state was taken.
   bool update() noexcept;
-  /// The same from positions (tests, no DDS): `count` points (x, y, z; m), node (r, c) at r columns + c. False (and
-  /// the previous shape kept) on a wrong count or a non-finite value.
-  bool set_positions(const double* xyz, int count) noexcept;
+  /// The same from positions (tests, no DDS): `count` points (x, y, z; m), node (r, c) at r columns + c, and when
+  /// given the instruments of that state. False (and the previous shape and instruments kept) on a wrong count or a
+  /// non-finite value.
+  bool set_positions(const double* xyz, int count, const InstrumentPoses* instruments = nullptr) noexcept;
+
+  /// The instruments of the shown body state (none present before one that carried them).
+  const InstrumentPoses& instruments() const { return instruments_; }
 
   /// Draws the tube and the mesentery (nothing before the first body state).
   void draw(Renderer& renderer) const;
@@ -90,10 +96,11 @@ class IntestineView {
   nlohmann::json stats() const;
 
  private:
-  bool accept(const double* xyz, int count) noexcept;
+  bool accept(const double* xyz, int count, const InstrumentPoses* instruments) noexcept;
   void rebuild(int lod) noexcept;
 
   int rows_ = 0, cols_ = 0;
+  int tools_ = 1;  // the scene's instruments
   std::uint64_t scene_hash_ = 0;
   double target_fps_ = 0;
   std::vector<double> points_;  // 3 rows cols, the shown body state
@@ -112,11 +119,14 @@ class IntestineView {
 
   std::unique_ptr<BodyStateListener> listener_;
   std::vector<double> incoming_;  // 3 x kMaxBodyPoints, the listener's newest copied out under its lock
+  InstrumentPoses incoming_instruments_;  // its instruments
+  InstrumentPoses instruments_;           // those of the shown body state
 
   // Statistics (fixed storage).
   std::uint64_t states_received_ = 0;
   std::uint64_t states_shown_ = 0;
   std::uint64_t states_rejected_ = 0;  // another scene's hash, a wrong point count or a non-finite value
+  std::uint64_t instrument_states_ignored_ = 0;  // instrument states of shown body states naming no tool of the scene
   std::uint64_t build_failures_ = 0;
   std::uint64_t last_seq_ = 0;
   std::array<std::uint64_t, intestine::kTubeMaxLod + 1> lod_frames_{};
@@ -127,7 +137,8 @@ class IntestineView {
 };
 
 /// The intestine as the visual node's organ: the frame loop's update() takes the newest BodyState (contact frames do
-/// not deform it), the frame-rate controller gets each frame's work time.
+/// not deform it), the instruments drawn are the probes that BodyState carries (in step with the body), the
+/// frame-rate controller gets each frame's work time.
 class IntestineOrganView : public OrganView {
  public:
   /// Init: see IntestineView (no mesh, no tensors).
@@ -142,6 +153,10 @@ class IntestineOrganView : public OrganView {
   /// took a new body state is its deformation time.
   double update(const msg::ContactFrame* frame, bool fresh) noexcept override;
   void draw(Renderer& renderer) const override { view_.draw(renderer); }
+  /// The instruments of the shown body state once one carried any (else null: those of the contact frame).
+  const InstrumentPoses* instruments() const override {
+    return view_.has_body() && view_.instruments().count() > 0 ? &view_.instruments() : nullptr;
+  }
   void frame_done(double work_seconds) noexcept override { view_.frame_done(work_seconds); }
   std::uint32_t lod() const override { return static_cast<std::uint32_t>(view_.lod()); }
 

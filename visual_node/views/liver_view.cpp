@@ -16,7 +16,8 @@ namespace {
 Eigen::Vector3d from_msg(const msg::Vec3& v) { return {v.x(), v.y(), v.z()}; }
 }  // namespace
 
-LiverView::LiverView(const Scene& scene, const OrganViewOptions& options) {
+LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
+    : tools_(static_cast<int>(scene.tools.size())) {
   // The visible mesh.
   mesh_ = load_scene_mesh(scene, options.cache_dir, options.log);
   surface_ = boundary_surface(mesh_);
@@ -51,9 +52,14 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
       const auto& e = frame->contacts()[static_cast<std::size_t>(l)];
       contact_nodes_[static_cast<std::size_t>(l)] = static_cast<int>(e.node());
       contact_lambda_[static_cast<std::size_t>(l)] = from_msg(e.lambda());
+      // An instrument the scene does not have (or without a state in the frame): its contact is superposed linearly.
+      const std::uint32_t i = e.instrument();
+      contact_instrument_[static_cast<std::size_t>(l)] =
+          i < static_cast<std::uint32_t>(kMaxInstruments) ? static_cast<int>(i) : -1;
     }
-    if (deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), contacts_, from_msg(frame->direction())) !=
-        ContactStatus::kOk) {
+    take_instruments(frame->instruments(), tools_, instruments_);  // absent instruments get a zero direction
+    if (deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), contact_instrument_.data(), contacts_,
+                         instruments_.direction.data(), std::min(tools_, kMaxInstruments)) != ContactStatus::kOk) {
       ++deform_errors_;  // a frame naming nodes this scene does not have: keep the last good shape
     }
     deform_us = static_cast<double>(monotonic_ns() - d0) * 1e-3;

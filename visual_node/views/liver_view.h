@@ -1,13 +1,16 @@
 // The liver in the visual node (Cotin et al. 1998): the scene's tetrahedral mesh and its boundary, the "visual" rows
 // of the precomputed tensors (visible x surface, from the cache both nodes share; no interior rows), the quasi
 // non-linear law, the SurfaceDeformer (u_n = sum_k G_nk lambda_k for the newest contacts), an optional finer visual
-// surface embedded in the boundary (visual.surface), and the contact nodes drawn as markers.
+// surface embedded in the boundary (visual.surface), and the contact nodes drawn as markers. With several instruments
+// (issue 19) the contacts of all of them deform the organ together (one solve on the haptic side); the non-linear law
+// bends each instrument's share about that instrument's own direction (SurfaceDeformer::apply with instruments).
 #pragma once
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <memory>
 
+#include "instruments.h"
 #include "liver/nonlinear_law.h"
 #include "liver/precompute.h"
 #include "liver/superposition.h"
@@ -47,9 +50,13 @@ class LiverView : public OrganView {
   Tensors tensors_;  // "visual" block only (no interior rows)
   std::unique_ptr<NonlinearLaw> law_;
   std::unique_ptr<SurfaceDeformer> deformer_;
-  // The shown frame's contacts (the last fresh frame's nodes and forces; fixed storage).
+  int tools_ = 1;  // the scene's instruments
+  // The shown frame's contacts (the last fresh frame's nodes, forces and instruments; fixed storage) and its
+  // instruments' directions (the non-linear law's axis of each instrument's share).
   std::array<int, kMaxContacts> contact_nodes_{};
   std::array<Eigen::Vector3d, kMaxContacts> contact_lambda_{};
+  std::array<int, kMaxContacts> contact_instrument_{};
+  InstrumentPoses instruments_;
   int contacts_ = 0;
   Eigen::MatrixX3f markers_;  // contact points drawn as markers
   int marker_count_ = 0;

@@ -33,6 +33,9 @@ SurfaceDeformer::SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface
   superposition_ = std::make_unique<Superposition>(*tensors, "visual", kMaxContacts);
   const TensorBlock& block = superposition_->block();
   u_.setZero(3 * block.row_count());
+  u_sum_.setZero(3 * block.row_count());
+  group_nodes_.assign(kMaxContacts, 0);
+  group_lambda_.assign(kMaxContacts, Eigen::Vector3d::Zero());
   block_row_.assign(visible_nodes_.size(), -1);
   for (std::size_t v = 0; v < visible_nodes_.size(); ++v) {
     block_row_[v] = block.row_of_node[static_cast<std::size_t>(visible_nodes_[v])];
@@ -103,6 +106,44 @@ ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* la
   if (law_ != nullptr && direction.squaredNorm() > 0.5 && !law_->apply_displacements(u_, direction)) {
     return ContactStatus::kNonFinite;
   }
+  set_shape(u_);
+  return ContactStatus::kOk;
+}
+
+ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* lambda, const int* instrument, int m,
+                                     const Eigen::Vector3d* directions, int instruments) noexcept {
+  // The law's group of contact l: its instrument when that has a direction, else `instruments` (linear).
+  const auto group = [&](int l) {
+    const int i = instrument[l];
+    return law_ != nullptr && i >= 0 && i < instruments && directions[i].squaredNorm() > 0.5 ? i : instruments;
+  };
+  if (m <= 0 || m > kMaxContacts || superposition_ == nullptr) return apply(nodes, lambda, m);
+  const int first = group(0);
+  bool one_group = true;
+  for (int l = 1; l < m && one_group; ++l) one_group = group(l) == first;
+  if (one_group) return apply(nodes, lambda, m, first < instruments ? directions[first] : Eigen::Vector3d::Zero());
+
+  // Each group's share u_g = sum_{l in g} G(., k_l) lambda_l, bent about its direction, added up.
+  u_sum_.setZero();
+  for (int g = 0; g <= instruments; ++g) {
+    int count = 0;
+    for (int l = 0; l < m; ++l) {
+      if (group(l) != g) continue;
+      group_nodes_[static_cast<std::size_t>(count)] = nodes[l];
+      group_lambda_[static_cast<std::size_t>(count)] = lambda[l];
+      ++count;
+    }
+    if (count == 0) continue;
+    const ContactStatus status = superposition_->displacements(group_nodes_.data(), group_lambda_.data(), count, u_);
+    if (status != ContactStatus::kOk) return status;
+    if (g < instruments && !law_->apply_displacements(u_, directions[g])) return ContactStatus::kNonFinite;
+    u_sum_ += u_;
+  }
+  set_shape(u_sum_);
+  return ContactStatus::kOk;
+}
+
+void SurfaceDeformer::set_shape(const Eigen::VectorXd& u_all) noexcept {
   double max2 = 0;
   for (Eigen::Index v = 0; v < rest_.rows(); ++v) {
     const int r = block_row_[static_cast<std::size_t>(v)];
@@ -110,13 +151,12 @@ ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* la
       positions_.row(v) = rest_.row(v);
       continue;
     }
-    const Eigen::Vector3d u = u_.segment<3>(3 * r);
+    const Eigen::Vector3d u = u_all.segment<3>(3 * r);
     max2 = std::max(max2, u.squaredNorm());
     positions_.row(v) = rest_.row(v) + u.cast<float>().transpose();
   }
   max_displacement_ = std::sqrt(max2);
   update_fine();
-  return ContactStatus::kOk;
 }
 
 }  // namespace surgsim

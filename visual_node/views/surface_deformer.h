@@ -26,6 +26,13 @@ class SurfaceDeformer {
   /// (unit; the ContactFrame's mean imposed displacement) is the axis of the non-linear law; zero skips it.
   ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
                       const Eigen::Vector3d& direction = Eigen::Vector3d::Zero()) noexcept;
+  /// Several instruments (issue 19): contact l belongs to instrument instrument[l], whose mean imposed displacement
+  /// direction is directions[instrument[l]] (`instruments` of them). The displacements are the same linear sum
+  /// u = sum_l G(., k_l) lambda_l; the non-linear law bends each instrument's share u_i (its own contacts) about its
+  /// own direction before the shares are added. Contacts naming an instrument outside 0..instruments-1 or one with
+  /// a zero direction are superposed linearly. One instrument: the same as apply(nodes, lambda, m, direction).
+  ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, const int* instrument, int m,
+                      const Eigen::Vector3d* directions, int instruments) noexcept;
 
   /// Embeds a finer visual surface: each of its vertices is tied to the closest point of the mechanical boundary
   /// (triangle, barycentric coordinates, offset along the triangle's normal) and follows it. Only boundary rows are
@@ -66,7 +73,13 @@ class SurfaceDeformer {
   Eigen::VectorXf fine_offset_;
   Eigen::MatrixX3f fine_positions_;
   void update_fine() noexcept;
+  /// The shape from the displacements u (3 per "visual" row).
+  void set_shape(const Eigen::VectorXd& u) noexcept;
   Eigen::VectorXd u_;
+  Eigen::VectorXd u_sum_;  // apply() with several instruments: the sum of their shares
+  // One instrument's contacts, gathered (kMaxContacts each).
+  std::vector<int> group_nodes_;
+  std::vector<Eigen::Vector3d> group_lambda_;
   double max_displacement_ = 0;
 };
 

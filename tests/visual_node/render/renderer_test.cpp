@@ -243,6 +243,58 @@ TEST(OsMesaRenderer, ToolShaftAndJawsAreDrawn) {
   }
 }
 
+// Several instruments are told apart by colour (issue 19): two tools side by side, one in instrument 0's colour
+// (grey), one in instrument 1's (blue).
+TEST(OsMesaRenderer, InstrumentColoursTellToolsApart) {
+  // The palette: distinct colours, cycling beyond the fourth instrument.
+  for (int i = 0; i < 4; ++i) {
+    for (int j = i + 1; j < 4; ++j) EXPECT_GT((instrument_rgb(i) - instrument_rgb(j)).norm(), 0.2f) << i << " " << j;
+    EXPECT_EQ(instrument_rgb(i + 4), instrument_rgb(i));
+  }
+  EXPECT_EQ(instrument_rgb(-1), instrument_rgb(0));
+
+  const auto tool_at = [](double x) {
+    ToolGeometry t{};
+    t.trocar = {x, 0.0, 1.2};
+    t.tip = {x, 0.0, -0.4};
+    t.direction = {0, 0, -1};
+    t.jaw_normal = {0, -1, 0};
+    t.jaw_tips = {t.tip + Eigen::Vector3d(0.1, 0, -0.2), t.tip + Eigen::Vector3d(-0.1, 0, -0.2)};
+    return t;
+  };
+  const ToolGeometry left = tool_at(-0.6), right = tool_at(0.6);
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  renderer->begin_frame(front_camera());
+  renderer->draw_tool(left, 0.06f, instrument_rgb(0));
+  renderer->draw_tool(right, 0.06f, instrument_rgb(1));
+  renderer->end_frame();
+  Image image;
+  ASSERT_TRUE(renderer->read_image(image));
+  EXPECT_EQ(renderer->counts().tools, 2u);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+  // Across each shaft, halfway along it: how many pixels are drawn, and how many of them are grey or blue.
+  const auto across = [&](const ToolGeometry& t, int& drawn, int& grey, int& blue) {
+    drawn = grey = blue = 0;
+    const Eigen::Vector3f middle = (0.5 * (t.trocar + t.tip)).cast<float>();
+    const Eigen::Vector2f c = project_to_pixel(front_camera(), kWidth, kHeight, middle);
+    for (int dx = -12; dx <= 12; ++dx) {
+      const int x = static_cast<int>(c.x()) + dx, y = static_cast<int>(c.y());
+      if (is_background(image, x, y)) continue;
+      const std::uint8_t* p = image.at(x, y);
+      ++drawn;
+      grey += std::abs(p[0] - p[2]) < 40 ? 1 : 0;
+      blue += p[2] > p[0] + 60 ? 1 : 0;
+    }
+  };
+  int drawn = 0, grey = 0, blue = 0;
+  across(left, drawn, grey, blue);
+  EXPECT_GT(drawn, 4) << "instrument 0's shaft";
+  EXPECT_EQ(grey, drawn) << "instrument 0 is grey";
+  across(right, drawn, grey, blue);
+  EXPECT_GT(drawn, 4) << "instrument 1's shaft";
+  EXPECT_GE(blue, drawn - 1) << "instrument 1 is blue (" << blue << " of " << drawn << " pixels)";
+}
+
 TEST(OsMesaRenderer, PointsAreDrawnAsMarkers) {
   auto renderer = make_renderer("osmesa", kWidth, kHeight);
   Eigen::MatrixX3f points(2, 3);
@@ -350,6 +402,12 @@ TEST(NullRenderer, CountsAndHasNoImage) {
   EXPECT_EQ(renderer->counts().tools, 2u);
   EXPECT_EQ(renderer->counts().points, 6u);
   EXPECT_EQ(renderer->counts().rejected, 0u);
+  // A tool in another instrument's colour counts as a tool; a non-finite colour is rejected.
+  renderer->draw_tool(tool, 0.01f, instrument_rgb(1));
+  EXPECT_EQ(renderer->counts().tools, 3u);
+  renderer->draw_tool(tool, 0.01f, Eigen::Vector3f(std::nanf(""), 0.0f, 0.0f));
+  EXPECT_EQ(renderer->counts().tools, 3u);
+  EXPECT_EQ(renderer->counts().rejected, 1u);
 }
 
 TEST(MakeRenderer, RefusesUnknownBackendAndBadSize) {

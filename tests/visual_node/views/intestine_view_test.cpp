@@ -106,6 +106,33 @@ TEST(IntestineView, RefusesWrongCountsAndNonFiniteValues) {
   EXPECT_EQ(view.stats()["body_states_rejected"].get<int>(), 2);
 }
 
+// The probes drawn with the intestine are those of the body state shown (issue 19: one probe per instrument, in step
+// with the body); a refused state keeps the previous ones.
+TEST(IntestineView, KeepsTheInstrumentsOfTheBodyStateShown) {
+  const Scene scene = shipped_intestine();
+  IntestineView view(scene, scene.hash());
+  EXPECT_EQ(view.instruments().count(), 0);
+  std::vector<double> x = rest_positions(scene);
+  InstrumentPoses probes;
+  probes.present[0] = true;
+  probes.pose[0].insertion = 0.07;
+  probes.ignored = 1;  // the state carried one instrument the scene does not have
+  ASSERT_TRUE(view.set_positions(x.data(), static_cast<int>(x.size() / 3), &probes));
+  EXPECT_TRUE(view.instruments().present[0]);
+  EXPECT_EQ(view.instruments().pose[0].insertion, 0.07);
+  EXPECT_EQ(view.stats()["instrument_states_ignored"].get<int>(), 1);
+
+  InstrumentPoses moved = probes;
+  moved.pose[0].insertion = 0.09;
+  x[4] = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(view.set_positions(x.data(), static_cast<int>(x.size() / 3), &moved));
+  EXPECT_EQ(view.instruments().pose[0].insertion, 0.07) << "a refused state changes nothing";
+  // Positions alone (no instruments, e.g. a benchmark): the probes shown stay.
+  x[4] = rest_positions(scene)[4];
+  ASSERT_TRUE(view.set_positions(x.data(), static_cast<int>(x.size() / 3)));
+  EXPECT_TRUE(view.instruments().present[0]);
+}
+
 // Frames whose work allows only half the target rate: the controller removes levels of detail (paper eq. 15), and
 // frames that leave room bring them back.
 TEST(IntestineView, FrameRateControllerLowersAndRaisesTheLod) {

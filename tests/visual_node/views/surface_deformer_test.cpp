@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "liver/fem.h"
 #include "liver/fixed_set.h"
+#include "liver/nonlinear_law.h"
 #include "liver/precompute.h"
 #include "render/renderer.h"
 #include "liver/static_solver.h"
@@ -114,6 +115,67 @@ TEST_F(SurfaceDeformerTest, BadFrameKeepsTheLastShape) {
   const Eigen::Vector3d nan(std::nan(""), 0, 0);
   EXPECT_NE(deformer.apply(&node, &nan, 1), ContactStatus::kOk);
   EXPECT_EQ(deformer.positions(), before);
+}
+
+// Several instruments (issue 19): the contacts of all instruments deform the surface together (the linear sum), and
+// the non-linear law bends each instrument's share about that instrument's own direction.
+TEST_F(SurfaceDeformerTest, EachInstrumentsShareIsBentAboutItsOwnDirection) {
+  NonlinearSpec spec;  // the shipped liver's curves (E 3000 Pa, nu 0.45, as this block)
+  spec.displacement_curve = std::string(SURGSIM_TEST_CONFIG_DIR) + "/curves/liver_dr.csv";
+  spec.force_curve = std::string(SURGSIM_TEST_CONFIG_DIR) + "/curves/liver_force.csv";
+  const NonlinearLaw law = load_nonlinear_law(spec);
+  ASSERT_FALSE(law.identity());
+
+  // Instrument 0 presses straight down on the left, instrument 1 pushes obliquely on the right.
+  const int nodes[2] = {top_node(-0.05, 0.0), top_node(0.05, 0.0)};
+  const Eigen::Vector3d lambda[2] = {{0, 0, -1.2}, {0.8, 0, -0.9}};
+  const Eigen::Vector3d dirs[2] = {{0, 0, -1}, Eigen::Vector3d(0.6, 0, -0.8)};
+  const int instrument[2] = {0, 1};
+  // Displacement of every visible vertex (m).
+  const auto u = [](const SurfaceDeformer& d) { return Eigen::MatrixX3d((d.positions() - d.rest()).cast<double>()); };
+
+  SurfaceDeformer both(*mesh_, *surface_, tensors_, &law);
+  ASSERT_EQ(both.apply(nodes, lambda, instrument, 2, dirs, 2), ContactStatus::kOk);
+  SurfaceDeformer first(*mesh_, *surface_, tensors_, &law), second(*mesh_, *surface_, tensors_, &law);
+  ASSERT_EQ(first.apply(&nodes[0], &lambda[0], 1, dirs[0]), ContactStatus::kOk);
+  ASSERT_EQ(second.apply(&nodes[1], &lambda[1], 1, dirs[1]), ContactStatus::kOk);
+  const Eigen::MatrixX3d shares = u(first) + u(second);
+  EXPECT_GT(shares.rowwise().norm().maxCoeff(), 0.004);
+  // Positions are floats: the sum of the shares up to float rounding of the coordinates.
+  EXPECT_LT((u(both) - shares).cwiseAbs().maxCoeff(), 1e-7);
+
+  // One direction for both contacts is another shape: the law really acts per instrument.
+  SurfaceDeformer one_axis(*mesh_, *surface_, tensors_, &law);
+  ASSERT_EQ(one_axis.apply(nodes, lambda, 2, dirs[0]), ContactStatus::kOk);
+  const double per_instrument_effect = (u(one_axis) - u(both)).cwiseAbs().maxCoeff();
+  EXPECT_GT(per_instrument_effect, 1e-5);
+
+  // All contacts of one instrument: exactly the single-direction call.
+  const int same[2] = {1, 1};
+  SurfaceDeformer one_instrument(*mesh_, *surface_, tensors_, &law), reference(*mesh_, *surface_, tensors_, &law);
+  ASSERT_EQ(one_instrument.apply(nodes, lambda, same, 2, dirs, 2), ContactStatus::kOk);
+  ASSERT_EQ(reference.apply(nodes, lambda, 2, dirs[1]), ContactStatus::kOk);
+  EXPECT_EQ(one_instrument.positions(), reference.positions());
+
+  // A contact of an instrument outside the list (or without a direction) is superposed linearly.
+  const int outside[2] = {0, 7};
+  SurfaceDeformer mixed(*mesh_, *surface_, tensors_, &law), linear_second(*mesh_, *surface_, tensors_);
+  ASSERT_EQ(mixed.apply(nodes, lambda, outside, 2, dirs, 2), ContactStatus::kOk);
+  ASSERT_EQ(linear_second.apply(&nodes[1], &lambda[1], 1), ContactStatus::kOk);
+  EXPECT_LT((u(mixed) - (u(first) + u(linear_second))).cwiseAbs().maxCoeff(), 1e-7);
+
+  // Without a law the instruments change nothing: the linear sum, bit for bit.
+  SurfaceDeformer linear_both(*mesh_, *surface_, tensors_), linear(*mesh_, *surface_, tensors_);
+  ASSERT_EQ(linear_both.apply(nodes, lambda, instrument, 2, dirs, 2), ContactStatus::kOk);
+  ASSERT_EQ(linear.apply(nodes, lambda, 2), ContactStatus::kOk);
+  EXPECT_EQ(linear_both.positions(), linear.positions());
+
+  // A bad contact in any instrument's share keeps the last shape.
+  const Eigen::MatrixX3f before = both.positions();
+  const int bad_nodes[2] = {nodes[0], 0};  // node 0: a fixed bottom node, no column
+  EXPECT_NE(both.apply(bad_nodes, lambda, instrument, 2, dirs, 2), ContactStatus::kOk);
+  EXPECT_EQ(both.positions(), before);
+  std::printf("per-instrument law: largest difference from one axis %.3g m\n", per_instrument_effect);
 }
 
 // A contact frame may name nodes this mesh does not have (another scene, a corrupt sample): the marker lookup the
