@@ -49,6 +49,19 @@ TEST(HapticApp, TickAllocatesNothingOnceWarm) {
   EXPECT_EQ(allocations_once_warm(app, warm), 0) << "ticks " << warm << ".." << app.total_ticks();
 }
 
+// Two instruments (issue 19): the shipped grasper and probe, one solve, two force stages, two ForceFeedback writes,
+// per-instrument log columns and the v2 recording; warm once the grasper holds (t 1.7 s = tick 510 at 300 Hz), then
+// counted over the probe's press and both releases.
+TEST(HapticApp, TwoInstrumentTickAllocatesNothingOnceWarm) {
+  HapticOptions o = test_options();
+  o.scene = "liver_two_tools";
+  o.log = ::testing::TempDir() + "/haptic_app_two_log.csv";
+  o.record = ::testing::TempDir() + "/haptic_app_two_record.csv";
+  HapticApp app(o);
+  const std::uint64_t warm = 510;
+  EXPECT_EQ(allocations_once_warm(app, warm), 0) << "ticks " << warm << ".." << app.total_ticks();
+}
+
 // The intestine scene: mass-spring step, probe force, ContactFrame, ForceFeedback and BodyState every tick.
 TEST(HapticApp, IntestineTickAllocatesNothingOnceWarm) {
   HapticOptions o = test_options();
