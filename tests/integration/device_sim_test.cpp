@@ -214,6 +214,23 @@ TEST_F(DeviceSim, TrajectoryDrivesEachInstrumentAndLosesOnlyTheSilencedOne) {
   }
   EXPECT_GT(lost_rows, 500);
   EXPECT_GT(right_pressing, 0.9 * lost_rows) << "right pressed on while left was lost";
+
+  // Recorded from live input, replayed tick-exactly: the replay of the node's recording (its losses included) logs
+  // exactly the live run's forces, every tick, both instruments.
+  Process replay(bin("haptic_node"),
+                 {"--scene", scene_, "--replay", path("record.csv"), "--speed", "max", "--rate", "1000",
+                  "--rt-priority", "0", "--log", path("replay_log.csv")},
+                 env_, path("replay.txt"));
+  ASSERT_EQ(replay.wait(300), 0) << testing::read_file(path("replay.txt"));
+  std::istringstream live_log(testing::read_file(path("log.csv"))), replay_log(testing::read_file(path("replay_log.csv")));
+  std::string a, b;
+  int compared = 0;
+  while (std::getline(live_log, a)) {
+    ASSERT_TRUE(std::getline(replay_log, b)) << "the replay is shorter, at line " << compared;
+    ASSERT_EQ(a, b) << "first difference at line " << compared;
+    ++compared;
+  }
+  EXPECT_GT(compared, 3000);
 }
 
 // A single-instrument (v1) file cannot drive a two-tool scene: the error names the file, both name lists and a fix.
