@@ -782,6 +782,14 @@ def two_hands_section(rep):
                               fmt(fig("contact_nodes_max_grasper")), fmt(fig("contact_nodes_max_probe")),
                               fmt(fig("ticks_over_capacity")) if fig("ticks_over_capacity") is not None else "?"),
                           "", ""))
+        if fig("tick_both_touching_p99_us_shipped_capacity") is not None:
+            # The same tick at the scene's own capacities (what the live node runs): a reference for the live row.
+            table.append(("tick with both touching at the scene's own capacities, %s + %s contact nodes (bench)" % (
+                fmt(fig("contact_nodes_max_grasper_shipped_capacity")), fmt(fig("contact_nodes_max_probe_shipped_capacity"))),
+                "p50 %s / p99 %s / max %s us" % tuple(fmt(fig(k + "_shipped_capacity")) if fig(
+                    k + "_shipped_capacity") is not None else "-" for k in (
+                        "tick_both_touching_p50_us", "tick_both_touching_p99_us", "tick_both_touching_max_us")),
+                "", ""))
     elif rows is not None:
         table.append(("tick with both instruments touching (bench)", "missing: not in `csv/two_hands.csv`", "", ""))
 
