@@ -1,5 +1,6 @@
 #include "liver/patch_solve.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/error.h"
@@ -36,12 +37,19 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c) noexcept {
     if (!std::isfinite(w) || w < 0) return ContactStatus::kNonFinite;
     if (u < 0 || u >= n) return ContactStatus::kInvalidNode;
   }
-  // G of the union nodes, symmetrized from both stored halves (as Superposition::solve).
+  // G of the union nodes, symmetrized from both stored halves (as Superposition::solve). The first `kept` nodes are
+  // those of the last read in the same order: their blocks are in guu_ already.
+  int kept = 0;
+  while (kept < n && kept < g_count_ &&
+         g_nodes_[static_cast<std::size_t>(kept)] == c.nodes[static_cast<std::size_t>(kept)])
+    ++kept;
+  g_count_ = 0;  // until the read below is complete
   for (int b = 0; b < n; ++b) {
     const int nb = c.nodes[static_cast<std::size_t>(b)];
     const int rb = block_.row_of_node[static_cast<std::size_t>(nb)];
     const int cb = tensors_.column_of_node[static_cast<std::size_t>(nb)];
-    for (int a = b; a < n; ++a) {
+    for (int a = std::max(b, kept); a < n; ++a) {
+      ++g_blocks_read_;
       const int na = c.nodes[static_cast<std::size_t>(a)];
       const int ra = block_.row_of_node[static_cast<std::size_t>(na)];
       const int ca = tensors_.column_of_node[static_cast<std::size_t>(na)];
@@ -53,6 +61,8 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c) noexcept {
         }
     }
   }
+  for (int u = 0; u < n; ++u) g_nodes_[static_cast<std::size_t>(u)] = c.nodes[static_cast<std::size_t>(u)];
+  g_count_ = n;
   // M_pq = sum_i sum_j w_pi w_qj G_ij: first H_q(u) = sum_j w_qj G_{u j}, then M_pq = sum_i w_pi H_q(i).
   for (int q = 0; q < c.patch_count; ++q) {
     const int q0 = c.patch_start[static_cast<std::size_t>(q)], q1 = c.patch_start[static_cast<std::size_t>(q + 1)];

@@ -13,6 +13,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <array>
+#include <cstdint>
 #include <string>
 
 #include "liver/superposition.h"
@@ -47,7 +48,9 @@ class PatchSolver {
   PatchSolver(const Tensors& tensors, const std::string& block_name);
 
   /// Run phase: reads G of the union nodes (symmetrized, 3x3 blocks) and the patch compliances
-  /// M_pq = sum_i sum_j w_pi w_qj G_ij (m/N). Refuses fixed, interior, non-row or out-of-range nodes, non-finite or
+  /// M_pq = sum_i sum_j w_pi w_qj G_ij (m/N). G is read only for the nodes that are not the previous successful
+  /// prepare()'s first nodes in the same order (a held or pressing contact keeps its nodes: nothing is read again; a
+  /// second instrument's new nodes are read alone); the values are those a full read gives, bit for bit. Refuses fixed, interior, non-row or out-of-range nodes, non-finite or
   /// negative weights (the status; nothing is usable then).
   ContactStatus prepare(const PatchConstraints& c) noexcept;
   /// Run phase, after prepare(): A = [d_k^T M_{p(k) p(l)} d_l] and its Cholesky factor, for the rows whose `enabled`
@@ -80,6 +83,13 @@ class PatchSolver {
   int row_count_ = 0;
   int dependent_row_ = -1;
   int prepared_nodes_ = 0;
+  std::array<int, kMaxContacts> g_nodes_{};  // the union nodes whose G is in guu_, in order
+  int g_count_ = 0;
+  std::uint64_t g_blocks_read_ = 0;          // 3x3 blocks of G read from the tensors since construction
+
+ public:
+  /// 3x3 blocks of G read from the tensors since construction (the others were reused).
+  std::uint64_t g_blocks_read() const { return g_blocks_read_; }
 };
 
 }  // namespace surgsim

@@ -133,5 +133,65 @@ TEST(PatchSolve, EqualsTheFullSolveOfTheSameConstraint) {
   EXPECT_EQ(allocations, 0);
 }
 
+// Issue 19: a held contact keeps its union nodes from tick to tick and a second instrument appends its own: prepare()
+// reads G only for the nodes that are new or moved, and the compliances are bit-identical to a fresh full read.
+TEST(PatchSolve, ReadsGOnlyForNewNodesAndGivesTheFullReadBitForBit) {
+  const auto organ = test::box_organ(8, 6, 4);
+  const std::vector<int> contacts = contactable_nodes(organ->mesh, organ->fixed);
+  const Tensors tensors = precompute_tensors(organ->model, contacts, standard_row_sets(organ->mesh, contacts), {});
+  ASSERT_GE(contacts.size(), 12u);
+  // Patches over union nodes given as contactable-node indices, equal weights.
+  const auto make = [&](const std::vector<std::vector<int>>& patches) {
+    PatchConstraints c;
+    c.clear();
+    for (const auto& patch : patches) {
+      const int p = c.patch_count;
+      const int start = c.patch_start[static_cast<std::size_t>(p)];
+      for (std::size_t e = 0; e < patch.size(); ++e) {
+        const int node = contacts[static_cast<std::size_t>(patch[e])];
+        int u = 0;
+        while (u < c.node_count && c.nodes[static_cast<std::size_t>(u)] != node) ++u;
+        if (u == c.node_count) c.nodes[static_cast<std::size_t>(c.node_count++)] = node;
+        c.entry_node[static_cast<std::size_t>(start + static_cast<int>(e))] = u;
+        c.entry_weight[static_cast<std::size_t>(start + static_cast<int>(e))] = 1.0 / static_cast<double>(patch.size());
+      }
+      c.patch_start[static_cast<std::size_t>(p + 1)] = start + static_cast<int>(patch.size());
+      c.patch_count = p + 1;
+    }
+    return c;
+  };
+  const PatchConstraints one = make({{0, 1, 2, 3, 4, 5}});
+  const PatchConstraints two = make({{0, 1, 2, 3, 4, 5}, {4, 5, 6, 7, 8, 9}});
+  const PatchConstraints moved = make({{1, 0, 2, 3, 4, 5}, {4, 5, 6, 7, 8, 9}});
+  const auto same = [](const PatchSolver& a, const PatchSolver& b, const PatchConstraints& c) {
+    for (int i = 0; i < c.node_count; ++i)
+      for (int j = 0; j < c.node_count; ++j)
+        if (a.g(i, j) != b.g(i, j)) return false;
+    for (int p = 0; p < c.patch_count; ++p)
+      for (int q = 0; q < c.patch_count; ++q)
+        if (a.compliance(p, q) != b.compliance(p, q)) return false;
+    return true;
+  };
+  PatchSolver held(tensors, "haptic");
+  ASSERT_EQ(held.prepare(one), ContactStatus::kOk);
+  EXPECT_EQ(held.g_blocks_read(), 21u);  // 6 nodes: 6 x 7 / 2 blocks
+  ASSERT_EQ(held.prepare(one), ContactStatus::kOk);
+  EXPECT_EQ(held.g_blocks_read(), 21u) << "the same nodes: nothing read again";
+  ASSERT_EQ(held.prepare(two), ContactStatus::kOk);
+  EXPECT_EQ(held.g_blocks_read(), 21u + (55u - 21u)) << "only the blocks of the 4 appended nodes";
+  PatchSolver fresh(tensors, "haptic");
+  ASSERT_EQ(fresh.prepare(two), ContactStatus::kOk);
+  EXPECT_TRUE(same(held, fresh, two));
+  ASSERT_EQ(held.prepare(moved), ContactStatus::kOk);  // the first two nodes swapped: everything read again
+  EXPECT_EQ(held.g_blocks_read(), 55u + 55u);
+  PatchSolver fresh_moved(tensors, "haptic");
+  ASSERT_EQ(fresh_moved.prepare(moved), ContactStatus::kOk);
+  EXPECT_TRUE(same(held, fresh_moved, moved));
+  ASSERT_EQ(held.prepare(one), ContactStatus::kOk);  // back to fewer nodes, in another order than the last read
+  PatchSolver fresh_one(tensors, "haptic");
+  ASSERT_EQ(fresh_one.prepare(one), ContactStatus::kOk);
+  EXPECT_TRUE(same(held, fresh_one, one));
+}
+
 }  // namespace
 }  // namespace surgsim
