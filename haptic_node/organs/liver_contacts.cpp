@@ -353,6 +353,9 @@ void LiverContacts::track(const ToolGeometry& geometry, int i, int g, bool resum
     return;
   }
   c.resumed = false;
+  // A point that was outside and has not moved cannot have crossed the rest surface: no query (a held instrument's
+  // shaft points, every tick it is still).
+  if (!resume && previous_[si] == p) return;
   const SurfaceHit hit = grid_.segment_query(resume ? geometry.trocar : previous_[si], p);
   RestPoint rp;
   if (hit.hit) rp = surface_->closest_local(p, hit.triangle);
