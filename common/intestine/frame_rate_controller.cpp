@@ -27,7 +27,8 @@ void FrameRateController::reset() noexcept {
 
 int FrameRateController::update(double f) noexcept {
   if (!(f > 0) || !std::isfinite(f)) return lod_;
-  const double eps_next = eps_ + params_.alpha * (params_.target_hz - f);
+  const double e = params_.error == FrameRateError::kHz ? params_.target_hz - f : std::log2(params_.target_hz / f);
+  const double eps_next = eps_ + params_.alpha * e;
   const double rho_max = std::nextafter(static_cast<double>(params_.lod_max - params_.lod_min + 1), 0.0);
   rho_ = std::clamp(rho_ + params_.beta * (eps_next - eps_), 0.0, rho_max);
   eps_ = eps_next;
