@@ -2,6 +2,11 @@
 
 #include <array>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -30,12 +35,27 @@ std::string tool_names(const Scene& scene) {
   return out;
 }
 
+/// SURGSIM_VISUAL_LOAD_STEP=AT:FOR:X (seconds, seconds, factor >= 1); false when unset. Throws on a malformed value.
+bool parse_load_step(double& at, double& duration, double& factor) {
+  const char* v = std::getenv("SURGSIM_VISUAL_LOAD_STEP");
+  if (v == nullptr || *v == '\0') return false;
+  char tail = 0;
+  if (std::sscanf(v, "%lf:%lf:%lf%c", &at, &duration, &factor, &tail) != 3 || !(at >= 0) || !(duration > 0) ||
+      !(factor >= 1) || !std::isfinite(at + duration + factor)) {
+    throw_error("SURGSIM_VISUAL_LOAD_STEP='", v, "' is not AT:FOR:X (from AT >= 0 s after the first frame shown, for ",
+                "FOR > 0 s, every frame's work X >= 1 times longer), e.g. 4:2:3");
+  }
+  return true;
+}
+
 }  // namespace
 
 VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(monotonic_ns(), options.quiet) {
   // --- init: scene and the organ (mesh, tensors, deformer or the intestine's tube) ---
   scene_ = load_scene(resolve_scene_path(options_.scene));
   rate_hz_ = options_.rate_hz > 0 ? options_.rate_hz : scene_.visual.rate_hz;
+  if (!parse_load_step(load_at_s_, load_for_s_, load_factor_)) load_at_s_ = -1;
+  trace_.reserve(kTraceCapacity);
   const int png_every = options_.png_every >= 0 ? options_.png_every : scene_.visual.png_every;
   if (options_.tube_skinning != "gpu" && options_.tube_skinning != "cpu") {
     throw_error("--tube-skinning '", options_.tube_skinning, "' is not a skinning path (use gpu or cpu)");
@@ -89,6 +109,10 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
               << tool_names(scene_) << "), " << renderer_->name() << " renderer " << scene_.visual.width << "x"
               << scene_.visual.height << " at " << rate_hz_ << " Hz\n";
     organ_->print_init(std::cerr);
+    if (load_at_s_ >= 0) {
+      std::cerr << "visual_node: synthetic load (SURGSIM_VISUAL_LOAD_STEP): frame work x" << load_factor_ << " from "
+                << load_at_s_ << " s after the first frame shown, for " << load_for_s_ << " s\n";
+    }
   }
 }
 
@@ -171,7 +195,21 @@ void VisualApp::render_frame(const msg::ContactFrame& frame, bool have_frame, bo
   const int drawn = instruments != nullptr ? draw_instruments(*renderer_, scene_.tools, *instruments) : 0;
   organ_->draw_markers(*renderer_);
   renderer_->end_frame();
-  organ_->frame_done(static_cast<double>(monotonic_ns() - work0) * 1e-9);
+  // The synthetic load: this frame's work made load_factor_ times longer (a busy wait, as a slower renderer would).
+  std::uint64_t work_end = monotonic_ns();
+  last_load_on_ = false;
+  if (load_at_s_ >= 0 && first_shown_ns_ != 0) {
+    const double t = static_cast<double>(work_end - first_shown_ns_) * 1e-9;
+    if (t >= load_at_s_ && t < load_at_s_ + load_for_s_) {
+      last_load_on_ = true;
+      const std::uint64_t until = work_end + static_cast<std::uint64_t>((load_factor_ - 1) * static_cast<double>(work_end - work0));
+      while (monotonic_ns() < until) {
+      }
+      work_end = monotonic_ns();
+    }
+  }
+  last_work_ms_ = static_cast<double>(work_end - work0) * 1e-6;
+  organ_->frame_done(static_cast<double>(work_end - work0) * 1e-9);
   ++frames_rendered_;
   if (output_->due(frames_rendered_) && renderer_->read_image(image_)) {
     output_->write(image_, frames_rendered_, frame.seq(), have_frame ? frame.sim_time() : -1.0, *organ_, drawn);
@@ -205,16 +243,36 @@ int VisualApp::run() {
     if (fresh) {
       have_frame = true;
       ++frames_shown_;
+      if (first_shown_ns_ == 0) first_shown_ns_ = monotonic_ns();
     }
+    const int lod_drawn = static_cast<int>(organ_->lod());
     render_frame(frame, have_frame, fresh);
-    frame_rate_.add(monotonic_ns());
+    const std::uint64_t end_ns = monotonic_ns();
+    frame_rate_.add(end_ns);
+    const double interval_ms =
+        last_frame_end_ns_ != 0 ? static_cast<double>(end_ns - last_frame_end_ns_) * 1e-6 : 0.0;
+    if (last_frame_end_ns_ != 0) interval_ms_.add(interval_ms);
+    last_frame_end_ns_ = end_ns;
+    if (trace_.size() < kTraceCapacity) {
+      const double t_s =
+          first_shown_ns_ != 0 ? (static_cast<double>(end_ns) - static_cast<double>(first_shown_ns_)) * 1e-9 : -1.0;
+      trace_.push_back(TraceRow{t_s, last_work_ms_, interval_ms, frame_rate_.fps(), lod_drawn, last_load_on_});
+    } else {
+      ++trace_dropped_;
+    }
 
     // The measured frame rate (not the configured one); the frame shown.
     dds_->publish_status(frame_rate_.fps(), organ_->lod(), have_frame ? frame.seq() : 0, frames_rendered_);
 
-    next += period;
+    // This frame was due at `next`; the next one at next + period. Late by less than a period: start it at once
+    // (catch up, the mean rate holds); later than that: restart the schedule from now (no burst after a stall).
     const auto now = clock::now();
-    if (next < now) next = now;  // fell behind: do not burst
+    next += period;
+    if (now > next) ++frames_late_;  // overran its period: the next frame starts at once
+    if (now - next > period) {
+      next = now;
+      ++schedule_restarts_;
+    }
     std::this_thread::sleep_until(next);
   }
   wall_seconds_ = static_cast<double>(monotonic_ns() - wall_start) * 1e-9;
@@ -245,6 +303,13 @@ void VisualApp::shutdown() {
   j["tensor_rows"] = 0;
   j["fps"] = wall_seconds_ > 0 ? static_cast<double>(frames_rendered_) / wall_seconds_ : 0.0;
   j["fps_configured"] = rate_hz_;
+  j["frame_interval_ms"] = to_json(interval_ms_.summary());
+  j["frames_late"] = frames_late_;                // ended after the next frame was due (overran their period)
+  j["schedule_restarts"] = schedule_restarts_;    // more than a period late: the schedule restarted from then
+  if (load_at_s_ >= 0) {
+    j["load_step"] = {{"at_s", load_at_s_}, {"for_s", load_for_s_}, {"factor", load_factor_}};
+  }
+  write_trace(j);
   j["wall_seconds"] = wall_seconds_;
   j["deform_us"] = to_json(deform);
   j["render_ms"] = to_json(render);
@@ -267,6 +332,28 @@ void VisualApp::shutdown() {
               << "\n";
     organ_->print_summary(std::cerr, j);
   }
+}
+
+void VisualApp::write_trace(nlohmann::json& j) const {
+  j["frame_trace_rows"] = trace_.size();
+  j["frame_trace_dropped"] = trace_dropped_;
+  if (options_.headless || options_.out.empty()) return;
+  const std::string path = options_.out + "/frame_trace.csv";
+  std::error_code ec;
+  std::filesystem::create_directories(options_.out, ec);
+  std::ofstream f(path);
+  if (!f) {
+    std::cerr << "visual_node: cannot write " << path << "\n";
+    return;
+  }
+  f << "t_s,lod,work_ms,interval_ms,fps,load_on\n";
+  char line[160];
+  for (const TraceRow& r : trace_) {
+    std::snprintf(line, sizeof line, "%.6f,%d,%.4f,%.4f,%.3f,%d\n", r.t_s, r.lod, r.work_ms, r.interval_ms, r.fps,
+                  r.load_on ? 1 : 0);
+    f << line;
+  }
+  j["frame_trace"] = path;
 }
 
 }  // namespace surgsim

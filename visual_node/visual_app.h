@@ -1,11 +1,27 @@
 // The visual node: init (scene, organ view, renderer, frame output, DDS), run (frame-paced loop drawing the newest
 // contact frame), shutdown (video, stats). The organ is behind OrganView (organ_view.h): nothing here depends on
 // which model the scene uses.
+//
+// Pacing: frame k is due at start + k / rate; a frame that ends late by less than one period starts the next one at
+// once (the schedule catches up, so an occasional slow frame, e.g. a PNG, does not lower the mean rate), one later
+// than that restarts the schedule from now (no burst of frames after a stall).
+//
+// Frame trace (issue 15): one row per frame, written at shutdown to OUT/frame_trace.csv (--out; nothing when
+// headless): the time since the first frame shown, the LOD drawn, the frame's work (organ update, draw, end_frame: what
+// the LOD controller is fed, the pacing sleep and the PNG excluded), the interval since the previous frame, the
+// measured rate (1 s window) and whether the synthetic load is on. Rows are preallocated (kTraceCapacity); later
+// frames are counted, not kept.
+//
+// Synthetic load (issue 15, for showing the controller live around a load change): SURGSIM_VISUAL_LOAD_STEP=AT:FOR:X
+// makes every frame's work X times longer (a busy wait of (X - 1) x its measured work, counted as work) from AT s
+// after the first frame shown, for FOR s. Unset: no extra load.
 #pragma once
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
+#include <vector>
 
 #include "core/stats.h"
 #include "frame_rate.h"
@@ -71,6 +87,18 @@ class VisualApp {
   /// frame taken (shown when `have_frame`), `fresh` when it arrived since the last one.
   void render_frame(const msg::ContactFrame& frame, bool have_frame, bool fresh);
 
+  /// One row of the frame trace.
+  struct TraceRow {
+    double t_s;          // since the first frame shown (negative before it)
+    double work_ms;      // update + draw + end_frame (+ the synthetic load)
+    double interval_ms;  // since the previous frame ended
+    double fps;          // FrameRateMeter, 1 s window
+    int lod;             // the organ's LOD drawn (0 for organs without one)
+    bool load_on;        // the synthetic load was on
+  };
+  static constexpr std::size_t kTraceCapacity = 1 << 16;  // 36 min at 30 Hz
+  void write_trace(nlohmann::json& stats) const;
+
   VisualOptions options_;
   std::string dds_threads_note_;            // how the DDS threads are scheduled (stats "dds_threads")
   Scene scene_;
@@ -98,6 +126,17 @@ class VisualApp {
   double wall_seconds_ = 0;
   SampleRecorder deform_us_{1 << 18};
   SampleRecorder render_ms_{1 << 18};
+  SampleRecorder interval_ms_{1 << 18};           // between frame ends
+  std::uint64_t frames_late_ = 0;                 // ended after the next frame was due
+  std::uint64_t schedule_restarts_ = 0;           // frames that ended more than a period late: schedule reset
+  // Synthetic load (SURGSIM_VISUAL_LOAD_STEP) and the frame trace.
+  double load_at_s_ = -1, load_for_s_ = 0, load_factor_ = 1;
+  std::uint64_t first_shown_ns_ = 0;              // the first fresh frame (0 before)
+  double last_work_ms_ = 0;
+  bool last_load_on_ = false;
+  std::uint64_t last_frame_end_ns_ = 0;
+  std::vector<TraceRow> trace_;                   // reserved kTraceCapacity rows at init
+  std::uint64_t trace_dropped_ = 0;
 };
 
 }  // namespace surgsim
