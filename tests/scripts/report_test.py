@@ -68,6 +68,13 @@ class ReportTest(unittest.TestCase):
     def run_report(self):
         return subprocess.run(["/usr/bin/python3", REPORT_PY, self.dir], capture_output=True, text=True)
 
+    def report_text(self):
+        """Runs report.py (it must succeed) and returns README.md."""
+        r = self.run_report()
+        self.assertEqual(r.returncode, 0, r.stderr)
+        with open(os.path.join(self.dir, "README.md")) as f:
+            return f.read()
+
     def test_writes_tables_plots_and_stamps(self):
         r = self.run_report()
         self.assertEqual(r.returncode, 0, r.stderr)
@@ -122,6 +129,74 @@ class ReportTest(unittest.TestCase):
         self.assertIn("**Missing**: `csv/intestine_frame_rate.csv` was not written", text)
         self.assertIn("Missing inputs:", text)
         self.assertIn("`raw/live_liver/haptic_stats.json`", text)
+
+    def test_intestine_live_section(self):
+        """Issue 15: the push run complete (floor, haptic and visual stats, a frame trace with a load step), the lift
+        run with its floor and haptic stats but no visual node output: figures and verdicts for the first, a named
+        missing line (no traceback) for the second."""
+        with open(os.path.join(self.dir, "csv", "rt_floor.csv"), "a") as f:
+            f.write("before_live_intestine_push,6500,1000,50,SCHED_FIFO,10,0.1538,0.01,35.2,4523.4,109.0\n")
+            f.write("before_live_intestine_lift,7500,1000,50,SCHED_FIFO,3,0.0400,0.01,30.0,900.0,90.0\n")
+        push = os.path.join(self.dir, "raw", "live_intestine_push")
+        write(os.path.join(push, "haptic_stats.json"), json.dumps({
+            "ticks": 6500, "rate_hz": 1000, "deadline_misses": 12, "achieved_hz": 999.9,
+            "tick_us": {"p50": 560.0, "p99": 740.0}, "intestine": {"step_us": {"p50": 515.0, "p99": 669.0}}}))
+        write(os.path.join(push, "visual_stats.json"), json.dumps({
+            "fps": 29.85, "fps_configured": 30, "frames_late": 4,
+            "frame_interval_ms": {"p50": 33.4, "p99": 60.0},
+            "load_step": {"at_s": 2, "for_s": 2, "factor": 1.5},
+            "intestine": {"work_ms": {"p50": 15.0}, "work_fps_mean": 62.0, "lod_mean": 4.2, "target_fps": 60}}))
+        # 30 Hz frames over 6 s: LOD 5 until the load comes on at t = 2.0 s, then 4, 3 and 2 one frame apart, where it
+        # stays (alternating 2-3) until the load goes off at t = 4.0 s; then 3 and 4, and 4-5 from t = 4.1 s.
+        lines = ["t_s,lod,work_ms,interval_ms,fps,load_on", "-1.000000,6,1.0,33.3,30.0,0"]
+        for k in range(180):
+            t = k / 30.0
+            on = 2.0 - 1e-9 <= t < 4.0 - 1e-9
+            if t < 2.0 - 1e-9:
+                lod = 5
+            elif on:
+                lod = [4, 3][k - 60] if k - 60 < 2 else 2 + (k % 2)
+            else:
+                lod = [3, 4, 4][k - 120] if k - 120 < 3 else 4 + (k % 2)
+            lines.append("%.6f,%d,%.4f,33.3,30.0,%d" % (t, lod, 16.0 if on else 15.0, 1 if on else 0))
+        write(os.path.join(push, "frames", "frame_trace.csv"), "\n".join(lines) + "\n")
+        lift = os.path.join(self.dir, "raw", "live_intestine_lift")
+        write(os.path.join(lift, "haptic_stats.json"), json.dumps({
+            "ticks": 7500, "rate_hz": 1000, "deadline_misses": 40, "tick_us": {"p50": 600.0, "p99": 900.0}}))
+        write(os.path.join(self.dir, "raw", "steps.csv"), "step,seconds,status,log\n"
+              "live_intestine_lift,9.0,failed,logs/live_intestine_lift.log\n")
+        text = self.report_text()
+        self.assertIn("## 8. The intestine live at 1 kHz (issue 15)", text)
+        self.assertNotIn("intestine_live_section failed", text)
+        self.assertIn("| push: machine floor just before (rt_bench, 6500 ticks) | 10 missed (0.154 %) |", text)
+        # 12 / 6500 = 0.185 %, 0.031 points over the floor's 0.154 %: within 0.1.
+        self.assertIn("| push: missed deadlines, 6500 ticks at 1000 Hz | 12 (0.185 %), +0.031 points from the floor | "
+                      "<= floor + 0.1 points | within |", text)
+        self.assertIn("| push: intestine step (wall, live) | p50 515 / p99 669 us |", text)
+        self.assertIn("| push: visual frames (whole run) | 29.85 fps, interval p50 33.4 / p99 60.0 ms, 4 late | "
+                      ">= 97 % of 30 Hz | within |", text)
+        # The load on at frame 60 (t = 2.0 s): band 2-3 (LOD 4 is within a level of it) reached at frame 61 (2.033 s);
+        # off at frame 120 (4.0 s): band 4-5 reached at frame 121 (4.033 s).
+        self.assertIn("| push: LOD controller: load on at 2.00 s | settled in 0.03 s to LOD 2-3, then 62 Hz of work | "
+                      "<= 1 s | within |", text)
+        self.assertIn("| push: LOD controller: load off at 4.00 s | settled in 0.03 s to LOD 4-5, then 67 Hz of work |",
+                      text)
+        self.assertIn("every frame's work x1.5 from 2 s", text)
+        self.assertGreater(os.path.getsize(os.path.join(self.dir, "plots", "intestine_live_controller.png")), 1000)
+        # 40 / 7500 = 0.533 % against the floor's 0.040 %: over.
+        self.assertIn("| lift: missed deadlines, 7500 ticks at 1000 Hz | 40 (0.533 %), +0.493 points from the floor | "
+                      "<= floor + 0.1 points | **over** |", text)
+        self.assertIn("| lift: intestine step (wall, live) | not in the haptic stats |", text)
+        self.assertIn("| lift: visual node | missing: `raw/live_intestine_lift/visual_stats.json` (the "
+                      "live_intestine_lift step failed: see [`logs/live_intestine_lift.log`]", text)
+
+    def test_intestine_live_section_with_nothing(self):
+        text = self.report_text()
+        self.assertNotIn("intestine_live_section failed", text)
+        self.assertIn("| push: machine floor just before (rt_bench) | missing: no `before_live_intestine_push` row in "
+                      "`csv/rt_floor.csv` (the rt_floor_intestine_push step did not run) |", text)
+        self.assertIn("| lift: haptic node at 1 kHz | missing: `raw/live_intestine_lift/haptic_stats.json` (the "
+                      "live_intestine_lift step did not run) |", text)
 
     def test_refuses_a_folder_without_meta(self):
         os.remove(os.path.join(self.dir, "meta.json"))
