@@ -1096,6 +1096,10 @@ def intestine_live_section(rep):
                          "(%s)" % (run, step_note(rep, run)), "", ""))
             continue
         traces[traj] = (trace, vin.get("target_fps"))
+        late = [r["t_s"] for r in trace if r["t_s"] >= 1.0]
+        if len(late) > 2 and late[-1] > late[0]:
+            rows.append((traj, "visual frames from 1 s after the first frame shown (trace)",
+                         "%.2f fps" % ((len(late) - 1) / (late[-1] - late[0])), "", ""))
         changes = load_changes(trace)
         if not changes:
             rows.append((traj, "LOD controller around the load step", "no load change in the trace (%d frames; "

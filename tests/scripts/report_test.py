@@ -175,6 +175,7 @@ class ReportTest(unittest.TestCase):
         self.assertIn("| push: intestine step (wall, live) | p50 515 / p99 669 us |", text)
         self.assertIn("| push: visual frames (whole run) | 29.85 fps, interval p50 33.4 / p99 60.0 ms, 4 late | "
                       ">= 97 % of 30 Hz | within |", text)
+        self.assertIn("| push: visual frames from 1 s after the first frame shown (trace) | 30.00 fps |", text)
         # The load on at frame 60 (t = 2.0 s): band 2-3 (LOD 4 is within a level of it) reached at frame 61 (2.033 s);
         # off at frame 120 (4.0 s): band 4-5 reached at frame 121 (4.033 s).
         self.assertIn("| push: LOD controller: load on at 2.00 s | settled in 0.03 s to LOD 2-3, then 62 Hz of work | "
