@@ -646,4 +646,150 @@ bool mesentery_strip(const double* points, MesenteryMesh& m) noexcept {
   return true;
 }
 
+namespace {
+
+// Catmull-Rom tangent (tension 0) of point i of a sequence of n >= 2, one-sided at the ends (cardinal_tangents).
+template <typename At>
+Eigen::Vector3d catmull_rom_tangent(const At& at, int i, int n) {
+  if (i == 0) return at(1) - at(0);
+  if (i == n - 1) return at(n - 1) - at(n - 2);
+  return 0.5 * (at(i + 1) - at(i - 1));
+}
+
+// Grid interval and parameter in it of refined index k (steps per interval, n grid points).
+void refined(int k, int steps, int n, int& interval, double& t) {
+  interval = std::min(k / steps, n - 2);
+  t = static_cast<double>(k - interval * steps) / steps;
+}
+
+}  // namespace
+
+MesenterySurface make_mesentery_surface(int rows, int cols, int row_steps, int col_steps) {
+  if (rows < 2 || cols < 2 || row_steps < 1 || row_steps > 16 || col_steps < 1 || col_steps > 16) {
+    throw_error("mesentery surface: rows and cols must be >= 2 and steps in 1..16 (got ", rows, " x ", cols,
+                ", steps ", row_steps, " x ", col_steps, ")");
+  }
+  MesenterySurface s;
+  s.rows = rows;
+  s.cols = cols;
+  s.row_steps = row_steps;
+  s.col_steps = col_steps;
+  s.vertex_rows = (rows - 1) * row_steps + 1;
+  s.vertex_cols = (cols - 1) * col_steps + 1;
+  s.vertex_count = s.vertex_rows * s.vertex_cols;
+  const auto n = static_cast<std::size_t>(s.vertex_count);
+  s.positions.assign(3 * n, 0.0f);
+  s.normals.assign(3 * n, 0.0f);
+  s.coords.resize(2 * n);
+  for (int i = 0; i < s.vertex_rows; ++i) {
+    for (int j = 0; j < s.vertex_cols; ++j) {
+      const auto k = static_cast<std::size_t>(i * s.vertex_cols + j);
+      s.coords[2 * k] = static_cast<float>(j) / static_cast<float>(col_steps);
+      s.coords[2 * k + 1] = static_cast<float>(i) / static_cast<float>(s.vertex_rows - 1);
+    }
+  }
+  s.indices.reserve(static_cast<std::size_t>(6 * (s.vertex_rows - 1) * (s.vertex_cols - 1)));
+  for (int i = 0; i + 1 < s.vertex_rows; ++i) {
+    for (int j = 0; j + 1 < s.vertex_cols; ++j) {
+      const auto a = static_cast<std::uint32_t>(i * s.vertex_cols + j), b = a + 1,
+                 c = a + static_cast<std::uint32_t>(s.vertex_cols), d = c + 1;
+      s.indices.insert(s.indices.end(), {a, b, d, a, d, c});  // (b - a) x (d - a) along dS/du x dS/dv
+    }
+  }
+  s.along.resize(static_cast<std::size_t>(rows * s.vertex_cols));
+  s.along_du.resize(s.along.size());
+  return s;
+}
+
+bool mesentery_surface(const double* points, MesenterySurface& s) noexcept {
+  const int rows = s.rows, cols = s.cols, vc = s.vertex_cols;
+  if (!points || rows < 2 || cols < 2 || s.vertex_count != s.vertex_rows * vc ||
+      s.positions.size() < 3 * static_cast<std::size_t>(s.vertex_count) ||
+      s.normals.size() < 3 * static_cast<std::size_t>(s.vertex_count) ||
+      s.along.size() < static_cast<std::size_t>(rows * vc) || s.along_du.size() < s.along.size()) {
+    return false;
+  }
+  for (int i = 0; i < 3 * rows * cols; ++i) {
+    if (!std::isfinite(points[i])) return false;
+  }
+  // 1. Each grid row refined along u (the cardinal spline of the tube's axis for row 0): point and d/du.
+  for (int r = 0; r < rows; ++r) {
+    const auto grid = [&](int c) {
+      const double* q = points + 3 * (r * cols + c);
+      return Eigen::Vector3d(q[0], q[1], q[2]);
+    };
+    for (int j = 0; j < vc; ++j) {
+      int c = 0;
+      double t = 0;
+      refined(j, s.col_steps, cols, c, t);
+      const Eigen::Vector3d p0 = grid(c), p1 = grid(c + 1);
+      const Eigen::Vector3d m0 = catmull_rom_tangent(grid, c, cols), m1 = catmull_rom_tangent(grid, c + 1, cols);
+      const auto k = static_cast<std::size_t>(r * vc + j);
+      s.along[k] = hermite(p0, p1, m0, m1, t);
+      s.along_du[k] = hermite_d1(p0, p1, m0, m1, t);
+    }
+  }
+  // 2. Across the rows: the same spline of the refined points (S, dS/dv) and of their u-derivatives (dS/du; the
+  //    tensor product is linear in the grid, so interpolating the derivatives is differentiating the patch).
+  s.degenerate_normals = 0;
+  for (int j = 0; j < vc; ++j) {
+    const auto a = [&](int r) { return s.along[static_cast<std::size_t>(r * vc + j)]; };
+    const auto d = [&](int r) { return s.along_du[static_cast<std::size_t>(r * vc + j)]; };
+    for (int i = 0; i < s.vertex_rows; ++i) {
+      int r = 0;
+      double t = 0;
+      refined(i, s.row_steps, rows, r, t);
+      const Eigen::Vector3d p = hermite(a(r), a(r + 1), catmull_rom_tangent(a, r, rows),
+                                        catmull_rom_tangent(a, r + 1, rows), t);
+      const Eigen::Vector3d dv = hermite_d1(a(r), a(r + 1), catmull_rom_tangent(a, r, rows),
+                                            catmull_rom_tangent(a, r + 1, rows), t);
+      const Eigen::Vector3d du = hermite(d(r), d(r + 1), catmull_rom_tangent(d, r, rows),
+                                         catmull_rom_tangent(d, r + 1, rows), t);
+      const int v = i * vc + j;
+      put(s.positions, v, p);
+      const Eigen::Vector3d n = du.cross(dv);
+      const double nn = n.norm();
+      if (nn > 1e-9 * du.norm() * dv.norm() && nn > 1e-14) {
+        put(s.normals, v, n / nn);
+      } else {
+        put(s.normals, v, Eigen::Vector3d::Zero());  // filled below
+        ++s.degenerate_normals;
+      }
+    }
+  }
+  // 3. Degenerate normals (a point the rows converge to): the nearest valid one of the vertex row, then of the column.
+  if (s.degenerate_normals > 0) {
+    const auto valid = [&](int v) {
+      const auto k = static_cast<std::size_t>(3 * v);
+      return s.normals[k] != 0.0f || s.normals[k + 1] != 0.0f || s.normals[k + 2] != 0.0f;
+    };
+    const auto copy = [&](int to, int from) {
+      for (std::size_t c = 0; c < 3; ++c) {
+        s.normals[static_cast<std::size_t>(3 * to) + c] = s.normals[static_cast<std::size_t>(3 * from) + c];
+      }
+    };
+    for (int i = 0; i < s.vertex_rows; ++i) {
+      for (int j = 0; j < vc; ++j) {
+        const int v = i * vc + j;
+        if (valid(v)) continue;
+        int from = -1;
+        for (int k = 1; from < 0 && k < vc; ++k) {
+          if (j + k < vc && valid(v + k)) from = v + k;
+          else if (j - k >= 0 && valid(v - k)) from = v - k;
+        }
+        for (int k = 1; from < 0 && k < s.vertex_rows; ++k) {
+          if (i + k < s.vertex_rows && valid(v + k * vc)) from = v + k * vc;
+          else if (i - k >= 0 && valid(v - k * vc)) from = v - k * vc;
+        }
+        if (from >= 0) {
+          copy(v, from);
+        } else {
+          put(s.normals, v, Eigen::Vector3d::UnitZ());
+        }
+      }
+    }
+  }
+  return true;
+}
+
 }  // namespace surgsim::intestine

@@ -1,5 +1,6 @@
 // Intestine rendering geometry (Raghupathi et al. 2004, section 5; DESIGN.md 4.4), pure CPU code usable by any
-// backend: the generalized cylinder around the intestine's points and the mesentery's triangle strip.
+// backend: the generalized cylinder around the intestine's points, the mesentery's triangle strip over the grid and
+// the mesentery as a smooth subdivided surface with analytic normals (MesenterySurface, what the visual node draws).
 //
 // Tube pipeline (TubeBuilder::build):
 //   1. a cardinal spline through the points (Hermite pieces, tangents (1 - c) (P_{i+1} - P_{i-1}) / 2);
@@ -43,8 +44,8 @@
 // (radius + clearance) passes unchanged: the weight's largest slope, 1.5 at t = 1/2, is where the skinned rings
 // turn fastest.
 //
-// Phases: TubeBuilder and the meshes allocate at construction (make_mesh: for the largest input and a LOD);
-// build() and mesentery_strip() allocate nothing.
+// Phases: TubeBuilder and the meshes allocate at construction (make_mesh: for the largest input and a LOD;
+// make_mesentery_mesh, make_mesentery_surface); build(), mesentery_strip() and mesentery_surface() allocate nothing.
 #pragma once
 #include <Eigen/Core>
 #include <cstdint>
@@ -219,5 +220,35 @@ MesenteryMesh make_mesentery_mesh(int rows, int cols);
 /// Run phase, no allocation: positions and normals from `points` (3 rows cols doubles, node (r, c) at r cols + c,
 /// the layout of IntestineState::positions()). False if the mesh is too small for its grid or a point is not finite.
 bool mesentery_strip(const double* points, MesenteryMesh& mesh) noexcept;
+
+/// The mesentery as a smooth surface (what the visual node draws): the rows x cols grid of the mass-spring model
+/// refined by a bicubic Catmull-Rom patch (the tensor product of the cardinal spline of cardinal_tangents with tension
+/// 0 along the columns and across the rows: one-sided tangents at the borders, so row 0's curve is the tube's axis
+/// spline), `col_steps` vertices per grid interval along the intestine and `row_steps` across the membrane. Every
+/// vertex carries the patch's analytic unit normal, normalize(dS/du x dS/dv) (u along the columns, v across the
+/// rows: the side of MesenteryMesh::normals), and its surface coordinates (u in grid columns, v in [0, 1] from the
+/// intestine to the vessel row) for the shader's vessels. Where the patch degenerates (rows converging to a point at
+/// a tapered end: dS/dv = 0) the normal is the nearest valid one of the same vertex row, then of the same column.
+struct MesenterySurface {
+  int rows = 0, cols = 0;              // the mass-spring grid
+  int row_steps = 1, col_steps = 1;    // vertices per grid interval across the rows and along the columns
+  int vertex_rows = 0, vertex_cols = 0;  // (rows - 1) row_steps + 1, (cols - 1) col_steps + 1
+  int vertex_count = 0;                // vertex_rows * vertex_cols, vertex (i, j) at i vertex_cols + j
+  int degenerate_normals = 0;          // vertices of the last build whose normal was borrowed from a neighbour
+  std::vector<float> positions;        // 3 per vertex, m
+  std::vector<float> normals;          // 3 per vertex, unit
+  std::vector<float> coords;           // 2 per vertex: u (grid columns, 0..cols - 1), v (0 intestine .. 1 vessel)
+  std::vector<std::uint32_t> indices;  // triangles, 3 per triangle, counter-clockwise seen from the normals' side
+  // Work arrays: the grid rows refined along u (point and d/du per grid row and vertex column).
+  std::vector<Eigen::Vector3d> along, along_du;
+};
+
+/// Allocates the surface for a rows x cols grid and writes the (fixed) triangles and coordinates. Throws
+/// surgsim::Error for rows or cols < 2 or steps outside 1..16.
+MesenterySurface make_mesentery_surface(int rows, int cols, int row_steps, int col_steps);
+/// Run phase, no allocation: the refined positions and normals from `points` (3 rows cols doubles, the layout of
+/// IntestineState::positions()). False (the surface unchanged) if a point is not finite or the surface was not made
+/// by make_mesentery_surface.
+bool mesentery_surface(const double* points, MesenterySurface& surface) noexcept;
 
 }  // namespace surgsim::intestine

@@ -10,12 +10,14 @@
 #include <GL/osmesa.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <array>
 #include <cmath>
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
 #include <cstring>
+#include <initializer_list>
 #include <vector>
 
 #include "core/error.h"
@@ -76,7 +78,9 @@ namespace {
   X(PFNGLBINDBUFFERBASEPROC, BindBufferBase)                                                                     \
   X(PFNGLBEGINTRANSFORMFEEDBACKPROC, BeginTransformFeedback)                                                     \
   X(PFNGLENDTRANSFORMFEEDBACKPROC, EndTransformFeedback)                                                         \
-  X(PFNGLGETBUFFERSUBDATAPROC, GetBufferSubData)
+  X(PFNGLGETBUFFERSUBDATAPROC, GetBufferSubData)                                                                 \
+  X(PFNGLBLENDFUNCPROC, BlendFunc)                                                                               \
+  X(PFNGLDEPTHMASKPROC, DepthMask)
 
 struct GlApi {
 #define SURGSIM_GL_DECLARE(type, name) type name = nullptr;
@@ -111,30 +115,41 @@ void main() {
 }
 )";
 
-constexpr const char* kFragmentShader = R"(#version 330 core
+// Fragment shaders are the version line, the lights (kLightsGlsl) and their own main.
+constexpr const char* kFragmentVersion = "#version 330 core\n";
+
+// Directions towards the lights, view space: key raking from the upper left, fill from the right. The key is kept
+// well away from the usual surface normals (a camera looking down on an organ at about 45 degrees) so that a dent
+// changes the shading at first order; a light along the normal hides shallow dents.
+// The fill is diffuse only: one specular highlight, one pow per fragment.
+constexpr const char* kLightsGlsl = R"(
+const vec3 kKeyDir = normalize(vec3(-0.75, 0.45, 0.5));
+const vec3 kFillDir = normalize(vec3(0.75, -0.25, 0.65));
+const float kKey = 0.9;
+const float kFill = 0.3;
+const float kAmbient = 0.08;
+// Linear colour at a view-space position of a surface with unit normal n (facing the viewer's side), diffuse
+// `albedo`, highlight `specular` with exponent `shininess`.
+vec3 lit(vec3 n, vec3 position, vec3 albedo, vec3 specular, float shininess) {
+  vec3 v = normalize(-position);
+  float key = max(dot(n, kKeyDir), 0.0);
+  float fill = max(dot(n, kFillDir), 0.0);
+  float highlight = key > 0.0 ? pow(max(dot(n, normalize(kKeyDir + v)), 0.0), shininess) : 0.0;
+  return (kAmbient + kKey * key + kFill * fill) * albedo + kKey * highlight * specular;
+}
+)";
+
+constexpr const char* kFragmentShader = R"(
 in vec3 v_position;
 in vec3 v_normal;
 uniform vec3 u_albedo;     // linear: the display colour squared
 uniform vec3 u_specular;   // linear
 uniform float u_shininess;
 out vec4 frag_color;
-// Directions towards the lights, view space: key raking from the upper left, fill from the right. The key is kept
-// well away from the usual surface normals (a camera looking down on an organ at about 45 degrees) so that a dent
-// changes the shading at first order; a light along the normal hides shallow dents.
-// The fill is diffuse only: one specular highlight, one pow per fragment.
-const vec3 kKeyDir = normalize(vec3(-0.75, 0.45, 0.5));
-const vec3 kFillDir = normalize(vec3(0.75, -0.25, 0.65));
-const float kKey = 0.9;
-const float kFill = 0.3;
-const float kAmbient = 0.08;
 void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) n = -n;  // both sides lit (open or cut surfaces)
-  vec3 v = normalize(-v_position);
-  float key = max(dot(n, kKeyDir), 0.0);
-  float fill = max(dot(n, kFillDir), 0.0);
-  float specular = key > 0.0 ? pow(max(dot(n, normalize(kKeyDir + v)), 0.0), u_shininess) : 0.0;
-  vec3 c = (kAmbient + kKey * key + kFill * fill) * u_albedo + kKey * specular * u_specular;
+  vec3 c = lit(n, v_position, u_albedo, u_specular, u_shininess);
   frag_color = vec4(sqrt(clamp(c, 0.0, 1.0)), 1.0);
 }
 )";
@@ -181,6 +196,100 @@ void main() {
 }
 )";
 
+// The membrane (draw_membrane: the mesentery): the surface's own normals and its coordinates (u along the intestine in
+// grid columns, s across from the bowel, 0, to the root on the vessel, 1).
+constexpr const char* kMembraneVertexShader = R"(#version 330 core
+layout(location = 0) in vec3 a_position;  // model space
+layout(location = 1) in vec3 a_normal;    // model space, unit
+layout(location = 2) in vec2 a_coord;     // u, s
+uniform mat4 u_mvp;
+uniform mat4 u_model_view;
+uniform mat3 u_normal_matrix;
+out vec3 v_position;
+out vec3 v_normal;
+out vec2 v_coord;
+out vec2 v_vessels;  // the branches' sideways wiggle (columns) and the arcades' height (s) here
+void main() {
+  v_position = (u_model_view * vec4(a_position, 1.0)).xyz;
+  v_normal = u_normal_matrix * a_normal;
+  v_coord = a_coord;
+  v_vessels = vec2(0.25 * sin(5.0 * a_coord.y + 0.57 * a_coord.x),
+                   0.30 + 0.14 * (1.0 - abs(sin(1.0471976 * a_coord.x))));
+  gl_Position = u_mvp * vec4(a_position, 1.0);
+}
+)";
+
+// Fat over vessels, lit like the other surfaces (same lights) on both sides, plus the key light coming through the
+// membrane from behind, reddened by the tissue; blended with u_alpha. The vessels are drawn from the coordinates,
+// anti-aliased by their screen derivatives: the root vessel along s = 1, a wavy branch every 3 columns from the root
+// down to the arcades, the arcades arching towards the bowel between branches, and thin straight vessels (vasa
+// recta) every half column from the arcades to the bowel. The curves' sines are evaluated per vertex (v_vessels):
+// the fragments only measure distances.
+constexpr const char* kMembraneFragmentShader = R"(
+in vec3 v_position;
+in vec3 v_normal;
+in vec2 v_coord;
+in vec2 v_vessels;
+uniform vec3 u_albedo;     // linear
+uniform vec3 u_vessel;     // linear
+uniform vec3 u_specular;   // linear
+uniform float u_shininess;
+uniform float u_alpha;
+uniform float u_vessels;
+out vec4 frag_color;
+const float kThrough = 0.35;
+const vec3 kThroughTint = vec3(1.0, 0.62, 0.48);
+// Coverage of a line of half-width w at distance d (same units), anti-aliased over fw, the distance's change per pixel.
+float line(float d, float w, float fw) { return 1.0 - smoothstep(w - fw, w + fw, d); }
+void main() {
+  vec3 n = normalize(v_normal);
+  if (!gl_FrontFacing) n = -n;
+  float u = v_coord.x, s = v_coord.y;
+  float arcade = v_vessels.y;
+  float d_branch = 3.0 * abs(fract((u - v_vessels.x) / 3.0 + 0.5) - 0.5);
+  float d_arcade = abs(s - arcade);
+  float d_recta = 0.5 * abs(fract(2.0 * u + 0.5) - 0.5);
+  float vessel = line(1.0 - s, 0.05, fwidth(s));
+  vessel = max(vessel, 0.9 * line(d_branch, 0.09, fwidth(d_branch)) * step(arcade, s));
+  vessel = max(vessel, 0.85 * line(d_arcade, 0.018, fwidth(d_arcade)));
+  vessel = max(vessel, 0.5 * line(d_recta, 0.035, fwidth(d_recta)) * step(s, arcade));
+  vec3 albedo = mix(u_albedo, u_vessel, 0.85 * u_vessels * vessel);
+  float through = max(-dot(n, kKeyDir), 0.0);
+  vec3 c = lit(n, v_position, albedo, u_specular, u_shininess) + kKey * kThrough * through * albedo * kThroughTint;
+  frag_color = vec4(sqrt(clamp(c, 0.0, 1.0)), u_alpha);
+}
+)";
+
+// The backdrop (draw_backdrop): a kBackdropColumns x kBackdropRows grid over the viewport at the far plane, its
+// vertices made from gl_VertexID (two triangles a cell), coloured in the vertex shader (a vignette with faint folds)
+// and interpolated: the fragment shader only writes the colour, the cheapest full-screen pass on llvmpipe.
+constexpr int kBackdropColumns = 16;
+constexpr int kBackdropRows = 12;
+constexpr const char* kBackdropVertexShader = R"(#version 330 core
+uniform vec3 u_centre;  // display colours
+uniform vec3 u_edge;
+uniform float u_aspect;
+out vec3 v_colour;
+const int kColumns = 16, kRows = 12;
+void main() {
+  int cell = gl_VertexID / 6, corner = gl_VertexID % 6;
+  int dx = (corner == 1 || corner == 2 || corner == 4) ? 1 : 0;
+  int dy = (corner == 2 || corner == 4 || corner == 5) ? 1 : 0;
+  vec2 p = vec2(float(cell % kColumns + dx) / float(kColumns), float(cell / kColumns + dy) / float(kRows)) * 2.0 - 1.0;
+  vec2 q = p * vec2(u_aspect, 1.0);
+  float r = length(q) / length(vec2(u_aspect, 1.0));
+  float folds = 0.5 + 0.5 * sin(7.0 * q.x + 3.0 * sin(2.3 * q.y + 1.3 * q.x));
+  v_colour = mix(u_centre, u_edge, smoothstep(0.0, 0.95, r)) * (0.82 + 0.18 * folds * (1.0 - r));
+  gl_Position = vec4(p, 0.99999, 1.0);
+}
+)";
+
+constexpr const char* kBackdropFragmentShader = R"(
+in vec3 v_colour;
+out vec4 frag_color;
+void main() { frag_color = vec4(v_colour, 1.0); }
+)";
+
 constexpr float kPi = 3.14159265358979323846f;
 constexpr int kCylinderSegments = 24;
 constexpr int kSphereSubdivisions = 2;  // 320 triangles
@@ -211,6 +320,17 @@ struct Program {
   GLuint id = 0;
   GLint mvp = -1, model_view = -1, normal_matrix = -1, albedo = -1, specular = -1, shininess = -1;
   GLint skin = -1, first_interval = -1;  // skinning programs only
+  GLint vessel = -1, alpha = -1, vessels = -1;  // membrane only
+  GLint centre = -1, edge = -1, aspect = -1;    // backdrop only
+};
+
+/// The membrane's buffers: interleaved position, normal, coordinates (8 floats) and the triangles last sent.
+struct MembraneMesh {
+  GLuint vao = 0, vbo = 0, ebo = 0;
+  GLsizei vertex_capacity = 0;
+  GLsizei index_capacity = 0;
+  GLsizei index_count = 0;
+  std::vector<std::uint32_t> indices;
 };
 
 /// A tube primitive of one LOD on the GPU: static vertices (x, y, t, z) and indices, uploaded once.
@@ -303,7 +423,10 @@ class OsMesaRenderer final : public Renderer {
     create_context();
     gl_.load();
     info_ = std::string(name()) + ": " + gl_string(GL_VERSION) + ", " + gl_string(GL_RENDERER);
-    program_ = build_program(kVertexShader, false);
+    program_ = build_program(kVertexShader, kFragmentShader, false);
+    membrane_program_ = build_program(kMembraneVertexShader, kMembraneFragmentShader, false);
+    backdrop_program_ = build_program(kBackdropVertexShader, kBackdropFragmentShader, false);
+    gl_.GenVertexArrays(1, &backdrop_vao_);  // the core profile draws only with a vertex array bound
     init_skinning();
     upload_static(make_unit_cylinder(), cylinder_);
     upload_static(make_unit_sphere(kSphereSubdivisions), sphere_);
@@ -335,8 +458,12 @@ class OsMesaRenderer final : public Renderer {
     gl_.UseProgram(program_.id);
   }
 
+  using Renderer::draw_skinned_tube;
+  using Renderer::draw_surface;
+
   void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
-                    const Eigen::Vector3f& rgb) override {
+                    const SurfaceLook& look) override {
+    const Eigen::Vector3f& rgb = look.rgb;
     // Indices to row-major 32-bit, checking the range on the way.
     const Eigen::Index nv = positions.rows();
     const Eigen::Index nt = tris.rows();
@@ -371,7 +498,84 @@ class OsMesaRenderer final : public Renderer {
       upload_indices(slot.mesh, index_staging_);
       slot.indices = index_staging_;
     }
-    draw(slot.mesh, Eigen::Matrix4f::Identity(), {rgb, Eigen::Vector3f::Constant(0.22f), 40.0f});
+    draw(slot.mesh, Eigen::Matrix4f::Identity(), material(look));
+  }
+
+  void draw_membrane(const intestine::MesenterySurface& surface, const MembraneLook& look) override {
+    if (!membrane_drawable(surface, look)) {
+      ++counts_.rejected;
+      return;
+    }
+    ++counts_.surfaces;
+    const int nv = surface.vertex_count;
+    if (nv == 0 || surface.indices.empty()) return;
+    // Position, normal, coordinates interleaved (8 floats a vertex).
+    vertex_staging_.resize(static_cast<std::size_t>(8 * nv));
+    for (std::size_t v = 0; v < static_cast<std::size_t>(nv); ++v) {
+      float* out = vertex_staging_.data() + 8 * v;
+      std::memcpy(out, surface.positions.data() + 3 * v, 3 * sizeof(float));
+      std::memcpy(out + 3, surface.normals.data() + 3 * v, 3 * sizeof(float));
+      std::memcpy(out + 6, surface.coords.data() + 2 * v, 2 * sizeof(float));
+    }
+    MembraneMesh& m = membrane_;
+    if (m.vao == 0) {
+      gl_.GenVertexArrays(1, &m.vao);
+      gl_.GenBuffers(1, &m.vbo);
+      gl_.GenBuffers(1, &m.ebo);
+      gl_.BindVertexArray(m.vao);
+      gl_.BindBuffer(GL_ARRAY_BUFFER, m.vbo);
+      const auto stride = static_cast<GLsizei>(8 * sizeof(float));
+      for (GLuint a = 0; a < 3; ++a) {
+        gl_.EnableVertexAttribArray(a);
+        gl_.VertexAttribPointer(a, a == 2 ? 2 : 3, GL_FLOAT, GL_FALSE, stride,
+                                reinterpret_cast<const void*>(3 * a * sizeof(float)));
+      }
+      gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, m.ebo);
+      gl_.BindVertexArray(0);
+    }
+    gl_.BindBuffer(GL_ARRAY_BUFFER, m.vbo);
+    send(GL_ARRAY_BUFFER, vertex_staging_, nv, m.vertex_capacity);
+    if (m.indices != surface.indices) {  // the same triangles every frame: sent once
+      m.index_count = static_cast<GLsizei>(surface.indices.size());
+      gl_.BindVertexArray(m.vao);  // the element buffer binding belongs to the VAO
+      send(GL_ELEMENT_ARRAY_BUFFER, surface.indices, m.index_count, m.index_capacity);
+      gl_.BindVertexArray(0);
+      m.indices = surface.indices;
+    }
+    gl_.UseProgram(membrane_program_.id);
+    set_uniforms(membrane_program_, Eigen::Matrix4f::Identity(),
+                 {look.rgb, Eigen::Vector3f::Constant(look.specular), look.shininess});
+    const Eigen::Vector3f vessel = look.vessel_rgb.cwiseProduct(look.vessel_rgb);  // display -> linear
+    gl_.Uniform3fv(membrane_program_.vessel, 1, vessel.data());
+    gl_.Uniform1f(membrane_program_.alpha, std::clamp(look.alpha, 0.0f, 1.0f));
+    gl_.Uniform1f(membrane_program_.vessels, look.vessels);
+    const bool blend = look.alpha < 1.0f;
+    if (blend) {
+      gl_.Enable(GL_BLEND);
+      gl_.BlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
+    }
+    gl_.BindVertexArray(m.vao);
+    gl_.DrawElements(GL_TRIANGLES, m.index_count, GL_UNSIGNED_INT, nullptr);
+    gl_.BindVertexArray(0);
+    if (blend) gl_.Disable(GL_BLEND);
+    gl_.UseProgram(program_.id);
+  }
+
+  void draw_backdrop(const Eigen::Vector3f& centre_rgb, const Eigen::Vector3f& edge_rgb) override {
+    if (!(centre_rgb.allFinite() && edge_rgb.allFinite())) {
+      ++counts_.rejected;
+      return;
+    }
+    gl_.UseProgram(backdrop_program_.id);
+    gl_.Uniform3fv(backdrop_program_.centre, 1, centre_rgb.data());
+    gl_.Uniform3fv(backdrop_program_.edge, 1, edge_rgb.data());
+    gl_.Uniform1f(backdrop_program_.aspect, static_cast<float>(width_) / static_cast<float>(height_));
+    gl_.DepthMask(GL_FALSE);
+    gl_.BindVertexArray(backdrop_vao_);
+    gl_.DrawArraysInstanced(GL_TRIANGLES, 0, 6 * kBackdropColumns * kBackdropRows, 1);
+    gl_.BindVertexArray(0);
+    gl_.DepthMask(GL_TRUE);
+    gl_.UseProgram(program_.id);
   }
 
   void draw_tool(const ToolGeometry& tool, float radius, const Eigen::Vector3f& rgb) override {
@@ -403,8 +607,8 @@ class OsMesaRenderer final : public Renderer {
   }
 
   void draw_skinned_tube(const intestine::TubePrimitive& primitive, const float* skin, int intervals,
-                         const Eigen::Vector3f& rgb) override {
-    const PrimitiveMesh* mesh = rgb.allFinite() ? skinning_input(primitive, skin, intervals) : nullptr;
+                         const SurfaceLook& look) override {
+    const PrimitiveMesh* mesh = look.rgb.allFinite() ? skinning_input(primitive, skin, intervals) : nullptr;
     if (mesh == nullptr) {
       ++counts_.rejected;
       return;
@@ -412,7 +616,7 @@ class OsMesaRenderer final : public Renderer {
     ++counts_.surfaces;
     // The tube: one instance per interval; then each cap once, with the first and the last interval's matrices.
     gl_.UseProgram(skin_program_.id);
-    set_uniforms(skin_program_, Eigen::Matrix4f::Identity(), {rgb, Eigen::Vector3f::Constant(0.22f), 40.0f});
+    set_uniforms(skin_program_, Eigen::Matrix4f::Identity(), material(look));
     gl_.BindVertexArray(mesh->vao);
     const auto offset = [](GLsizei indices) { return reinterpret_cast<const void*>(indices * sizeof(std::uint32_t)); };
     gl_.Uniform1i(skin_program_.first_interval, 0);
@@ -529,9 +733,10 @@ class OsMesaRenderer final : public Renderer {
     return s ? reinterpret_cast<const char*>(s) : "?";
   }
 
-  GLuint compile(GLenum type, const char* source) {
+  /// A shader from the concatenation of `sources` (the first begins with the version line).
+  GLuint compile(GLenum type, std::initializer_list<const char*> sources) {
     const GLuint shader = gl_.CreateShader(type);
-    gl_.ShaderSource(shader, 1, &source, nullptr);
+    gl_.ShaderSource(shader, static_cast<GLsizei>(sources.size()), sources.begin(), nullptr);
     gl_.CompileShader(shader);
     GLint ok = GL_FALSE;
     gl_.GetShaderiv(shader, GL_COMPILE_STATUS, &ok);
@@ -547,11 +752,11 @@ class OsMesaRenderer final : public Renderer {
     return shader;
   }
 
-  /// Links `vertex_source` with the fragment shader; `capture` records v_world and v_world_normal by transform
-  /// feedback (interleaved).
-  Program build_program(const char* vertex_source, bool capture) {
-    const GLuint vs = compile(GL_VERTEX_SHADER, vertex_source);
-    const GLuint fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
+  /// Links `vertex_source` with the fragment shader of `fragment_main` (after the version line and the lights);
+  /// `capture` records v_world and v_world_normal by transform feedback (interleaved).
+  Program build_program(const char* vertex_source, const char* fragment_main, bool capture) {
+    const GLuint vs = compile(GL_VERTEX_SHADER, {vertex_source});
+    const GLuint fs = compile(GL_FRAGMENT_SHADER, {kFragmentVersion, kLightsGlsl, fragment_main});
     const GLuint program = gl_.CreateProgram();
     gl_.AttachShader(program, vs);
     gl_.AttachShader(program, fs);
@@ -581,6 +786,12 @@ class OsMesaRenderer final : public Renderer {
     p.shininess = gl_.GetUniformLocation(program, "u_shininess");
     p.skin = gl_.GetUniformLocation(program, "u_skin");
     p.first_interval = gl_.GetUniformLocation(program, "u_first_interval");
+    p.vessel = gl_.GetUniformLocation(program, "u_vessel");
+    p.alpha = gl_.GetUniformLocation(program, "u_alpha");
+    p.vessels = gl_.GetUniformLocation(program, "u_vessels");
+    p.centre = gl_.GetUniformLocation(program, "u_centre");
+    p.edge = gl_.GetUniformLocation(program, "u_edge");
+    p.aspect = gl_.GetUniformLocation(program, "u_aspect");
     return p;
   }
 
@@ -589,8 +800,8 @@ class OsMesaRenderer final : public Renderer {
   /// and info() says why.
   void init_skinning() {
     try {
-      skin_program_ = build_program(kSkinVertexShader, false);
-      capture_program_ = build_program(kSkinVertexShader, true);
+      skin_program_ = build_program(kSkinVertexShader, kFragmentShader, false);
+      capture_program_ = build_program(kSkinVertexShader, kFragmentShader, true);
     } catch (const Error& e) {
       skin_program_ = capture_program_ = Program{};
       info_ += std::string("; no GPU tube skinning (") + e.what() + ")";
@@ -687,35 +898,38 @@ class OsMesaRenderer final : public Renderer {
     gl_.BindVertexArray(0);
   }
 
+  /// Sends `data` (`count` elements: vertices or indices) into the buffer bound to `target`, reallocating it only
+  /// when `count` exceeds `capacity` (then raised).
+  template <typename T>
+  void send(GLenum target, const std::vector<T>& data, GLsizei count, GLsizei& capacity) {
+    const auto bytes = static_cast<GLsizeiptr>(data.size() * sizeof(T));
+    if (count > capacity) {
+      gl_.BufferData(target, bytes, data.data(), GL_DYNAMIC_DRAW);
+      capacity = count;
+    } else {
+      gl_.BufferSubData(target, 0, bytes, data.data());
+    }
+  }
+
   void upload_vertices(GpuMesh& mesh, const std::vector<float>& data) {
     ensure_buffers(mesh);
-    const auto count = static_cast<GLsizei>(data.size() / 6);
-    const auto bytes = static_cast<GLsizeiptr>(data.size() * sizeof(float));
     gl_.BindBuffer(GL_ARRAY_BUFFER, mesh.vbo);
-    if (count > mesh.vertex_capacity) {
-      gl_.BufferData(GL_ARRAY_BUFFER, bytes, data.data(), GL_DYNAMIC_DRAW);
-      mesh.vertex_capacity = count;
-    } else {
-      gl_.BufferSubData(GL_ARRAY_BUFFER, 0, bytes, data.data());
-    }
+    send(GL_ARRAY_BUFFER, data, static_cast<GLsizei>(data.size() / 6), mesh.vertex_capacity);
   }
 
   void upload_indices(GpuMesh& mesh, const std::vector<std::uint32_t>& data) {
     ensure_buffers(mesh);
-    const auto count = static_cast<GLsizei>(data.size());
-    const auto bytes = static_cast<GLsizeiptr>(data.size() * sizeof(std::uint32_t));
+    mesh.index_count = static_cast<GLsizei>(data.size());
     gl_.BindVertexArray(mesh.vao);  // the element buffer binding belongs to the VAO
-    if (count > mesh.index_capacity) {
-      gl_.BufferData(GL_ELEMENT_ARRAY_BUFFER, bytes, data.data(), GL_DYNAMIC_DRAW);
-      mesh.index_capacity = count;
-    } else {
-      gl_.BufferSubData(GL_ELEMENT_ARRAY_BUFFER, 0, bytes, data.data());
-    }
+    send(GL_ELEMENT_ARRAY_BUFFER, data, mesh.index_count, mesh.index_capacity);
     gl_.BindVertexArray(0);
-    mesh.index_count = count;
   }
 
   // --- drawing ---
+
+  static Material material(const SurfaceLook& look) {
+    return {look.rgb, Eigen::Vector3f::Constant(look.specular), look.shininess};
+  }
 
   /// Transforms and material of the program in use.
   void set_uniforms(const Program& program, const Eigen::Matrix4f& model, const Material& material) {
@@ -775,6 +989,10 @@ class OsMesaRenderer final : public Renderer {
   Program program_;          // surfaces, tool, markers
   Program skin_program_;     // tube skinning (id 0: not available)
   Program capture_program_;  // the same with transform feedback, for capture_skinned_tube
+  Program membrane_program_;  // draw_membrane
+  Program backdrop_program_;  // draw_backdrop
+  GLuint backdrop_vao_ = 0;   // empty: the backdrop's vertices come from gl_VertexID
+  MembraneMesh membrane_;
   GLuint skin_buffer_ = 0, skin_texture_ = 0;  // the matrices, a texture buffer
   int skin_capacity_ = 0;                      // intervals
   std::array<PrimitiveMesh, intestine::kTubeMaxLod + 1> primitives_{};  // uploaded on first use

@@ -16,12 +16,19 @@ class NullRenderer final : public Renderer {
  public:
   NullRenderer(int width, int height) : Renderer(width, height) {}
 
+  using Renderer::draw_skinned_tube;
+  using Renderer::draw_surface;
+
   void begin_frame(const Camera&) override {}
   void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
-                    const Eigen::Vector3f&) override {
+                    const SurfaceLook&) override {
     const bool ok = positions.allFinite() && (tris.size() == 0 || (tris.minCoeff() >= 0 && tris.maxCoeff() < positions.rows()));
     ++(ok ? counts_.surfaces : counts_.rejected);
   }
+  void draw_membrane(const intestine::MesenterySurface& surface, const MembraneLook& look) override {
+    ++(membrane_drawable(surface, look) ? counts_.surfaces : counts_.rejected);
+  }
+  void draw_backdrop(const Eigen::Vector3f&, const Eigen::Vector3f&) override {}
   void draw_tool(const ToolGeometry& tool, float radius, const Eigen::Vector3f& rgb) override {
     const bool ok = tool.trocar.allFinite() && tool.tip.allFinite() && tool.jaw_tips[0].allFinite() &&
                     tool.jaw_tips[1].allFinite() && std::isfinite(radius) && rgb.allFinite();
@@ -35,7 +42,7 @@ class NullRenderer final : public Renderer {
     }
   }
   void draw_skinned_tube(const intestine::TubePrimitive&, const float* skin, int intervals,
-                         const Eigen::Vector3f&) override {
+                         const SurfaceLook&) override {
     bool ok = skin != nullptr && intervals >= 1;
     for (int i = 0; ok && i < 24 * intervals; ++i) ok = std::isfinite(skin[i]);
     ++(ok ? counts_.surfaces : counts_.rejected);
@@ -60,6 +67,23 @@ std::unique_ptr<Renderer> make_renderer(const std::string& backend, int width, i
   if (backend == "null") return std::make_unique<NullRenderer>(width, height);
   if (backend == "osmesa") return make_osmesa_renderer(width, height);
   throw_error("renderer: unknown backend '", backend, "' (use 'osmesa' or 'null')");
+}
+
+bool membrane_drawable(const intestine::MesenterySurface& s, const MembraneLook& look) noexcept {
+  const auto n = static_cast<std::size_t>(s.vertex_count);
+  if (s.vertex_count < 0 || s.positions.size() < 3 * n || s.normals.size() < 3 * n || s.coords.size() < 2 * n ||
+      s.indices.size() % 3 != 0 || !look.rgb.allFinite() || !look.vessel_rgb.allFinite() ||
+      !std::isfinite(look.alpha) || !std::isfinite(look.vessels) || !std::isfinite(look.specular) ||
+      !std::isfinite(look.shininess)) {
+    return false;
+  }
+  for (std::size_t i = 0; i < 3 * n; ++i) {
+    if (!std::isfinite(s.positions[i]) || !std::isfinite(s.normals[i])) return false;
+  }
+  for (const std::uint32_t i : s.indices) {
+    if (i >= n) return false;
+  }
+  return true;
 }
 
 void vertex_normals(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,

@@ -33,10 +33,29 @@ inline const Eigen::Vector3f& instrument_rgb(int instrument) {
 /// Background, as stored in the image (a dark neutral, not black, so a test can tell foreground apart).
 constexpr std::uint8_t kBackgroundRgb[3] = {40, 42, 48};
 
+/// How a lit surface reflects (draw_surface, draw_skinned_tube): its colour and a grey specular highlight. The
+/// default is a matte organ; wet mucosa (the intestine tube) is glossier.
+struct SurfaceLook {
+  Eigen::Vector3f rgb = Eigen::Vector3f::Constant(0.8f);  // display colour
+  float specular = 0.22f;                                   // linear, of the key light
+  float shininess = 40.0f;                                  // Blinn-Phong exponent
+};
+
+/// What a membrane looks like (draw_membrane): fat over a web of vessels, translucent, lit on both sides with some
+/// of the light coming through from behind.
+struct MembraneLook {
+  Eigen::Vector3f rgb = Eigen::Vector3f(0.95f, 0.80f, 0.62f);        // display colour of the fat
+  Eigen::Vector3f vessel_rgb = Eigen::Vector3f(0.55f, 0.13f, 0.14f); // of the vessels
+  float alpha = 0.88f;      // opacity, blended over what was drawn before it
+  float vessels = 1.0f;     // 0: no vessels; 1: the root vessel along v = 1, branches and arcades to v = 0
+  float specular = 0.30f;   // linear
+  float shininess = 30.0f;
+};
+
 /// What a renderer was asked to do (both backends count the same way).
 struct RenderCounts {
   std::uint64_t frames = 0;     // end_frame calls
-  std::uint64_t surfaces = 0;   // draw_surface calls drawn
+  std::uint64_t surfaces = 0;   // draw_surface, draw_skinned_tube and draw_membrane calls drawn
   std::uint64_t tools = 0;      // draw_tool calls drawn
   std::uint64_t points = 0;     // markers drawn (sum of rows passed to draw_points)
   std::uint64_t rejected = 0;   // draw calls skipped because of bad input
@@ -55,7 +74,27 @@ class Renderer {
   /// outside. Smooth normals (area-weighted per vertex) are recomputed from the positions on every call; both
   /// sides are lit. GPU buffers are allocated for the largest size seen and then only updated.
   virtual void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions,
-                            const Eigen::Ref<const Eigen::MatrixX3i>& tris, const Eigen::Vector3f& rgb) = 0;
+                            const Eigen::Ref<const Eigen::MatrixX3i>& tris, const SurfaceLook& look) = 0;
+  /// The same, matte, in `rgb`.
+  void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
+                    const Eigen::Vector3f& rgb) {
+    draw_surface(positions, tris, SurfaceLook{rgb});
+  }
+
+  /// A membrane given with its own per-vertex unit normals (intestine::MesenterySurface: the smooth mesentery) and
+  /// surface coordinates (u along, v across from 0 to 1) from which the fragment shader draws its vessels. Drawn
+  /// translucent (look.alpha) over what was drawn before it, so draw it after the opaque surfaces it may cover; it
+  /// writes depth, so what is drawn after it behind it is hidden. Both sides lit, plus the light through it. GPU
+  /// buffers as draw_surface's; the triangles are sent again only when they change. Rejected (counts().rejected)
+  /// when the surface's arrays do not match its counts, an index is out of range or a value is not finite.
+  virtual void draw_membrane(const intestine::MesenterySurface& surface, const MembraneLook& look) = 0;
+
+  /// A backdrop behind everything drawn in this frame, before or after it (it lies at the far plane and writes no
+  /// depth): a vignette from `centre_rgb` in the middle of the image to `edge_rgb` in its corners, with faint
+  /// folds, like an abdominal cavity seen through a laparoscope. Drawn after the opaque surfaces it costs only the
+  /// pixels they leave (early depth test); a translucent surface drawn before it blends over the clear colour
+  /// instead. Not counted as a surface.
+  virtual void draw_backdrop(const Eigen::Vector3f& centre_rgb, const Eigen::Vector3f& edge_rgb) = 0;
 
   /// A tool in metallic `rgb` (instrument_rgb(i) for instrument i): the shaft as a cylinder of `radius` (m) from
   /// tool.trocar to tool.tip, and the two jaws as thinner cylinders from the tip to jaw_tips[0] and jaw_tips[1].
@@ -74,7 +113,12 @@ class Renderer {
   /// Only the matrices are sent per call. Lit like draw_surface. Rejected (counts().rejected) when the backend has no
   /// GPU skinning (gpu_skinning() false), for intervals < 1 or a non-finite matrix.
   virtual void draw_skinned_tube(const intestine::TubePrimitive& primitive, const float* skin, int intervals,
-                                 const Eigen::Vector3f& rgb) = 0;
+                                 const SurfaceLook& look) = 0;
+  /// The same, matte, in `rgb`.
+  void draw_skinned_tube(const intestine::TubePrimitive& primitive, const float* skin, int intervals,
+                         const Eigen::Vector3f& rgb) {
+    draw_skinned_tube(primitive, skin, intervals, SurfaceLook{rgb});
+  }
   /// Whether draw_skinned_tube draws (the null backend counts it; OSMesa needs a core context with texture buffers).
   virtual bool gpu_skinning() const = 0;
 
@@ -122,6 +166,10 @@ using MatrixX3fView = Eigen::Ref<Eigen::MatrixX3f, 0, Eigen::Stride<Eigen::Dynam
 /// gets (0, 0, 1). Indices must be in range (not checked here).
 void vertex_normals(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
                     MatrixX3fView normals);
+
+/// Whether draw_membrane can draw `surface` with `look`: arrays as long as its counts, indices in range, every value
+/// finite (both backends reject the same input).
+bool membrane_drawable(const intestine::MesenterySurface& surface, const MembraneLook& look) noexcept;
 
 /// World -> view (right-handed, camera looking down -z) for camera.eye/target/up.
 Eigen::Matrix4f view_matrix(const Camera& camera);

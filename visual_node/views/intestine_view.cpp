@@ -88,25 +88,12 @@ IntestineView::IntestineView(const Scene& scene, std::uint64_t scene_hash, intes
       points_(static_cast<std::size_t>(3 * rows_ * cols_), 0.0),
       builder_(tube_params(scene), cols_),
       tube_(builder_.make_mesh(intestine::kTubeMaxLod)),
-      mesentery_(intestine::make_mesentery_mesh(rows_, cols_)),
+      mesentery_(intestine::make_mesentery_surface(rows_, cols_, kMesenteryRowSteps, kMesenteryColSteps)),
       controller_(rate_params(scene)),
       skinning_(skinning),
       incoming_(3 * static_cast<std::size_t>(msg::kMaxBodyPoints), 0.0) {
   tube_positions_.resize(static_cast<Eigen::Index>(tube_.positions.size() / 3), 3);
   tube_tris_.resize(static_cast<Eigen::Index>(tube_.indices.size() / 3), 3);
-  mesentery_positions_.resize(mesentery_.vertex_count, 3);
-
-  // The strip unrolled into triangles once (the renderer draws triangle lists): every other triangle is flipped to
-  // keep one winding, the degenerate joins between rows are skipped.
-  std::vector<Eigen::Vector3i> tris;
-  const auto& s = mesentery_.strip;
-  for (std::size_t i = 0; i + 2 < s.size(); ++i) {
-    const int a = static_cast<int>(s[i]), b = static_cast<int>(s[i + 1]), c = static_cast<int>(s[i + 2]);
-    if (a == b || b == c || a == c) continue;
-    tris.push_back(i % 2 == 0 ? Eigen::Vector3i(a, b, c) : Eigen::Vector3i(b, a, c));
-  }
-  mesentery_tris_.resize(static_cast<Eigen::Index>(tris.size()), 3);
-  for (std::size_t i = 0; i < tris.size(); ++i) mesentery_tris_.row(static_cast<Eigen::Index>(i)) = tris[i].transpose();
 }
 
 IntestineView::~IntestineView() = default;
@@ -185,28 +172,25 @@ void IntestineView::rebuild(int lod) noexcept {
   } else {
     ++build_failures_;  // the tube is not drawn until a build succeeds
   }
-  // The mesentery over the whole grid.
-  if (intestine::mesentery_strip(points_.data(), mesentery_)) {
-    for (int v = 0; v < mesentery_.vertex_count; ++v) {
-      mesentery_positions_.row(v) << mesentery_.positions[3 * static_cast<std::size_t>(v)],
-          mesentery_.positions[3 * static_cast<std::size_t>(v) + 1],
-          mesentery_.positions[3 * static_cast<std::size_t>(v) + 2];
-    }
-  }
+  // The mesentery over the whole grid, refined, with its normals (accept() checked the points: it cannot fail).
+  intestine::mesentery_surface(points_.data(), mesentery_);
   built_lod_ = lod;
   build_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
 }
 
 void IntestineView::draw(Renderer& renderer) const {
-  if (!have_body_) return;
-  renderer.draw_surface(mesentery_positions_, mesentery_tris_, kMesenteryRgb);
-  if (tube_.vertex_count == 0) return;
-  if (skinning_ == intestine::TubeSkinning::kGpu) {
-    renderer.draw_skinned_tube(builder_.primitive(tube_.lod), tube_.skin.data(), tube_.intervals, kIntestineRgb);
-  } else {
-    renderer.draw_surface(tube_positions_.topRows(tube_.vertex_count), tube_tris_.topRows(tube_.index_count / 3),
-                          kIntestineRgb);
+  // The opaque tube first: the backdrop is then shaded only where the tube leaves pixels, and the translucent
+  // mesentery blends over both.
+  if (have_body_ && tube_.vertex_count > 0) {
+    if (skinning_ == intestine::TubeSkinning::kGpu) {
+      renderer.draw_skinned_tube(builder_.primitive(tube_.lod), tube_.skin.data(), tube_.intervals, kIntestineLook);
+    } else {
+      renderer.draw_surface(tube_positions_.topRows(tube_.vertex_count), tube_tris_.topRows(tube_.index_count / 3),
+                            kIntestineLook);
+    }
   }
+  renderer.draw_backdrop(kCavityCentreRgb, kCavityEdgeRgb);
+  if (have_body_) renderer.draw_membrane(mesentery_, kMesenteryLook);
 }
 
 void IntestineView::frame_done(double work_seconds) noexcept {
@@ -242,7 +226,8 @@ nlohmann::json IntestineView::stats() const {
   j["build_us"] = to_json(build_us_.summary());
   j["tube_vertices_max"] = tube_vertices_max_;
   j["tube_triangles_max"] = tube_triangles_max_;
-  j["mesentery_triangles"] = mesentery_tris_.rows();
+  j["mesentery_triangles"] = mesentery_.indices.size() / 3;
+  j["mesentery_vertices"] = mesentery_.vertex_count;
   const intestine::TubeStats& ts = builder_.stats();
   j["tube_last"] = {{"samples", ts.samples},
                     {"flagged_segments", ts.flagged_segments},
@@ -268,7 +253,7 @@ void IntestineOrganView::attach(const Renderer& renderer) {
 void IntestineOrganView::print_init(std::ostream& out) const {
   out << "visual_node: intestine: tube skinned on the "
       << (view_.skinning() == intestine::TubeSkinning::kGpu ? "GPU (vertex shader)" : "CPU")
-      << " + mesentery strip, LOD by the frame-rate "
+      << " + smooth mesentery (" << view_.mesentery().vertex_count << " vertices), LOD by the frame-rate "
       << "controller (target " << view_.controller().params().target_hz << " Hz)\n";
 }
 

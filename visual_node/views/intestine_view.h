@@ -12,6 +12,13 @@
 // the same CPU code in both (the matrices come from the same build). tests/bench/tube_skinning_bench prints the
 // frame time of both per LOD.
 //
+// The picture (issue 15): the mesentery is drawn as a smooth surface, the mass-spring grid refined by a bicubic
+// Catmull-Rom patch (intestine::MesenterySurface, kMesenteryRowSteps x kMesenteryColSteps vertices per grid cell,
+// analytic per-vertex normals) in translucent pinkish-yellow fat with its vessels drawn by the shader
+// (Renderer::draw_membrane); the tube in glossy pink-red (kIntestineLook) with its rounded ends; behind them a dark
+// abdominal backdrop (Renderer::draw_backdrop). The tube is drawn before the membrane so that it shows through it.
+// The refinement is fixed (the frame-rate controller drives the tube's LOD only): about 0.1 ms of CPU per build.
+//
 // The controller is fed with each frame's work time (update + draw + end_frame, not the pacing sleep): the LOD is the
 // finest whose work still allows the target rate (visual.target_fps; visual.rate_hz when 0), so the displayed rate
 // (visual.rate_hz) holds with the margin the target leaves.
@@ -35,21 +42,32 @@
 #include "intestine/frame_rate_controller.h"
 #include "intestine/tube_geometry.h"
 #include "organ_view.h"
+#include "render/renderer.h"
 #include "scene/scene.h"
 
 namespace surgsim {
 
-class Renderer;
 class BodyStateListener;
 
-/// Colours, linear RGB in [0, 1].
-inline const Eigen::Vector3f kIntestineRgb(0.86f, 0.46f, 0.42f);  // pink bowel wall
-inline const Eigen::Vector3f kMesenteryRgb(0.92f, 0.76f, 0.50f);  // yellowish fatty membrane
+/// Colours, display RGB in [0, 1].
+inline const Eigen::Vector3f kIntestineRgb(0.84f, 0.38f, 0.37f);  // pink-red bowel wall
+inline const Eigen::Vector3f kMesenteryRgb(0.95f, 0.80f, 0.62f);  // pinkish-yellow fat
+/// The bowel wall is wet serosa: a glossy highlight.
+inline const SurfaceLook kIntestineLook{kIntestineRgb, 0.55f, 60.0f};
+/// The mesentery: translucent fat over dark red vessels.
+inline const MembraneLook kMesenteryLook{kMesenteryRgb, Eigen::Vector3f(0.55f, 0.13f, 0.14f), 0.88f, 1.0f, 0.30f,
+                                         30.0f};
+/// The abdominal cavity behind: dark red-brown in the middle of the image, nearly black in its corners.
+inline const Eigen::Vector3f kCavityCentreRgb(0.30f, 0.13f, 0.11f);
+inline const Eigen::Vector3f kCavityEdgeRgb(0.05f, 0.025f, 0.025f);
+/// Vertices per mass-spring grid cell of the drawn mesentery: across the membrane and along the intestine.
+constexpr int kMesenteryRowSteps = 3;
+constexpr int kMesenteryColSteps = 2;
 
 class IntestineView {
  public:
   /// Init (allocates; throws surgsim::Error on bad parameters): the tube builder for scene.intestine's columns, the
-  /// meshes at the finest LOD, the mesentery strip as triangles, the frame-rate controller. BodyStates whose scene
+  /// meshes at the finest LOD, the mesentery's refined surface, the frame-rate controller. BodyStates whose scene
   /// hash differs from `scene_hash` are refused.
   IntestineView(const Scene& scene, std::uint64_t scene_hash,
                 intestine::TubeSkinning skinning = intestine::TubeSkinning::kGpu);
@@ -76,7 +94,7 @@ class IntestineView {
   /// The instruments of the shown body state (none present before one that carried them).
   const InstrumentPoses& instruments() const { return instruments_; }
 
-  /// Draws the tube and the mesentery (nothing before the first body state).
+  /// Draws (once a body state came) the tube, the backdrop, then the translucent mesentery over both.
   void draw(Renderer& renderer) const;
   /// Feeds the frame-rate controller with this frame's work time (s); the next update() uses the LOD it returns.
   void frame_done(double work_seconds) noexcept;
@@ -91,6 +109,7 @@ class IntestineView {
   const intestine::TubeMesh& tube() const { return tube_; }  // counts and matrices; vertices with kCpu only
   const intestine::TubePrimitive& tube_primitive() const { return builder_.primitive(tube_.lod); }
   const intestine::FrameRateController& controller() const { return controller_; }
+  const intestine::MesenterySurface& mesentery() const { return mesentery_; }  // the drawn surface
 
   /// Shutdown: states, LOD histogram and mean, the controller's target, work and build times, tube sizes.
   nlohmann::json stats() const;
@@ -106,13 +125,11 @@ class IntestineView {
   std::vector<double> points_;  // 3 rows cols, the shown body state
   intestine::TubeBuilder builder_;
   intestine::TubeMesh tube_;
-  intestine::MesenteryMesh mesentery_;
+  intestine::MesenterySurface mesentery_;
   intestine::FrameRateController controller_;
   // What the renderer draws (column-major copies, sized for the finest LOD).
   Eigen::MatrixX3f tube_positions_;
   Eigen::MatrixX3i tube_tris_;
-  Eigen::MatrixX3f mesentery_positions_;
-  Eigen::MatrixX3i mesentery_tris_;  // the strip unrolled once into triangles (degenerate joins skipped)
   int built_lod_ = -1;
   bool have_body_ = false;
   intestine::TubeSkinning skinning_ = intestine::TubeSkinning::kGpu;

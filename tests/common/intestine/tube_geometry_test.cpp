@@ -479,5 +479,189 @@ TEST(TubeGeometryTest, MesenteryStripCoversTheGrid) {
   EXPECT_THROW(make_mesentery_mesh(1, 10), Error);
 }
 
+
+Eigen::Vector3d surface_point(const MesenterySurface& s, int v) {
+  const auto k = static_cast<std::size_t>(3 * v);
+  return {s.positions[k], s.positions[k + 1], s.positions[k + 2]};
+}
+Eigen::Vector3d surface_normal(const MesenterySurface& s, int v) {
+  const auto k = static_cast<std::size_t>(3 * v);
+  return {s.normals[k], s.normals[k + 1], s.normals[k + 2]};
+}
+
+// The model's rest grid with a smooth sag across the membrane (the folds hang and wave as under gravity and a probe):
+// a curved sheet that is not the one the model starts from.
+std::vector<double> sagged_rest(const IntestineModel& model) {
+  std::vector<double> x(model.rest().data(), model.rest().data() + model.rest().size());
+  for (int r = 0; r < model.rows(); ++r) {
+    for (int c = 0; c < model.columns(); ++c) {
+      const double w = 1.0 - static_cast<double>(r) / (model.rows() - 1);  // 0 on the fixed vessel row
+      double* p = x.data() + 3 * (r * model.columns() + c);
+      p[2] -= 0.04 * w * w * (1.0 + 0.5 * std::sin(0.3 * c));
+      p[1] += 0.02 * w * std::cos(0.2 * c);
+    }
+  }
+  return x;
+}
+
+// The smooth mesentery passes through the grid, its normals are unit, on the grid's side (the strip's central-
+// difference normals) and along the normal of the refined mesh's own geometry, and every triangle winds counter-
+// clockwise seen from them. The membrane is a fan pleated onto its root: where the intestine turns at a fold's crest
+// the vessel row (all on the vessel) reverses along it and the sheet folds over there, so the normal turns over a
+// short way near the root; away from the root (the outer half, where it is wide) adjacent normals never flip.
+TEST(TubeGeometryTest, MesenterySurfaceInterpolatesTheGridWithUnitConsistentNormals) {
+  const IntestineModel model(IntestineParams{});
+  const int rows = model.rows(), cols = model.columns();
+  for (const auto& x : {std::vector<double>(model.rest().data(), model.rest().data() + model.rest().size()),
+                        sagged_rest(model)}) {
+    MesenterySurface s = make_mesentery_surface(rows, cols, 4, 3);
+    ASSERT_EQ(s.vertex_rows, 3 * 4 + 1);
+    ASSERT_EQ(s.vertex_cols, 99 * 3 + 1);
+    ASSERT_EQ(s.indices.size(), static_cast<std::size_t>(6 * (s.vertex_rows - 1) * (s.vertex_cols - 1)));
+    ASSERT_TRUE(mesentery_surface(x.data(), s));
+    EXPECT_EQ(s.degenerate_normals, 0);
+    MesenteryMesh strip = make_mesentery_mesh(rows, cols);
+    ASSERT_TRUE(mesentery_strip(x.data(), strip));
+    const int vc = s.vertex_cols;
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        const int v = r * s.row_steps * vc + c * s.col_steps, g = r * cols + c;
+        const Eigen::Vector3d grid(x[3 * g], x[3 * g + 1], x[3 * g + 2]);
+        ASSERT_LT((surface_point(s, v) - grid).norm(), 1e-6) << "grid node " << r << ", " << c;
+        const Eigen::Vector3d gn(strip.normals[3 * g], strip.normals[3 * g + 1], strip.normals[3 * g + 2]);
+        if (r + 1 < rows) ASSERT_GT(surface_normal(s, v).dot(gn), 0.5) << "the grid's side at node " << r << ", " << c;
+      }
+    }
+    double worst_unit = 0, worst_geometry = 1, worst_outer = 1;
+    int regular = 0;
+    for (int i = 0; i < s.vertex_rows; ++i) {
+      for (int j = 0; j < vc; ++j) {
+        const int v = i * vc + j;
+        const Eigen::Vector3d n = surface_normal(s, v);
+        worst_unit = std::max(worst_unit, std::abs(n.norm() - 1.0));
+        if (2 * i <= s.vertex_rows) {
+          if (j + 1 < vc) worst_outer = std::min(worst_outer, n.dot(surface_normal(s, v + 1)));
+          worst_outer = std::min(worst_outer, n.dot(surface_normal(s, v + vc)));
+        }
+        // The refined mesh's own central-difference normal (one-sided on the borders), where the mesh is regular
+        // there (its two directions at least 17 degrees apart).
+        const Eigen::Vector3d du = surface_point(s, i * vc + std::min(j + 1, vc - 1)) -
+                                   surface_point(s, i * vc + std::max(j - 1, 0));
+        const Eigen::Vector3d dv = surface_point(s, std::min(i + 1, s.vertex_rows - 1) * vc + j) -
+                                   surface_point(s, std::max(i - 1, 0) * vc + j);
+        const Eigen::Vector3d cn = du.cross(dv);
+        if (cn.norm() < 0.3 * du.norm() * dv.norm()) continue;
+        ++regular;
+        worst_geometry = std::min(worst_geometry, n.dot(cn.normalized()));
+      }
+    }
+    EXPECT_LT(worst_unit, 1e-6);
+    EXPECT_GT(regular, s.vertex_count * 9 / 10);
+    EXPECT_GT(worst_geometry, 0.9) << "normals on the side and along the normal of the refined mesh";
+    EXPECT_GT(worst_outer, 0.0) << "no flip between adjacent normals in the outer half";
+    // Every triangle winds counter-clockwise seen from its vertices' normals, but for those the pleat's fold line
+    // crosses (their vertices' normals on opposite sides).
+    int against = 0, folded = 0;
+    for (std::size_t t = 0; t < s.indices.size(); t += 3) {
+      const int a = static_cast<int>(s.indices[t]), b = static_cast<int>(s.indices[t + 1]),
+                c = static_cast<int>(s.indices[t + 2]);
+      const Eigen::Vector3d na = surface_normal(s, a), nb = surface_normal(s, b), nc = surface_normal(s, c);
+      if (na.dot(nb) < 0 || nb.dot(nc) < 0 || na.dot(nc) < 0) {
+        ++folded;
+        continue;
+      }
+      const Eigen::Vector3d fn = (surface_point(s, b) - surface_point(s, a)).cross(surface_point(s, c) - surface_point(s, a));
+      if (fn.dot(na + nb + nc) <= 0) ++against;
+    }
+    EXPECT_EQ(against, 0);
+    EXPECT_LT(folded, static_cast<int>(s.indices.size() / 3) / 50) << "the pleats' fold lines only";
+  }
+}
+
+// On a grid sampled from a cylinder (axis x, radius R) the patch's normals are the cylinder's (radial, one side),
+// and its points stay within a small fraction of the spacing of the cylinder: the refinement is smooth, not faceted.
+TEST(TubeGeometryTest, MesenterySurfaceNormalsOfACylinderAreRadial) {
+  const int rows = 6, cols = 12;
+  const double radius = 0.1, dth = 0.25, dx = 0.03;
+  std::vector<double> x;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) x.insert(x.end(), {c * dx, radius * std::cos(r * dth), radius * std::sin(r * dth)});
+  }
+  MesenterySurface s = make_mesentery_surface(rows, cols, 5, 4);
+  ASSERT_TRUE(mesentery_surface(x.data(), s));
+  // Everywhere, and inside the first and last grid intervals across the rows (whose one-sided end tangents make
+  // the border intervals flatter).
+  double worst_dot = 1, worst_radius = 0, inner_dot = 1, inner_radius = 0, worst_neighbour = 1;
+  for (int v = 0; v < s.vertex_count; ++v) {
+    const Eigen::Vector3d p = surface_point(s, v);
+    const Eigen::Vector3d radial = Eigen::Vector3d(0, p.y(), p.z()).normalized();
+    // du along +x, dv along increasing angle: du x dv points inwards.
+    const double d = surface_normal(s, v).dot(-radial);
+    const double e = std::abs(Eigen::Vector2d(p.y(), p.z()).norm() - radius);
+    worst_dot = std::min(worst_dot, d);
+    worst_radius = std::max(worst_radius, e);
+    const int i = v / s.vertex_cols;
+    if (i >= s.row_steps && i <= s.vertex_rows - 1 - s.row_steps) {
+      inner_dot = std::min(inner_dot, d);
+      inner_radius = std::max(inner_radius, e);
+    }
+    if (v + s.vertex_cols < s.vertex_count) {
+      worst_neighbour = std::min(worst_neighbour, surface_normal(s, v).dot(surface_normal(s, v + s.vertex_cols)));
+    }
+  }
+  EXPECT_GT(worst_dot, 0.99);
+  EXPECT_LT(worst_radius, 0.006 * radius);  // the linear chord's sagitta at 0.25 rad is 0.8 % of R
+  EXPECT_GT(inner_dot, 0.9999);
+  EXPECT_LT(inner_radius, 0.0005 * radius);
+  EXPECT_GT(worst_neighbour, std::cos(2.0 * dth / s.row_steps)) << "the normal turns with the surface, step by step";
+  const std::size_t mid = static_cast<std::size_t>(s.vertex_count / 2);
+  EXPECT_FLOAT_EQ(s.coords[2 * mid + 1], static_cast<float>(mid / s.vertex_cols) / (s.vertex_rows - 1));
+}
+
+// Rows converging to one point at both ends (a mesentery tapered to zero width): the patch degenerates there and
+// the normals are borrowed from the nearest valid vertex of the same row; all stay unit, finite and on one side.
+TEST(TubeGeometryTest, MesenterySurfaceTaperedToAPointKeepsUnitNormals) {
+  const IntestineModel model(IntestineParams{});
+  const int rows = model.rows(), cols = model.columns();
+  std::vector<double> x = sagged_rest(model);
+  for (const int c : {0, cols - 1}) {
+    for (int r = 0; r + 1 < rows; ++r) {
+      for (int k = 0; k < 3; ++k) x[3 * (r * cols + c) + k] = x[3 * ((rows - 1) * cols + c) + k];
+    }
+  }
+  MesenterySurface s = make_mesentery_surface(rows, cols, 4, 3);
+  ASSERT_TRUE(mesentery_surface(x.data(), s));
+  EXPECT_GE(s.degenerate_normals, 2 * s.vertex_rows);  // the two end vertex columns
+  for (int v = 0; v < s.vertex_count; ++v) {
+    ASSERT_NEAR(surface_normal(s, v).norm(), 1.0, 1e-6) << v;
+  }
+  for (int i = 0; i < s.vertex_rows; ++i) {
+    const int v = i * s.vertex_cols;
+    EXPECT_GT(surface_normal(s, v).dot(surface_normal(s, v + 1)), 0.99) << "row " << i;
+  }
+}
+
+TEST(TubeGeometryTest, MesenterySurfaceAllocatesNothingAndRefusesBadInput) {
+  const IntestineModel model(IntestineParams{});
+  MesenterySurface s = make_mesentery_surface(model.rows(), model.columns(), 4, 3);
+  const std::vector<double> x = sagged_rest(model);
+  {
+    surgsim::test::AllocationCounter counter;
+    ASSERT_TRUE(mesentery_surface(model.rest().data(), s));
+    ASSERT_TRUE(mesentery_surface(x.data(), s));
+    EXPECT_EQ(counter.count(), 0);
+  }
+  const std::vector<float> before = s.positions;
+  std::vector<double> bad = x;
+  bad[3 * 150 + 1] = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(mesentery_surface(bad.data(), s));
+  EXPECT_EQ(s.positions, before);
+  MesenterySurface empty;
+  EXPECT_FALSE(mesentery_surface(x.data(), empty));
+  EXPECT_THROW(make_mesentery_surface(1, 10, 2, 2), Error);
+  EXPECT_THROW(make_mesentery_surface(4, 10, 0, 2), Error);
+  EXPECT_THROW(make_mesentery_surface(4, 10, 2, 17), Error);
+}
+
 }  // namespace
 }  // namespace surgsim::intestine

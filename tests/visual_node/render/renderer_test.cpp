@@ -378,6 +378,137 @@ TEST(OsMesaRenderer, BadInputIsSkippedAndCounted) {
   EXPECT_EQ(foreground_fraction(image), 0.0);
 }
 
+// A curved membrane for draw_membrane: a coarse rows x cols grid on a cylinder about z (radius 1, facing the front
+// camera at -y, u around it over 2.4 rad, v down it), refined and given normals by intestine::MesenterySurface as the
+// intestine view does with the mass-spring grid.
+intestine::MesenterySurface curved_membrane(int rows = 4, int cols = 8) {
+  std::vector<double> grid;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      const double phi = -1.2 + 2.4 * c / (cols - 1);
+      grid.insert(grid.end(), {std::sin(phi), -std::cos(phi), 0.6 - 1.2 * r / (rows - 1)});
+    }
+  }
+  intestine::MesenterySurface s = intestine::make_mesentery_surface(rows, cols, 3, 4);
+  EXPECT_TRUE(intestine::mesentery_surface(grid.data(), s));
+  return s;
+}
+
+int grey(const Image& image, int x, int y) {
+  const std::uint8_t* p = image.at(x, y);
+  return static_cast<int>(p[0]) + p[1] + p[2];
+}
+
+Image render_membrane(Renderer& renderer, const intestine::MesenterySurface& s, const MembraneLook& look,
+                      const Camera& camera = front_camera()) {
+  renderer.begin_frame(camera);
+  renderer.draw_membrane(s, look);
+  renderer.end_frame();
+  Image image;
+  EXPECT_TRUE(renderer.read_image(image));
+  return image;
+}
+
+// The mesentery is shaded, not one flat colour: across a curved sheet seen from the front its intensity changes a
+// lot from one side to the other, and smoothly (no step between adjacent pixels as between facets of the coarse
+// grid, whose intervals turn the normal by 0.34 rad); seen from behind it is lit too.
+TEST(OsMesaRenderer, MembraneIsShadedSmoothlyOnBothSides) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  const intestine::MesenterySurface sheet = curved_membrane();
+  MembraneLook look;
+  look.vessels = 0.0f;  // the shading alone
+  look.alpha = 1.0f;
+  const Image front = render_membrane(*renderer, sheet, look);
+  EXPECT_EQ(renderer->counts().surfaces, 1u);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+  EXPECT_GT(foreground_fraction(front), 0.15);
+  // Along the middle row, from the sheet's left edge to its right edge (a few pixels in from the silhouette).
+  const int y = kHeight / 2;
+  int x0 = 0, x1 = kWidth - 1;
+  while (x0 < kWidth && is_background(front, x0, y)) ++x0;
+  while (x1 > 0 && is_background(front, x1, y)) --x1;
+  ASSERT_GT(x1 - x0, kWidth / 3);
+  int lo = 765, hi = 0, step = 0;
+  for (int x = x0 + 3; x <= x1 - 3; ++x) {
+    lo = std::min(lo, grey(front, x, y));
+    hi = std::max(hi, grey(front, x, y));
+    if (x > x0 + 3) step = std::max(step, std::abs(grey(front, x, y) - grey(front, x - 1, y)));
+  }
+  std::printf("membrane across the middle row: grey %d..%d, largest step between adjacent pixels %d\n", lo, hi, step);
+  EXPECT_GT(hi - lo, 90) << "lit by the key light: bright on one side, darker on the other";
+  EXPECT_LE(step, 12) << "smooth: no facet edge between adjacent pixels (range " << lo << ".." << hi << ")";
+  // The inside of the sheet, from behind: lit as well (both sides), not black.
+  Camera back = front_camera();
+  back.eye = {0, 4, 0};
+  const Image behind = render_membrane(*renderer, sheet, look, back);
+  double sum = 0;
+  int n = 0;
+  for (int x = 0; x < kWidth; ++x) {
+    if (is_background(behind, x, y)) continue;
+    sum += grey(behind, x, y);
+    ++n;
+  }
+  ASSERT_GT(n, kWidth / 3);
+  EXPECT_GT(sum / n, 150.0) << "the far side is lit too";
+}
+
+// With its vessels the membrane has dark red lines over the fat (the root vessel along v = 1, the bottom edge here);
+// translucent, it lets a surface behind it show through; the backdrop is a vignette behind everything.
+TEST(OsMesaRenderer, MembraneVesselsTranslucencyAndBackdrop) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  const intestine::MesenterySurface sheet = curved_membrane();
+  MembraneLook look;
+  look.alpha = 1.0f;
+  look.vessels = 0.0f;
+  const Image plain = render_membrane(*renderer, sheet, look);
+  look.vessels = 1.0f;
+  const Image veined = render_membrane(*renderer, sheet, look);
+  // The root vessel: just above the sheet's bottom edge at the centre column, redder than the fat there.
+  const Eigen::Vector2f root = project_to_pixel(front_camera(), kWidth, kHeight, Eigen::Vector3f(0.0f, -1.0f, -0.58f));
+  const std::uint8_t* v = veined.at(static_cast<int>(root.x()), static_cast<int>(root.y()));
+  const std::uint8_t* f = plain.at(static_cast<int>(root.x()), static_cast<int>(root.y()));
+  std::printf("root vessel pixel %d %d %d, fat there %d %d %d\n", v[0], v[1], v[2], f[0], f[1], f[2]);
+  EXPECT_GT(f[1], v[1] + 40) << "the vessel is darker in green than the fat";
+  EXPECT_GT(v[0], v[1] + 40) << "and red";
+  int changed = 0;
+  for (std::size_t i = 0; i < plain.rgb.size(); i += 3) changed += plain.rgb[i + 1] != veined.rgb[i + 1] ? 1 : 0;
+  EXPECT_GT(changed, static_cast<int>(plain.rgb.size() / 3) / 50) << "branches and arcades over the sheet";
+
+  // An opaque blue sphere behind the sheet's middle: seen through the translucent membrane, not through an opaque one.
+  Surface ball = icosphere(2, 0.3f);
+  ball.positions.col(1).array() += 0.2f;  // behind the sheet (which bulges towards -y, the camera)
+  const auto with_ball = [&](float alpha) {
+    renderer->begin_frame(front_camera());
+    renderer->draw_surface(ball.positions, ball.tris, Eigen::Vector3f(0.2f, 0.3f, 0.9f));
+    MembraneLook l;
+    l.vessels = 0.0f;
+    l.alpha = alpha;
+    renderer->draw_membrane(sheet, l);
+    renderer->end_frame();
+    Image image;
+    EXPECT_TRUE(renderer->read_image(image));
+    return image;
+  };
+  const Image opaque = with_ball(1.0f), translucent = with_ball(0.8f);
+  const std::uint8_t* o = opaque.at(kWidth / 2, kHeight / 2);
+  const std::uint8_t* t = translucent.at(kWidth / 2, kHeight / 2);
+  std::printf("behind an opaque membrane %d %d %d, a translucent one %d %d %d\n", o[0], o[1], o[2], t[0], t[1], t[2]);
+  EXPECT_GT(static_cast<int>(t[2]) - t[0], static_cast<int>(o[2]) - o[0] + 20) << "bluer where the ball shows through";
+
+  // The backdrop: brighter and redder in the middle than in the corners, drawn wherever nothing else is.
+  renderer->begin_frame(front_camera());
+  renderer->draw_backdrop(Eigen::Vector3f(0.30f, 0.13f, 0.11f), Eigen::Vector3f(0.05f, 0.025f, 0.025f));
+  renderer->end_frame();
+  Image backdrop;
+  ASSERT_TRUE(renderer->read_image(backdrop));
+  EXPECT_DOUBLE_EQ(foreground_fraction(backdrop), 1.0);
+  const std::uint8_t* mid = backdrop.at(kWidth / 2, kHeight / 2);
+  EXPECT_GT(mid[0], mid[2] + 20);
+  EXPECT_GT(grey(backdrop, kWidth / 2, kHeight / 2), grey(backdrop, 0, 0) + 60);
+  EXPECT_EQ(renderer->counts().rejected, 0u);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+}
+
 TEST(NullRenderer, CountsAndHasNoImage) {
   auto renderer = make_renderer("null", 640, 480);
   EXPECT_STREQ(renderer->name(), "null");
@@ -408,6 +539,18 @@ TEST(NullRenderer, CountsAndHasNoImage) {
   renderer->draw_tool(tool, 0.01f, Eigen::Vector3f(std::nanf(""), 0.0f, 0.0f));
   EXPECT_EQ(renderer->counts().tools, 3u);
   EXPECT_EQ(renderer->counts().rejected, 1u);
+  // A membrane counts as a surface, the backdrop as nothing; a membrane with a bad index or value is rejected.
+  intestine::MesenterySurface sheet = intestine::make_mesentery_surface(3, 4, 2, 2);
+  renderer->draw_membrane(sheet, MembraneLook{});
+  renderer->draw_backdrop(Eigen::Vector3f::Zero(), Eigen::Vector3f::Ones());
+  EXPECT_EQ(renderer->counts().surfaces, 3u);
+  sheet.indices[4] = static_cast<std::uint32_t>(sheet.vertex_count);
+  renderer->draw_membrane(sheet, MembraneLook{});
+  sheet.indices[4] = 0;
+  sheet.normals[7] = std::nanf("");
+  renderer->draw_membrane(sheet, MembraneLook{});
+  EXPECT_EQ(renderer->counts().surfaces, 3u);
+  EXPECT_EQ(renderer->counts().rejected, 3u);
 }
 
 TEST(MakeRenderer, RefusesUnknownBackendAndBadSize) {
