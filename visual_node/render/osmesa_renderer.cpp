@@ -208,13 +208,15 @@ uniform mat3 u_normal_matrix;
 out vec3 v_position;
 out vec3 v_normal;
 out vec2 v_coord;
-out vec2 v_vessels;  // the branches' sideways wiggle (columns) and the arcades' height (s) here
+out vec3 v_vessels;  // the branches' sideways wiggle (columns), the arcades' height (s), the vasa recta's shift
 void main() {
   v_position = (u_model_view * vec4(a_position, 1.0)).xyz;
   v_normal = u_normal_matrix * a_normal;
   v_coord = a_coord;
-  v_vessels = vec2(0.25 * sin(5.0 * a_coord.y + 0.57 * a_coord.x),
-                   0.30 + 0.14 * (1.0 - abs(sin(1.0471976 * a_coord.x))));
+  float u = a_coord.x, s = a_coord.y;
+  v_vessels = vec3(0.3 * sin(4.0 * s + 0.57 * u) + 0.25 * sin(0.23 * u),
+                   0.27 + 0.12 * (1.0 - abs(sin(1.0471976 * u))) + 0.05 * sin(0.37 * u + 1.0),
+                   0.25 * sin(1.3 * u));
   gl_Position = u_mvp * vec4(a_position, 1.0);
 }
 )";
@@ -229,7 +231,7 @@ constexpr const char* kMembraneFragmentShader = R"(
 in vec3 v_position;
 in vec3 v_normal;
 in vec2 v_coord;
-in vec2 v_vessels;
+in vec3 v_vessels;
 uniform vec3 u_albedo;     // linear
 uniform vec3 u_vessel;     // linear
 uniform vec3 u_specular;   // linear
@@ -248,12 +250,12 @@ void main() {
   float arcade = v_vessels.y;
   float d_branch = 3.0 * abs(fract((u - v_vessels.x) / 3.0 + 0.5) - 0.5);
   float d_arcade = abs(s - arcade);
-  float d_recta = 0.5 * abs(fract(2.0 * u + 0.5) - 0.5);
-  float vessel = line(1.0 - s, 0.05, fwidth(s));
-  vessel = max(vessel, 0.9 * line(d_branch, 0.09, fwidth(d_branch)) * step(arcade, s));
-  vessel = max(vessel, 0.85 * line(d_arcade, 0.018, fwidth(d_arcade)));
-  vessel = max(vessel, 0.5 * line(d_recta, 0.035, fwidth(d_recta)) * step(s, arcade));
-  vec3 albedo = mix(u_albedo, u_vessel, 0.85 * u_vessels * vessel);
+  float d_recta = 0.5 * abs(fract(2.0 * u + v_vessels.z + 0.5) - 0.5);
+  float vessel = line(1.0 - s, 0.04, fwidth(s));
+  vessel = max(vessel, 0.85 * line(d_branch, 0.06, fwidth(d_branch)) * step(arcade, s));
+  vessel = max(vessel, 0.75 * line(d_arcade, 0.011, fwidth(d_arcade)));
+  vessel = max(vessel, 0.35 * line(d_recta, 0.03, fwidth(d_recta)) * step(s, arcade) * smoothstep(0.0, 0.12, s));
+  vec3 albedo = mix(u_albedo, u_vessel, 0.8 * u_vessels * vessel);
   float through = max(-dot(n, kKeyDir), 0.0);
   vec3 c = lit(n, v_position, albedo, u_specular, u_shininess) + kKey * kThrough * through * albedo * kThroughTint;
   frag_color = vec4(sqrt(clamp(c, 0.0, 1.0)), u_alpha);

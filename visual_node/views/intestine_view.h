@@ -51,11 +51,11 @@ class BodyStateListener;
 
 /// Colours, display RGB in [0, 1].
 inline const Eigen::Vector3f kIntestineRgb(0.84f, 0.38f, 0.37f);  // pink-red bowel wall
-inline const Eigen::Vector3f kMesenteryRgb(0.95f, 0.80f, 0.62f);  // pinkish-yellow fat
+inline const Eigen::Vector3f kMesenteryRgb(0.96f, 0.80f, 0.60f);  // pinkish-yellow fat
 /// The bowel wall is wet serosa: a glossy highlight.
 inline const SurfaceLook kIntestineLook{kIntestineRgb, 0.55f, 60.0f};
 /// The mesentery: translucent fat over dark red vessels.
-inline const MembraneLook kMesenteryLook{kMesenteryRgb, Eigen::Vector3f(0.55f, 0.13f, 0.14f), 0.88f, 1.0f, 0.30f,
+inline const MembraneLook kMesenteryLook{kMesenteryRgb, Eigen::Vector3f(0.55f, 0.13f, 0.14f), 0.80f, 1.0f, 0.30f,
                                          30.0f};
 /// The abdominal cavity behind: dark red-brown in the middle of the image, nearly black in its corners.
 inline const Eigen::Vector3f kCavityCentreRgb(0.30f, 0.13f, 0.11f);
