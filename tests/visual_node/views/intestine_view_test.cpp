@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <vector>
 
@@ -158,6 +159,55 @@ TEST(IntestineView, FrameRateControllerLowersAndRaisesTheLod) {
   EXPECT_EQ(s["target_fps"].get<double>(), target);
   EXPECT_EQ(s["lod_histogram"].size(), static_cast<std::size_t>(intestine::kTubeMaxLod + 1));
   EXPECT_GE(s["lod_mean"].get<double>(), 0.0);
+}
+
+// The shipped scene's rest shape drawn with OSMesa at the scene's camera, as the visual node draws it: pink-red tube
+// pixels, many pinkish-yellow mesentery pixels whose intensity spans a wide range in many levels (lit, smooth: not
+// one flat tan), and the abdominal backdrop around them (dark, not the flat clear colour, darker in the corners).
+TEST(IntestineView, OsMesaFrameShowsAShadedMesenteryAPinkTubeAndTheCavity) {
+  const Scene scene = shipped_intestine();
+  IntestineView view(scene, scene.hash());
+  auto renderer = make_renderer("osmesa", 320, 240);
+  if (!renderer->gpu_skinning()) view.set_skinning(intestine::TubeSkinning::kCpu);
+  const std::vector<double> x = rest_positions(scene);
+  ASSERT_TRUE(view.set_positions(x.data(), static_cast<int>(x.size() / 3)));
+  renderer->begin_frame(scene.visual.camera);
+  view.draw(*renderer);
+  renderer->end_frame();
+  EXPECT_EQ(renderer->counts().surfaces, 2u);
+  EXPECT_EQ(renderer->counts().rejected, 0u);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+  Image image;
+  ASSERT_TRUE(renderer->read_image(image));
+  int pink = 0, fat = 0, clear = 0, cavity = 0;
+  std::vector<int> levels(766, 0);
+  int lo = 765, hi = 0;
+  for (int y = 0; y < image.height; ++y) {
+    for (int px = 0; px < image.width; ++px) {
+      const std::uint8_t* p = image.at(px, y);
+      const int r = p[0], g = p[1], b = p[2];
+      if (r == kBackgroundRgb[0] && g == kBackgroundRgb[1] && b == kBackgroundRgb[2]) ++clear;
+      if (r + g + b < 120 && r > b + 3) ++cavity;
+      if (r > 80 && r > g + 50 && r > b + 50) ++pink;
+      if (r > 100 && g > r * 0.62 && g > b + 15) {  // the fat's hue: yellow-orange, not the tube's red
+        ++fat;
+        ++levels[static_cast<std::size_t>(r + g + b)];
+        lo = std::min(lo, r + g + b);
+        hi = std::max(hi, r + g + b);
+      }
+    }
+  }
+  const int n = image.width * image.height;
+  int distinct = 0;
+  for (const int c : levels) distinct += c > 0 ? 1 : 0;
+  std::printf("intestine frame: %d pink, %d mesentery pixels (grey %d..%d, %d levels), %d clear, %d cavity of %d\n", pink,
+              fat, lo, hi, distinct, clear, cavity, n);
+  EXPECT_GT(pink, n / 50) << "the tube";
+  EXPECT_GT(fat, n / 10) << "the mesentery";
+  EXPECT_GT(hi - lo, 150) << "the mesentery is lit, not one flat colour";
+  EXPECT_GT(distinct, 100) << "and smoothly shaded";
+  EXPECT_EQ(clear, 0) << "the backdrop covers what the organ leaves";
+  EXPECT_GT(cavity, n / 20) << "a dark red-brown cavity around the organ";
 }
 
 }  // namespace
