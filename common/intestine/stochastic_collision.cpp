@@ -17,6 +17,7 @@ namespace {
 
 constexpr double kTiny = 1e-12;
 constexpr double kContactEps = 1e-9;  // m: below this the closest points give no direction
+constexpr double kMarginEps = 1e-9;   // m: a margin left below this is spent (rounding of the distances)
 
 double clamp01(double v) { return v < 0 ? 0 : (v > 1 ? 1 : v); }
 
@@ -71,23 +72,24 @@ double segment_segment(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, con
   return ((p0 + s * d1) - (q0 + t * d2)).norm();
 }
 
-double segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& a,
-                        const Eigen::Vector3d& b, const Eigen::Vector3d& c, double& s, Eigen::Vector3d& bary,
-                        double bound) noexcept {
+namespace {
+
+// A lower bound of the distance from segment [p0, p1] to triangle (a, b, c) from the triangle's plane: the nearer
+// end's distance when both ends are on the same side, else 0.
+double plane_bound(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& a,
+                   const Eigen::Vector3d& b, const Eigen::Vector3d& c) noexcept {
+  const Eigen::Vector3d nrm = (b - a).cross(c - a);
+  const double nn = nrm.norm();
+  if (!(nn > kTiny)) return 0;
+  const double d0 = (p0 - a).dot(nrm) / nn, d1 = (p1 - a).dot(nrm) / nn;
+  return d0 * d1 > 0 ? std::min(std::abs(d0), std::abs(d1)) : 0.0;
+}
+
+// The exact segment-triangle distance (segment_triangle without the bound).
+double segment_triangle_exact(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& a,
+                              const Eigen::Vector3d& b, const Eigen::Vector3d& c, double& s,
+                              Eigen::Vector3d& bary) noexcept {
   const Eigen::Vector3d e1 = b - a, e2 = c - a, d = p1 - p0;
-  if (bound < std::numeric_limits<double>::infinity()) {
-    // Bounding spheres: segment about its middle, triangle about its centroid.
-    const Eigen::Vector3d m = 0.5 * (p0 + p1), g = (a + b + c) / 3.0;
-    const double rt = std::sqrt(std::max({(a - g).squaredNorm(), (b - g).squaredNorm(), (c - g).squaredNorm()}));
-    if ((m - g).norm() - 0.5 * d.norm() - rt >= bound) return std::numeric_limits<double>::infinity();
-    // The triangle's plane, when both ends are on the same side.
-    const Eigen::Vector3d nrm = e1.cross(e2);
-    const double nn = nrm.norm();
-    if (nn > kTiny) {
-      const double d0 = (p0 - a).dot(nrm) / nn, d1 = (p1 - a).dot(nrm) / nn;
-      if (d0 * d1 > 0 && std::min(std::abs(d0), std::abs(d1)) >= bound) return std::numeric_limits<double>::infinity();
-    }
-  }
   // The segment crossing the triangle (Moller-Trumbore restricted to [p0, p1]).
   const Eigen::Vector3d h = d.cross(e2);
   const double det = e1.dot(h);
@@ -135,6 +137,22 @@ double segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, co
     }
   }
   return best;
+}
+
+}  // namespace
+
+double segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& a,
+                        const Eigen::Vector3d& b, const Eigen::Vector3d& c, double& s, Eigen::Vector3d& bary,
+                        double bound) noexcept {
+  if (bound < std::numeric_limits<double>::infinity()) {
+    // Bounding spheres: segment about its middle, triangle about its centroid.
+    const Eigen::Vector3d m = 0.5 * (p0 + p1), g = (a + b + c) / 3.0;
+    const double rt = std::sqrt(std::max({(a - g).squaredNorm(), (b - g).squaredNorm(), (c - g).squaredNorm()}));
+    if ((m - g).norm() - 0.5 * (p1 - p0).norm() - rt >= bound) return std::numeric_limits<double>::infinity();
+    // The triangle's plane, when both ends are on the same side.
+    if (plane_bound(p0, p1, a, b, c) >= bound) return std::numeric_limits<double>::infinity();
+  }
+  return segment_triangle_exact(p0, p1, a, b, c, s, bary);
 }
 
 void CollisionTopology::triangle(int t, int out[3]) const {
@@ -190,6 +208,45 @@ StochasticDetector::StochasticDetector(CollisionTopology topology, const Stochas
   cell_owner_.assign(static_cast<std::size_t>(topo_.segments()) * static_cast<std::size_t>(topo_.cells()), 0);
   seg_reported_.assign(seg_owner_.size(), 0);
   cell_reported_.assign(cell_owner_.size(), 0);
+  seg_clear_.assign(seg_owner_.size(), 0);
+  cell_clear_.assign(cell_owner_.size(), 0);
+  seg_memo_stamp_.assign(seg_owner_.size(), 0);
+  cell_memo_stamp_.assign(cell_owner_.size(), 0);
+  seg_memo_index_.assign(seg_owner_.size(), 0);
+  cell_memo_index_.assign(cell_owner_.size(), 0);
+  memo_pool_.resize(8192);
+  // Element tables.
+  nseg_ = topo_.segments();
+  ncell_ = topo_.cells();
+  nodes_ = *std::max_element(topo_.grid.begin(), topo_.grid.end()) + 1;
+  if (*std::min_element(topo_.grid.begin(), topo_.grid.end()) < 0) throw_error("stochastic collision: negative node");
+  seg_node_.resize(2 * static_cast<std::size_t>(nseg_));
+  for (int a = 0; a < nseg_; ++a) {
+    seg_node_[2 * static_cast<std::size_t>(a)] = topo_.node(0, a);
+    seg_node_[2 * static_cast<std::size_t>(a) + 1] = topo_.node(0, a + 1);
+  }
+  tri_node_.resize(6 * static_cast<std::size_t>(ncell_));
+  for (int t = 0; t < 2 * ncell_; ++t) topo_.triangle(t, &tri_node_[3 * static_cast<std::size_t>(t)]);
+  cell_ok_.resize(static_cast<std::size_t>(nseg_) * static_cast<std::size_t>(ncell_));
+  for (int a = 0; a < nseg_; ++a) {
+    for (int c = 0; c < ncell_; ++c) {
+      cell_ok_[static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_) + static_cast<std::size_t>(c)] =
+          topo_.cell_tested(a, c);
+    }
+  }
+  seg_sphere_.resize(static_cast<std::size_t>(nseg_));
+  tri_sphere_.resize(2 * static_cast<std::size_t>(ncell_));
+  cell_sphere_.resize(static_cast<std::size_t>(ncell_));
+  x_prev_.resize(3, nodes_);
+  node_move_.resize(static_cast<std::size_t>(nodes_));
+  seg_move_.resize(static_cast<std::size_t>(nseg_));
+  seg_near_move_.resize(static_cast<std::size_t>(nseg_));
+  cell_move_.resize(static_cast<std::size_t>(ncell_));
+  cell_near_move_.resize(static_cast<std::size_t>(ncell_));
+  seg_margin_.resize(static_cast<std::size_t>(params_.capacity));
+  cell_margin_.resize(static_cast<std::size_t>(params_.capacity));
+  seg_gap_.resize(static_cast<std::size_t>(params_.capacity));
+  cell_gap_.resize(static_cast<std::size_t>(params_.capacity));
   reset(params_.seed);
 }
 
@@ -201,8 +258,74 @@ void StochasticDetector::set_random_pairs(int segment_pairs, int mesentery_pairs
 void StochasticDetector::reset(std::uint64_t seed) noexcept {
   rng_ = seed;
   seg_count_ = cell_count_ = 0;
-  for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_}) std::fill(t->begin(), t->end(), 0u);
+  for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_, &seg_clear_, &cell_clear_, &seg_memo_stamp_,
+                  &cell_memo_stamp_}) std::fill(t->begin(), t->end(), 0u);
   stamp_ = 0;
+  have_prev_ = false;
+}
+
+void StochasticDetector::cache_step(const Eigen::Matrix3Xd& x) noexcept {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < nseg_; ++a) {
+    const auto p0 = x.col(seg_node_[2 * static_cast<std::size_t>(a)]);
+    const auto p1 = x.col(seg_node_[2 * static_cast<std::size_t>(a) + 1]);
+    auto& sp = seg_sphere_[static_cast<std::size_t>(a)];
+    sp.head<3>() = 0.5 * (p0 + p1);
+    sp[3] = 0.5 * (p1 - p0).norm();
+  }
+  for (int t = 0; t < 2 * ncell_; ++t) {
+    const int* n = &tri_node_[3 * static_cast<std::size_t>(t)];
+    const auto a = x.col(n[0]), b = x.col(n[1]), c = x.col(n[2]);
+    // As segment_triangle's bound: the centroid and the farthest corner.
+    const Eigen::Vector3d g = (a + b + c) / 3.0;
+    auto& sp = tri_sphere_[static_cast<std::size_t>(t)];
+    sp.head<3>() = g;
+    sp[3] = std::sqrt(std::max({(a - g).squaredNorm(), (b - g).squaredNorm(), (c - g).squaredNorm()}));
+  }
+  for (int c = 0; c < ncell_; ++c) {
+    const int* n = &tri_node_[6 * static_cast<std::size_t>(c)];  // triangle 2c: (r,c) (r,c+1) (r+1,c+1)
+    const int n3 = tri_node_[6 * static_cast<std::size_t>(c) + 5];  // triangle 2c+1: ..., (r+1,c)
+    const Eigen::Vector3d g = 0.25 * (x.col(n[0]) + x.col(n[1]) + x.col(n[2]) + x.col(n3));
+    auto& sp = cell_sphere_[static_cast<std::size_t>(c)];
+    sp.head<3>() = g;
+    sp[3] = std::sqrt(std::max({(x.col(n[0]) - g).squaredNorm(), (x.col(n[1]) - g).squaredNorm(),
+                                (x.col(n[2]) - g).squaredNorm(), (x.col(n3) - g).squaredNorm()}));
+  }
+  // Displacements since the last step (infinite on the first): bound how much any element distance has changed.
+  for (int n = 0; n < nodes_; ++n) {
+    node_move_[static_cast<std::size_t>(n)] = have_prev_ ? (x.col(n) - x_prev_.col(n)).norm() : kInf;
+  }
+  x_prev_ = x.leftCols(nodes_);
+  have_prev_ = true;
+  for (int a = 0; a < nseg_; ++a) {
+    seg_move_[static_cast<std::size_t>(a)] = std::max(node_move_[static_cast<std::size_t>(seg_node_[2 * a])],
+                                                      node_move_[static_cast<std::size_t>(seg_node_[2 * a + 1])]);
+  }
+  for (int a = 0; a < nseg_; ++a) {
+    double m = seg_move_[static_cast<std::size_t>(a)];
+    if (a > 0) m = std::max(m, seg_move_[static_cast<std::size_t>(a - 1)]);
+    if (a + 1 < nseg_) m = std::max(m, seg_move_[static_cast<std::size_t>(a + 1)]);
+    seg_near_move_[static_cast<std::size_t>(a)] = m;
+  }
+  for (int c = 0; c < ncell_; ++c) {
+    const int* n = &tri_node_[6 * static_cast<std::size_t>(c)];
+    const int n3 = tri_node_[6 * static_cast<std::size_t>(c) + 5];
+    cell_move_[static_cast<std::size_t>(c)] =
+        std::max({node_move_[static_cast<std::size_t>(n[0])], node_move_[static_cast<std::size_t>(n[1])],
+                  node_move_[static_cast<std::size_t>(n[2])], node_move_[static_cast<std::size_t>(n3)]});
+  }
+  const int cw = topo_.cols - 1, cr = topo_.rows - 1;
+  for (int r = 0; r < cr; ++r) {
+    for (int c = 0; c < cw; ++c) {
+      double m = 0;
+      for (int rr = std::max(0, r - 1); rr <= std::min(cr - 1, r + 1); ++rr) {
+        for (int cc = std::max(0, c - 1); cc <= std::min(cw - 1, c + 1); ++cc) {
+          m = std::max(m, cell_move_[static_cast<std::size_t>(rr * cw + cc)]);
+        }
+      }
+      cell_near_move_[static_cast<std::size_t>(r * cw + c)] = m;
+    }
+  }
 }
 
 // splitmix64: small state, fast, and identical on every platform (std distributions are not).
@@ -217,10 +340,20 @@ int StochasticDetector::uniform(int n) noexcept {
   return static_cast<int>((next_random() >> 11) * (1.0 / 9007199254740992.0) * n);
 }
 
-double StochasticDetector::eval_segments(const Eigen::Matrix3Xd& x, int a, int b, ActivePair& out) noexcept {
+double StochasticDetector::compute_segments(const Eigen::Matrix3Xd& x, int a, int b, double bound,
+                                            ActivePair& out) noexcept {
   ++tests_;
-  const auto p0 = x.col(topo_.node(0, a)), p1 = x.col(topo_.node(0, a + 1));
-  const auto q0 = x.col(topo_.node(0, b)), q1 = x.col(topo_.node(0, b + 1));
+  if (bound < std::numeric_limits<double>::infinity()) {
+    // Bounding spheres: not closer than the bound, out unchanged; returns the lower bound.
+    const auto& sa = seg_sphere_[static_cast<std::size_t>(a)];
+    const auto& sb = seg_sphere_[static_cast<std::size_t>(b)];
+    const double lb = (sa.head<3>() - sb.head<3>()).norm() - sa[3] - sb[3];
+    if (lb >= bound) return lb;
+  }
+  const auto p0 = x.col(seg_node_[2 * static_cast<std::size_t>(a)]);
+  const auto p1 = x.col(seg_node_[2 * static_cast<std::size_t>(a) + 1]);
+  const auto q0 = x.col(seg_node_[2 * static_cast<std::size_t>(b)]);
+  const auto q1 = x.col(seg_node_[2 * static_cast<std::size_t>(b) + 1]);
   double s = 0, t = 0;
   const double d = segment_segment(p0, p1, q0, q1, s, t);
   out.a = a;
@@ -237,17 +370,83 @@ double StochasticDetector::eval_segments(const Eigen::Matrix3Xd& x, int a, int b
   return d;
 }
 
+double StochasticDetector::eval_segments(const Eigen::Matrix3Xd& x, int a, int b, double bound,
+                                         ActivePair& out) noexcept {
+  return eval(x, false, a, b, bound, out);
+}
+
 double StochasticDetector::eval_cell(const Eigen::Matrix3Xd& x, int seg, int cell, double bound,
                                      ActivePair& out) noexcept {
-  const auto p0 = x.col(topo_.node(0, seg)), p1 = x.col(topo_.node(0, seg + 1));
-  double best = std::numeric_limits<double>::infinity();
+  return eval(x, true, seg, cell, bound, out);
+}
+
+double StochasticDetector::eval(const Eigen::Matrix3Xd& x, bool mes, int a, int b, double bound,
+                                ActivePair& out) noexcept {
+  const std::size_t key = mes ? static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_) + static_cast<std::size_t>(b)
+                              : static_cast<std::size_t>(a) * static_cast<std::size_t>(nseg_) + static_cast<std::size_t>(b);
+  auto& stamp = (mes ? cell_memo_stamp_ : seg_memo_stamp_)[key];
+  auto& index = (mes ? cell_memo_index_ : seg_memo_index_)[key];
+  Memo* m = nullptr;
+  if (stamp == stamp_) {
+    m = &memo_pool_[index];
+    if (m->exact) {
+      if (m->value < bound) {
+        const Eigen::Vector3d side = out.normal;
+        out = m->pair;
+        // A membrane crossed (no direction from the closest points): on the caller's side, as computing it would.
+        if (mes && m->value <= kContactEps && side.dot(out.normal) < 0) out.normal = -out.normal;
+      }
+      return m->value;
+    }
+    if (m->value >= bound) return m->value;
+  } else if (memo_used_ < static_cast<int>(memo_pool_.size())) {
+    stamp = stamp_;
+    index = static_cast<std::uint32_t>(memo_used_++);
+    m = &memo_pool_[index];
+  }
+  const double d = mes ? compute_cell(x, a, b, bound, out) : compute_segments(x, a, b, bound, out);
+  if (m != nullptr) {
+    m->value = d;
+    m->exact = d < bound;
+    if (m->exact) m->pair = out;
+  }
+  return d;
+}
+
+double StochasticDetector::compute_cell(const Eigen::Matrix3Xd& x, int seg, int cell, double bound,
+                                        ActivePair& out) noexcept {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  const auto p0 = x.col(seg_node_[2 * static_cast<std::size_t>(seg)]);
+  const auto p1 = x.col(seg_node_[2 * static_cast<std::size_t>(seg) + 1]);
+  const auto& ss = seg_sphere_[static_cast<std::size_t>(seg)];
+  if (bound < kInf) {
+    // Both triangles at once: the cell's bounding sphere.
+    const auto& cs = cell_sphere_[static_cast<std::size_t>(cell)];
+    const double lb = (ss.head<3>() - cs.head<3>()).norm() - ss[3] - cs[3];
+    if (lb >= bound) {
+      ++tests_;
+      return lb;
+    }
+  }
+  double best = kInf, lower = kInf;  // exact distance of the closer triangle; lower bound over both
   for (int t = 0; t < 2; ++t) {
     ++tests_;
-    int n[3];
-    topo_.triangle(2 * cell + t, n);
+    const int tri = 2 * cell + t;
+    const int* n = &tri_node_[3 * static_cast<std::size_t>(tri)];
+    const double bt = std::min(bound, best);
+    if (bt < kInf) {
+      const auto& ts = tri_sphere_[static_cast<std::size_t>(tri)];
+      double lb = (ss.head<3>() - ts.head<3>()).norm() - ss[3] - ts[3];
+      if (lb < bt) lb = std::max(lb, plane_bound(p0, p1, x.col(n[0]), x.col(n[1]), x.col(n[2])));
+      if (lb >= bt) {
+        lower = std::min(lower, lb);
+        continue;
+      }
+    }
     double s = 0;
     Eigen::Vector3d bary;
-    const double d = segment_triangle(p0, p1, x.col(n[0]), x.col(n[1]), x.col(n[2]), s, bary, std::min(bound, best));
+    const double d = segment_triangle_exact(p0, p1, x.col(n[0]), x.col(n[1]), x.col(n[2]), s, bary);
+    lower = std::min(lower, d);
     if (d < best) {
       best = d;
       out.tri = t;
@@ -255,12 +454,11 @@ double StochasticDetector::eval_cell(const Eigen::Matrix3Xd& x, int seg, int cel
       out.wb = bary;
     }
   }
-  if (!(best < bound)) return std::numeric_limits<double>::infinity();  // not closer than the bound: out unchanged
+  if (!(best < bound)) return lower;  // not closer than the bound: the lower bound (>= bound), out unused
   out.a = seg;
   out.b = cell;
   out.distance = best;
-  int n[3];
-  topo_.triangle(2 * cell + out.tri, n);
+  const int* n = &tri_node_[3 * static_cast<std::size_t>(2 * cell + out.tri)];
   const Eigen::Vector3d pa = p0 + out.s * (p1 - p0);
   const Eigen::Vector3d pb = out.wb[0] * x.col(n[0]) + out.wb[1] * x.col(n[1]) + out.wb[2] * x.col(n[2]);
   if (best > kContactEps) {
@@ -274,37 +472,44 @@ double StochasticDetector::eval_cell(const Eigen::Matrix3Xd& x, int seg, int cel
   return best;
 }
 
-void StochasticDetector::converge_segments(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept {
-  eval_segments(x, p.a, p.b, p);
+double StochasticDetector::converge_segments(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept {
+  eval_segments(x, p.a, p.b, std::numeric_limits<double>::infinity(), p);
   for (int move = 0; move < moves; ++move) {
     // The 9-neighbour update: the closest of (a + {-1,0,1}, b + {-1,0,1}).
     ActivePair best = p, cand = p;
+    double nearest = std::numeric_limits<double>::infinity();
     for (int da = -1; da <= 1; ++da) {
       for (int db = -1; db <= 1; ++db) {
         if (da == 0 && db == 0) continue;
         const int a = p.a + da, b = p.b + db;
         if (!topo_.segments_tested(a, b)) continue;
         cand.normal = p.normal;
-        if (eval_segments(x, a, b, cand) < best.distance) best = cand;
+        const double d = eval_segments(x, a, b, best.distance, cand);
+        if (d < best.distance) best = cand;
+        nearest = std::min(nearest, d);
       }
     }
-    if (best.a == p.a && best.b == p.b) return;  // a local minimum
+    if (best.a == p.a && best.b == p.b) return nearest - p.distance;  // a local minimum, by this margin
     p = best;
   }
+  return -std::numeric_limits<double>::infinity();
 }
 
-void StochasticDetector::converge_cell(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept {
+double StochasticDetector::converge_cell(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept {
   const int cw = topo_.cols - 1;
   eval_cell(x, p.a, p.b, std::numeric_limits<double>::infinity(), p);
   int done = 0;
   while (done < moves) {
     bool moved = false;
+    double nearest = std::numeric_limits<double>::infinity();
     // Step 1: along the intestine, the cell fixed.
     ActivePair best = p, cand = p;
     for (int ds = -1; ds <= 1; ds += 2) {
-      if (!topo_.cell_tested(p.a + ds, p.b)) continue;
+      if (!cell_ok(p.a + ds, p.b)) continue;
       cand.normal = p.normal;
-      if (eval_cell(x, p.a + ds, p.b, best.distance, cand) < best.distance) best = cand;
+      const double d = eval_cell(x, p.a + ds, p.b, best.distance, cand);
+      if (d < best.distance) best = cand;
+      nearest = std::min(nearest, d);
     }
     if (best.a != p.a) {
       p = best;
@@ -320,9 +525,11 @@ void StochasticDetector::converge_cell(const Eigen::Matrix3Xd& x, ActivePair& p,
         const int rr = r + dr, cc = c + dc;
         if (rr < 0 || cc < 0 || rr >= topo_.rows - 1 || cc >= cw) continue;
         const int cell = rr * cw + cc;
-        if (!topo_.cell_tested(p.a, cell)) continue;
+        if (!cell_ok(p.a, cell)) continue;
         cand.normal = p.normal;
-        if (eval_cell(x, p.a, cell, best.distance, cand) < best.distance) best = cand;
+        const double d = eval_cell(x, p.a, cell, best.distance, cand);
+        if (d < best.distance) best = cand;
+        nearest = std::min(nearest, d);
       }
     }
     if (best.b != p.b && done < moves) {
@@ -330,8 +537,35 @@ void StochasticDetector::converge_cell(const Eigen::Matrix3Xd& x, ActivePair& p,
       moved = true;
       ++done;
     }
-    if (!moved) return;  // a local minimum of both steps
+    if (!moved) return nearest - p.distance;  // a local minimum of both steps, by this margin
   }
+  return -std::numeric_limits<double>::infinity();
+}
+
+double StochasticDetector::reach_bound(bool mes, int a, int b, int moves) const noexcept {
+  // Each move changes the segment by at most one and the other element by at most one (segment, or cell row and
+  // column), so the pairs reached lie in these index ranges.
+  double lb = std::numeric_limits<double>::infinity();
+  const int a0 = std::max(0, a - moves), a1 = std::min(nseg_ - 1, a + moves);
+  auto gap = [](const Eigen::Vector4d& u, const Eigen::Vector4d& v) {
+    return (u.head<3>() - v.head<3>()).norm() - u[3] - v[3];
+  };
+  if (!mes) {
+    const int b0 = std::max(0, b - moves), b1 = std::min(nseg_ - 1, b + moves);
+    for (int i = a0; i <= a1; ++i) {
+      for (int j = b0; j <= b1; ++j) lb = std::min(lb, gap(seg_sphere_[i], seg_sphere_[j]));
+    }
+    return lb;
+  }
+  const int cw = topo_.cols - 1, r = b / cw, c = b % cw;
+  const int r0 = std::max(0, r - moves), r1 = std::min(topo_.rows - 2, r + moves);
+  const int c0 = std::max(0, c - moves), c1 = std::min(cw - 1, c + moves);
+  for (int i = a0; i <= a1; ++i) {
+    for (int rr = r0; rr <= r1; ++rr) {
+      for (int cc = c0; cc <= c1; ++cc) lb = std::min(lb, gap(seg_sphere_[i], cell_sphere_[rr * cw + cc]));
+    }
+  }
+  return lb;
 }
 
 bool StochasticDetector::claim(std::vector<std::uint32_t>& owner, int key) noexcept {
@@ -343,7 +577,9 @@ bool StochasticDetector::claim(std::vector<std::uint32_t>& owner, int key) noexc
 
 bool StochasticDetector::add_pair(int a, int b, bool mesentery) noexcept {
   if (mesentery) {
-    if (!topo_.cell_tested(a, b) || cell_count_ >= params_.capacity) return false;
+    if (!cell_ok(a, b) || cell_count_ >= params_.capacity) return false;
+    cell_margin_[static_cast<std::size_t>(cell_count_)] = -std::numeric_limits<double>::infinity();
+    cell_gap_[static_cast<std::size_t>(cell_count_)] = -std::numeric_limits<double>::infinity();
     ActivePair& p = cell_pairs_[static_cast<std::size_t>(cell_count_++)];
     p = ActivePair{};
     p.a = a;
@@ -352,6 +588,8 @@ bool StochasticDetector::add_pair(int a, int b, bool mesentery) noexcept {
   }
   if (a > b) std::swap(a, b);
   if (!topo_.segments_tested(a, b) || seg_count_ >= params_.capacity) return false;
+  seg_margin_[static_cast<std::size_t>(seg_count_)] = -std::numeric_limits<double>::infinity();
+  seg_gap_[static_cast<std::size_t>(seg_count_)] = -std::numeric_limits<double>::infinity();
   ActivePair& p = seg_pairs_[static_cast<std::size_t>(seg_count_++)];
   p = ActivePair{};
   p.a = a;
@@ -369,8 +607,7 @@ bool StochasticDetector::emit(const ActivePair& p, bool mesentery, ContactList& 
   reported = stamp_;
   CollisionContact c;
   if (mesentery) {
-    int n[3];
-    topo_.triangle(2 * p.b + p.tri, n);
+    const int* n = &tri_node_[3 * static_cast<std::size_t>(2 * p.b + p.tri)];
     c.kind = ContactKind::kSegmentTriangle;
     c.count_b = 3;
     c.nodes = {topo_.node(0, p.a), topo_.node(0, p.a + 1), n[0], n[1], n[2]};
@@ -401,9 +638,14 @@ void StochasticDetector::expand(const Eigen::Matrix3Xd& x, const ActivePair& sta
   const double contact = mes ? topo_.intestine_radius + topo_.mesentery_half_thickness : 2 * topo_.intestine_radius;
   const int cw = topo_.cols - 1;
   const auto& reported = mes ? cell_reported_ : seg_reported_;
+  auto& clear = mes ? cell_clear_ : seg_clear_;
+  auto key_of = [&](int a, int b) {
+    return static_cast<std::size_t>(mes ? a * topo_.cells() + b : a * topo_.segments() + b);
+  };
+  // Reported already, or evaluated by another zone's fill this step and out of contact.
   auto seen = [&](int a, int b) {
-    const int key = mes ? a * topo_.cells() + b : a * topo_.segments() + b;
-    return reported[static_cast<std::size_t>(key)] == stamp_;
+    const std::size_t key = key_of(a, b);
+    return reported[key] == stamp_ || clear[key] == stamp_;
   };
   // Flood fill from the minimum over colliding neighbouring pairs.
   int head = 0, tail = 0, added = 0;
@@ -414,21 +656,25 @@ void StochasticDetector::expand(const Eigen::Matrix3Xd& x, const ActivePair& sta
     auto visit = [&](int a, int b) {
       if (added >= params_.zone_budget || seen(a, b)) return;
       cand.normal = q.normal;
-      const double d = mes ? eval_cell(x, a, b, contact, cand) : eval_segments(x, a, b, cand);
-      if (!(d < contact) || !emit(cand, mes, out, st)) return;
+      const double d = mes ? eval_cell(x, a, b, contact, cand) : eval_segments(x, a, b, contact, cand);
+      if (!(d < contact)) {
+        clear[key_of(a, b)] = stamp_;
+        return;
+      }
+      if (!emit(cand, mes, out, st)) return;
       ++added;
       if (tail < static_cast<int>(zone_.size())) zone_[static_cast<std::size_t>(tail++)] = cand;
     };
     if (mes) {
       for (int ds = -1; ds <= 1; ds += 2) {
-        if (topo_.cell_tested(q.a + ds, q.b)) visit(q.a + ds, q.b);
+        if (cell_ok(q.a + ds, q.b)) visit(q.a + ds, q.b);
       }
       const int r = q.b / cw, c = q.b % cw;
       for (int dr = -1; dr <= 1; ++dr) {
         for (int dc = -1; dc <= 1; ++dc) {
           const int rr = r + dr, cc = c + dc;
           if ((dr == 0 && dc == 0) || rr < 0 || cc < 0 || rr >= topo_.rows - 1 || cc >= cw) continue;
-          if (topo_.cell_tested(q.a, rr * cw + cc)) visit(q.a, rr * cw + cc);
+          if (cell_ok(q.a, rr * cw + cc)) visit(q.a, rr * cw + cc);
         }
       }
     } else {
@@ -446,10 +692,13 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
   DetectStats st;
   tests_ = 0;
   if (++stamp_ == 0) {  // wrapped: clear the tables so that no stale stamp matches
-    for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_}) std::fill(t->begin(), t->end(), 0u);
+    for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_, &seg_clear_, &cell_clear_, &seg_memo_stamp_,
+                  &cell_memo_stamp_}) std::fill(t->begin(), t->end(), 0u);
     stamp_ = 1;
   }
   const int nseg = topo_.segments(), ncell = topo_.cells();
+  cache_step(x);
+  memo_used_ = 0;
   const double drop_seg = params_.drop_factor * 2 * topo_.intestine_radius;
   const double drop_cell = params_.drop_factor * (topo_.intestine_radius + topo_.mesentery_half_thickness);
 
@@ -460,14 +709,19 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
     std::vector<ActivePair>& pairs = mes ? cell_pairs_ : seg_pairs_;
     std::vector<std::uint32_t>& owner = mes ? cell_owner_ : seg_owner_;
     int& count = mes ? cell_count_ : seg_count_;
+    std::vector<double>& margin = mes ? cell_margin_ : seg_margin_;
+    std::vector<double>& gap = mes ? cell_gap_ : seg_gap_;
+    const double contact = mes ? topo_.intestine_radius + topo_.mesentery_half_thickness : 2 * topo_.intestine_radius;
+    // After a convergence that reached a minimum (margin >= 0) every neighbour is at least as far as the pair: the
+    // neighbourhood is this far from contact.
+    auto gap_of = [&](const ActivePair& p, double m) {
+      return m >= 0 ? p.distance - contact : -std::numeric_limits<double>::infinity();
+    };
+    const std::vector<double>& near_b = mes ? cell_near_move_ : seg_near_move_;
     const int width = mes ? ncell : nseg;
     const double drop = mes ? drop_cell : drop_seg;
     auto settle = [&](ActivePair& p, int moves) {
-      if (mes) {
-        converge_cell(x, p, moves);
-      } else {
-        converge_segments(x, p, moves);
-      }
+      return mes ? converge_cell(x, p, moves) : converge_segments(x, p, moves);
     };
     auto report = [&](const ActivePair& p) {
       if (emit(p, mes, out, st) && params_.zone_budget > 0) expand(x, p, mes, out, st);
@@ -475,12 +729,34 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
     int keep = 0;
     for (int i = 0; i < count; ++i) {
       ActivePair p = pairs[static_cast<std::size_t>(i)];
-      settle(p, params_.max_moves);
+      // What is left of the margin of its last convergence once every distance near the pair may have changed by
+      // the displacement of the nodes around it (own distance up, a neighbour's down): while positive, the pair is
+      // still a local minimum and converging would only evaluate its neighbours to stay put.
+      const double shrink =
+          2 * (seg_near_move_[static_cast<std::size_t>(p.a)] + near_b[static_cast<std::size_t>(p.b)]);
+      double left = margin[static_cast<std::size_t>(i)] - shrink;
+      double far = gap[static_cast<std::size_t>(i)] - shrink;
+      if (far > kMarginEps) {
+        // Its whole neighbourhood is still out of contact: the pair waits where it is (not evaluated, not reported).
+        ++st.settled;
+      } else if (left > kMarginEps && params_.max_moves > 0) {
+        if (mes) {
+          eval_cell(x, p.a, p.b, std::numeric_limits<double>::infinity(), p);
+        } else {
+          eval_segments(x, p.a, p.b, std::numeric_limits<double>::infinity(), p);
+        }
+        ++st.settled;
+      } else {
+        left = settle(p, params_.max_moves);
+        far = gap_of(p, left);
+      }
       if (p.distance > drop) {
         ++st.dropped;
       } else if (!claim(owner, p.a * width + p.b)) {
         ++st.merged;
       } else {
+        margin[static_cast<std::size_t>(keep)] = left;
+        gap[static_cast<std::size_t>(keep)] = far;
         pairs[static_cast<std::size_t>(keep++)] = p;
         report(p);
       }
@@ -494,18 +770,22 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
         a = uniform(nseg);
         b = uniform(mes ? ncell : nseg);
         if (!mes && a > b) std::swap(a, b);
-        ok = mes ? topo_.cell_tested(a, b) : topo_.segments_tested(a, b);
+        ok = mes ? cell_ok(a, b) : topo_.segments_tested(a, b);
       }
       if (!ok || owner[static_cast<std::size_t>(a * width + b)] == stamp_) continue;  // tracked already
+      // Every pair its convergence could reach is farther than the drop distance: it would be dropped.
+      if (reach_bound(mes, a, b, params_.new_pair_moves) > drop) continue;
       ActivePair p;
       p.a = a;
       p.b = b;
-      settle(p, params_.new_pair_moves);
+      const double left = settle(p, params_.new_pair_moves);
       if (p.distance > drop || !claim(owner, p.a * width + p.b)) continue;
       if (count >= params_.capacity) {
         ++st.overflow;
         continue;
       }
+      margin[static_cast<std::size_t>(count)] = left;
+      gap[static_cast<std::size_t>(count)] = gap_of(p, left);
       pairs[static_cast<std::size_t>(count++)] = p;
       ++st.new_pairs;
       report(p);
@@ -517,6 +797,58 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
   return st;
 }
 
+bool segment_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, int a, int b, double margin,
+                     CollisionContact& c) noexcept {
+  const double rr = 2 * topo.intestine_radius;
+  const Eigen::Vector3d p0 = x.col(topo.node(0, a)), p1 = x.col(topo.node(0, a + 1));
+  const Eigen::Vector3d q0 = x.col(topo.node(0, b)), q1 = x.col(topo.node(0, b + 1));
+  double s = 0, t = 0;
+  const double d = segment_segment(p0, p1, q0, q1, s, t);
+  if (d >= rr + margin) return false;
+  c = CollisionContact{};
+  c.kind = ContactKind::kSegmentSegment;
+  c.nodes = {topo.node(0, a), topo.node(0, a + 1), topo.node(0, b), topo.node(0, b + 1), -1};
+  c.weights = {1 - s, s, 1 - t, t, 0};
+  const Eigen::Vector3d diff = (p0 + s * (p1 - p0)) - (q0 + t * (q1 - q0));
+  c.normal = d > kContactEps ? Eigen::Vector3d(diff / d) : orthogonal(p1 - p0);
+  c.radius_sum = rr;
+  c.distance = d;
+  c.element_a = a;
+  c.element_b = b;
+  return true;
+}
+
+bool triangle_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, int a, int tri, double margin,
+                      CollisionContact& c) noexcept {
+  const double rm = topo.intestine_radius + topo.mesentery_half_thickness;
+  const Eigen::Vector3d p0 = x.col(topo.node(0, a)), p1 = x.col(topo.node(0, a + 1));
+  int n[3];
+  topo.triangle(tri, n);
+  const Eigen::Vector3d A = x.col(n[0]), B = x.col(n[1]), C = x.col(n[2]);
+  double s = 0;
+  Eigen::Vector3d bary;
+  // The bounded test: bounding spheres and the triangle's plane reject most pairs before the exact distance.
+  const double d = segment_triangle(p0, p1, A, B, C, s, bary, rm + margin);
+  if (!(d < rm + margin)) return false;
+  c = CollisionContact{};
+  c.kind = ContactKind::kSegmentTriangle;
+  c.count_b = 3;
+  c.nodes = {topo.node(0, a), topo.node(0, a + 1), n[0], n[1], n[2]};
+  c.weights = {1 - s, s, bary[0], bary[1], bary[2]};
+  const Eigen::Vector3d diff = (p0 + s * (p1 - p0)) - (bary[0] * A + bary[1] * B + bary[2] * C);
+  if (d > kContactEps) {
+    c.normal = diff / d;
+  } else {
+    const Eigen::Vector3d nt = (B - A).cross(C - A);
+    c.normal = nt.norm() > kTiny ? Eigen::Vector3d(nt.normalized()) : orthogonal(p1 - p0);
+  }
+  c.radius_sum = rm;
+  c.distance = d;
+  c.element_a = a;
+  c.element_b = tri;
+  return true;
+}
+
 void detect_brute_force(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, ContactList& out,
                         double margin) noexcept {
   const int nseg = topo.segments();
@@ -525,6 +857,7 @@ void detect_brute_force(const CollisionTopology& topo, const Eigen::Matrix3Xd& x
                     const Eigen::Vector3d& hi2, double r) {
     return (lo1.array() > hi2.array() + r).any() || (lo2.array() > hi1.array() + r).any();
   };
+  CollisionContact c;
   for (int a = 0; a < nseg; ++a) {
     const Eigen::Vector3d p0 = x.col(topo.node(0, a)), p1 = x.col(topo.node(0, a + 1));
     const Eigen::Vector3d plo = p0.cwiseMin(p1), phi = p0.cwiseMax(p1);
@@ -533,49 +866,17 @@ void detect_brute_force(const CollisionTopology& topo, const Eigen::Matrix3Xd& x
       if (!topo.segments_tested(a, b)) continue;
       const Eigen::Vector3d q0 = x.col(topo.node(0, b)), q1 = x.col(topo.node(0, b + 1));
       if (box_gap(plo, phi, q0.cwiseMin(q1), q0.cwiseMax(q1), rr + margin)) continue;
-      double s = 0, t = 0;
-      const double d = segment_segment(p0, p1, q0, q1, s, t);
-      if (d >= rr + margin) continue;
-      CollisionContact c;
-      c.kind = ContactKind::kSegmentSegment;
-      c.nodes = {topo.node(0, a), topo.node(0, a + 1), topo.node(0, b), topo.node(0, b + 1), -1};
-      c.weights = {1 - s, s, 1 - t, t, 0};
-      const Eigen::Vector3d diff = (p0 + s * (p1 - p0)) - (q0 + t * (q1 - q0));
-      c.normal = d > kContactEps ? Eigen::Vector3d(diff / d) : orthogonal(p1 - p0);
-      c.radius_sum = rr;
-      c.distance = d;
-      c.element_a = a;
-      c.element_b = b;
-      out.push(c);
+      if (segment_contact(topo, x, a, b, margin, c)) out.push(c);
     }
-    // Intestine-mesentery.
+    // Intestine-mesentery: the segment's ends against the triangle (point-triangle), the segment against its edges
+    // (edge-triangle) and the segment crossing it.
     for (int tri = 0; tri < 2 * topo.cells(); ++tri) {
       if (!topo.cell_tested(a, tri / 2)) continue;
       int n[3];
       topo.triangle(tri, n);
       const Eigen::Vector3d A = x.col(n[0]), B = x.col(n[1]), C = x.col(n[2]);
       if (box_gap(plo, phi, A.cwiseMin(B).cwiseMin(C), A.cwiseMax(B).cwiseMax(C), rm + margin)) continue;
-      double s = 0;
-      Eigen::Vector3d bary;
-      const double d = segment_triangle(p0, p1, A, B, C, s, bary);
-      if (d >= rm + margin) continue;
-      CollisionContact c;
-      c.kind = ContactKind::kSegmentTriangle;
-      c.count_b = 3;
-      c.nodes = {topo.node(0, a), topo.node(0, a + 1), n[0], n[1], n[2]};
-      c.weights = {1 - s, s, bary[0], bary[1], bary[2]};
-      const Eigen::Vector3d diff = (p0 + s * (p1 - p0)) - (bary[0] * A + bary[1] * B + bary[2] * C);
-      if (d > kContactEps) {
-        c.normal = diff / d;
-      } else {
-        const Eigen::Vector3d nt = (B - A).cross(C - A);
-        c.normal = nt.norm() > kTiny ? Eigen::Vector3d(nt.normalized()) : orthogonal(p1 - p0);
-      }
-      c.radius_sum = rm;
-      c.distance = d;
-      c.element_a = a;
-      c.element_b = tri;
-      out.push(c);
+      if (triangle_contact(topo, x, a, tri, margin, c)) out.push(c);
     }
   }
 }

@@ -24,6 +24,14 @@
 // (the same 9 / 10 neighbourhoods as the update), at most zone_budget of them, each contact once per step.
 // zone_budget = 0 reports the minima alone, as the paper does.
 //
+// Speed (the result is bit-identical to running every step in full): the element tables (segment and triangle
+// nodes, which segment-cell pairs are tested) are built once; each step caches every segment's and triangle's bounding
+// sphere and every node's displacement since the last step. A candidate whose bounding spheres are already farther
+// than the distance to beat is rejected without the exact test (and its lower bound is kept). A tracked pair that
+// converged keeps its margin (how much closer than every neighbour it was); while the nodes around it have moved
+// less than that margin allows (the distances are 1-Lipschitz in the node positions), it is still the local minimum
+// and only its own distance is evaluated.
+//
 // Phases: construction allocates (pair arrays, the merge tables); detect() allocates nothing and is deterministic for
 // a given seed and input. detect_brute_force() tests every element pair (with a bounding-box cull): the reference
 // for recall, O(n^2), not for the loop.
@@ -86,7 +94,8 @@ struct DetectStats {
   int dropped = 0;           // pairs dropped above the drop distance
   int contacts = 0;          // contacts written
   int overflow = 0;          // pairs or contacts refused for lack of capacity
-  long distance_tests = 0;   // element-element distance evaluations
+  long distance_tests = 0;   // element-element distance evaluations (exact tests and bounding-sphere rejections)
+  int settled = 0;           // tracked pairs provably still at their minimum: neighbours not re-tested
 };
 
 /// Closest points of segments [p0, p1] and [q0, q1]: returns the distance, s and t the parameters (Ericson 5.1.9).
@@ -128,10 +137,24 @@ class StochasticDetector {
  private:
   std::uint64_t next_random() noexcept;
   int uniform(int n) noexcept;
-  double eval_segments(const Eigen::Matrix3Xd& x, int a, int b, ActivePair& out) noexcept;
+  // The distance of a pair, or a lower bound >= `bound` when it is not closer (out then unused); remembered for the
+  // step, so that converging pairs and contact zones that meet evaluate each pair once.
+  double eval_segments(const Eigen::Matrix3Xd& x, int a, int b, double bound, ActivePair& out) noexcept;
   double eval_cell(const Eigen::Matrix3Xd& x, int s, int cell, double bound, ActivePair& out) noexcept;
-  void converge_segments(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept;
-  void converge_cell(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept;
+  double eval(const Eigen::Matrix3Xd& x, bool mesentery, int a, int b, double bound, ActivePair& out) noexcept;
+  double compute_segments(const Eigen::Matrix3Xd& x, int a, int b, double bound, ActivePair& out) noexcept;
+  double compute_cell(const Eigen::Matrix3Xd& x, int s, int cell, double bound, ActivePair& out) noexcept;
+  // Converge p (at most `moves` moves); returns the margin of the minimum reached (a lower bound of how much farther
+  // every neighbour is), or -infinity when the moves ran out first.
+  double converge_segments(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept;
+  double converge_cell(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept;
+  void cache_step(const Eigen::Matrix3Xd& x) noexcept;
+  // A lower bound of the distance of every pair that `moves` moves can reach from (a, b) (bounding spheres).
+  double reach_bound(bool mesentery, int a, int b, int moves) const noexcept;
+  bool cell_ok(int seg, int cell) const noexcept {
+    return seg >= 0 && seg < nseg_ && cell >= 0 && cell < ncell_ &&
+           cell_ok_[static_cast<std::size_t>(seg) * static_cast<std::size_t>(ncell_) + static_cast<std::size_t>(cell)];
+  }
   bool claim(std::vector<std::uint32_t>& owner, int key) noexcept;
   bool emit(const ActivePair& p, bool mesentery, ContactList& out, DetectStats& st) noexcept;
   void expand(const Eigen::Matrix3Xd& x, const ActivePair& p, bool mesentery, ContactList& out,
@@ -149,7 +172,32 @@ class StochasticDetector {
   std::vector<std::uint32_t> cell_owner_;  // segments x cells
   std::vector<std::uint32_t> seg_reported_;   // contacts already reported this step (same keys)
   std::vector<std::uint32_t> cell_reported_;
+  // The step's evaluations: memo_stamp == stamp_ when memo_pool_[memo_index] holds the pair's result.
+  struct Memo {
+    ActivePair pair;
+    double value = 0;    // distance, or a lower bound when !exact
+    bool exact = false;
+  };
+  std::vector<std::uint32_t> seg_memo_stamp_, cell_memo_stamp_, seg_memo_index_, cell_memo_index_;
+  std::vector<Memo> memo_pool_;
+  int memo_used_ = 0;
+  std::vector<std::uint32_t> seg_clear_;   // pairs expand() evaluated this step and found out of contact
+  std::vector<std::uint32_t> cell_clear_;
   std::vector<ActivePair> zone_;  // flood-fill queue of expand(), zone_budget + 1 entries
+  // Element tables (construction) and the per-step caches of cache_step().
+  int nseg_ = 0, ncell_ = 0, nodes_ = 0;
+  std::vector<int> seg_node_;           // 2 per segment
+  std::vector<int> tri_node_;           // 3 per triangle
+  std::vector<char> cell_ok_;           // segments x cells: topology().cell_tested
+  std::vector<Eigen::Vector4d> seg_sphere_;   // centre, radius per segment
+  std::vector<Eigen::Vector4d> tri_sphere_;   // per triangle
+  std::vector<Eigen::Vector4d> cell_sphere_;  // per cell (both triangles)
+  Eigen::Matrix3Xd x_prev_;                  // positions at the last detect()
+  bool have_prev_ = false;
+  std::vector<double> node_move_, seg_move_, cell_move_;  // displacement since the last step, m (element: largest)
+  std::vector<double> seg_near_move_, cell_near_move_;    // the largest over the element and its neighbours
+  std::vector<double> seg_margin_, cell_margin_;          // per active pair: margin left of its last convergence
+  std::vector<double> seg_gap_, cell_gap_;                // per active pair: how far its neighbourhood is from contact
   std::uint32_t stamp_ = 0;
   long tests_ = 0;
 };
@@ -172,6 +220,14 @@ struct RecallStats {
 };
 RecallStats compare_with_reference(const CollisionTopology& topology, const ContactList& found,
                                    const ContactList& truth);
+
+/// The exact narrow phase of the reference (and of BroadPhaseDetector): the contact of segments a < b, or of segment a
+/// and mesentery triangle tri, when closer than the sum of the radii + margin; false (c unset) otherwise. Does not
+/// check that the pair is tested (CollisionTopology::segments_tested / cell_tested).
+bool segment_contact(const CollisionTopology& topology, const Eigen::Matrix3Xd& x, int a, int b, double margin,
+                     CollisionContact& c) noexcept;
+bool triangle_contact(const CollisionTopology& topology, const Eigen::Matrix3Xd& x, int a, int tri, double margin,
+                      CollisionContact& c) noexcept;
 
 /// Reference: every tested element pair closer than the sum of the radii + margin (m), appended to `out`.
 /// No allocation; O(segments^2 + segments x cells) with a bounding-box cull.

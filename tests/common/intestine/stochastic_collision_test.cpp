@@ -1,5 +1,6 @@
 #include "intestine/stochastic_collision.h"
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,7 +11,9 @@
 
 #include "support/alloc_counter.h"
 #include "core/error.h"
+#include "intestine/broad_phase.h"
 #include "intestine/intestine_model.h"
+#include "mesh/geometry.h"
 #include "support/intestine_test_util.h"
 
 namespace surgsim::intestine {
@@ -344,6 +347,77 @@ TEST(StochasticCollisionTest, StochasticDetectionAndResponseUntangleCraftedCross
   double left = 0;
   for (const auto& c : truth) left = std::max(left, c.radius_sum - c.distance);
   EXPECT_LT(left, 1e-3) << truth.size() << " contacts left, deepest " << left << " m";
+}
+
+// A mesentery fold pushed onto the middle of an intestine segment far from it along the chain (what a probe pressing
+// the membrane against a loop does): the four nodes of cell (row 1, column 70) are moved so that the cell stands
+// across segment 30, (a) pierced at its middle (segment crossing the triangle) and (b) with one edge 5 mm from the
+// segment's middle (edge-triangle: the closest points are the middle of the segment and of that edge). No intestine node moves, so
+// no segment-segment pair comes close: the segment tests alone (the paper's) never see it; the point/edge-triangle
+// cases do, in the reference, in the exact broad phase and in the stochastic detector's intestine-mesentery pairs.
+TEST(StochasticCollisionTest, MembraneFoldOnASegmentIsCaughtOnlyByTheTriangleCases) {
+  const IntestineModel model(IntestineParams{});
+  const CollisionTopology& topo = model.topology();
+  const int seg = 30, col = 70, cw = topo.cols - 1, cell = 1 * cw + col;
+  for (int variant = 0; variant < 2; ++variant) {
+    SCOPED_TRACE(variant == 0 ? "pierced" : "edge");
+    IntestineState state(model, 5);
+    const Eigen::Vector3d p0 = state.x.col(topo.node(0, seg)), p1 = state.x.col(topo.node(0, seg + 1));
+    const Eigen::Vector3d m = 0.5 * (p0 + p1), d = (p1 - p0).normalized();
+    const Eigen::Vector3d u = d.cross(Eigen::Vector3d::UnitZ()).normalized(), w = d.cross(u);
+    const double h = 0.02;
+    // The cell's square in the plane (u, w) across the segment: (a) centred a little off the diagonal, so that the
+    // segment pierces triangle 0's interior; (b) moved by h + 5 mm along u, its edge 5 mm from the middle.
+    const Eigen::Vector3d centre = variant == 0 ? Eigen::Vector3d(m + 0.3 * h * u - 0.1 * h * w)
+                                                : Eigen::Vector3d(m + (h + 0.005) * u);
+    state.x.col(topo.node(1, col)) = centre - h * u - h * w;
+    state.x.col(topo.node(1, col + 1)) = centre + h * u - h * w;
+    state.x.col(topo.node(2, col + 1)) = centre + h * u + h * w;
+    state.x.col(topo.node(2, col)) = centre - h * u + h * w;
+
+    ContactList truth(100000), broad_found(100000);
+    detect_brute_force(topo, state.x, truth);
+    const CollisionContact* fold = nullptr;  // the cell's closer triangle
+    for (const auto& c : truth) {
+      if (c.kind == ContactKind::kSegmentTriangle && c.element_a == seg && c.element_b / 2 == cell &&
+          (fold == nullptr || c.distance < fold->distance)) {
+        fold = &c;
+      }
+      EXPECT_FALSE(c.kind == ContactKind::kSegmentSegment && (c.element_a == seg || c.element_b == seg))
+          << "segment pair " << c.element_a << "-" << c.element_b << " at " << c.distance;
+    }
+    ASSERT_NE(fold, nullptr);
+    EXPECT_LT(fold->distance, variant == 0 ? 1e-12 : 0.0051);
+    EXPECT_GT(fold->weights[1], 0.3);  // at the segment's middle, not at an end
+    EXPECT_LT(fold->weights[1], 0.7);
+    BroadPhaseDetector broad(topo);
+    broad.detect(state.x, broad_found);
+    EXPECT_EQ(broad_found.size(), truth.size());
+
+    // The paper's segment tests alone: never, however long they search.
+    auto caught = [&](const StochasticParams& params, int steps) {
+      StochasticDetector det(topo, params);
+      ContactList out(4096);
+      for (int s = 0; s < steps; ++s) {
+        out.clear();
+        det.detect(state.x, out);
+        for (const auto& c : out) {
+          if (c.element_a == seg && c.kind == ContactKind::kSegmentTriangle && c.element_b / 2 == cell) return s;
+        }
+      }
+      return -1;
+    };
+    StochasticParams segments_only = model.params().detection;
+    segments_only.random_mesentery_pairs = 0;
+    EXPECT_EQ(caught(segments_only, 300), -1);
+    // With the intestine-mesentery pairs (n = 10 a step): found within 300 steps (0.3 s), for every seed tried.
+    for (std::uint64_t seed : {1, 2, 3}) {
+      StochasticParams params = model.params().detection;
+      params.seed = seed;
+      const int at = caught(params, 300);
+      EXPECT_GE(at, 0) << "seed " << seed;
+    }
+  }
 }
 
 TEST(StochasticCollisionTest, SameSeedSameResultOtherSeedOtherPairs) {
