@@ -4,6 +4,9 @@
 //   2. integrator stability against spring stiffness at dt = 1 ms (implicit vs explicit);
 //   3. detection recall against the brute-force reference and time per step against the random pairs n
 //      (the paper's fig. 14 as numbers);
+//   3b. the three detectors side by side on the same positions of the same run: the stochastic one (the loop's), the
+//      brute-force reference and the exact broad phase, thread CPU time p50 / p99 and recall against the reference,
+//      intestine-intestine and intestine-mesentery contacts apart;
 //   4. tube build time and size per LOD; mesentery strip;
 //   5. the frame-rate controller (paper eq. 15) under a synthetic load step: LOD band, mean rate and settling time
 //      (frames and seconds) per target, the paper's law as printed against the default (log2 error).
@@ -19,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "intestine/broad_phase.h"
 #include "intestine/frame_rate_controller.h"
 #include "intestine/intestine_model.h"
 #include "intestine_run.h"
@@ -117,6 +121,76 @@ void recall_table(int steps) {
   std::printf("pairs: reference contacts reported; zones: contact zones with at least one reported; depth: weighted by "
               "penetration;\nmissed: deepest reference contact not reported; left: deepest penetration after the "
               "response; times in us (det: wall clock; cpu: the step's thread CPU time).\n");
+}
+
+// The contacts of `in` of one kind, appended to `out`.
+void of_kind(const ContactList& in, ContactKind kind, ContactList& out) {
+  for (const auto& c : in) {
+    if (c.kind == kind) out.push(c);
+  }
+}
+
+void detector_table(int steps) {
+  std::printf("\n3b. Detectors side by side at n = 10 on the same positions (the scripted run, %.1f s, every step; recall "
+              "every 10 steps), thread CPU time\n", steps * 1e-3);
+  const IntestineParams params;
+  const IntestineModel model(params);
+  IntestineState state(model, 1);
+  BroadPhaseDetector broad(model.topology());
+  StepReport report;
+  ContactList truth(100000), exact(100000), kind_found(100000), kind_truth(100000);
+  std::vector<double> t[3];
+  RecallStats recall[2][2];  // [stochastic, broad phase][intestine-intestine, intestine-mesentery]
+  long contacts[2] = {0, 0};
+  for (int s = 0; s < steps; ++s) {
+    step_dynamics(model, state, test::scripted_probe(s * 1e-3), 1e-3, report);
+    double c0 = thread_cpu_us();
+    step_detection(model, state, report);
+    t[0].push_back(thread_cpu_us() - c0);
+    truth.clear();
+    c0 = thread_cpu_us();
+    detect_brute_force(model.topology(), state.x, truth);
+    t[1].push_back(thread_cpu_us() - c0);
+    exact.clear();
+    c0 = thread_cpu_us();
+    broad.detect(state.x, exact);
+    t[2].push_back(thread_cpu_us() - c0);
+    if (s % 10 == 0) {
+      for (int k = 0; k < 2; ++k) {
+        const ContactKind kind = k == 0 ? ContactKind::kSegmentSegment : ContactKind::kSegmentTriangle;
+        kind_truth.clear();
+        of_kind(truth, kind, kind_truth);
+        contacts[k] += kind_truth.size();
+        for (int d = 0; d < 2; ++d) {
+          kind_found.clear();
+          of_kind(d == 0 ? state.contacts() : exact, kind, kind_found);
+          recall[d][k] += compare_with_reference(model.topology(), kind_found, kind_truth);
+        }
+      }
+    }
+    step_response(model, state, report);
+  }
+  std::printf("%-26s %9s %9s %9s | %-27s | %-27s\n", "detector", "p50 us", "p99 us", "max us",
+              "intestine-intestine recall", "intestine-mesentery recall");
+  std::printf("%-26s %9s %9s %9s | %8s %8s %9s | %8s %8s %9s\n", "", "", "", "", "pairs", "depth", "missed mm",
+              "pairs", "depth", "missed mm");
+  const char* names[3] = {"stochastic (n = 10)", "brute force (reference)", "broad phase (sweep/prune)"};
+  for (int d = 0; d < 3; ++d) {
+    std::printf("%-26s %9.1f %9.1f %9.1f |", names[d], percentile(t[d], 0.5), percentile(t[d], 0.99),
+                percentile(t[d], 1.0));
+    for (int k = 0; k < 2; ++k) {
+      if (d == 1) {
+        std::printf(" %8.3f %8.3f %9.2f |", 1.0, 1.0, 0.0);
+      } else {
+        const RecallStats& r = recall[d == 0 ? 0 : 1][k];
+        std::printf(" %8.3f %8.3f %9.2f |", r.pair_recall(), r.depth_recall(), 1e3 * r.max_missed);
+      }
+    }
+    std::printf("\n");
+  }
+  std::printf("reference contacts compared: %ld intestine-intestine, %ld intestine-mesentery (segment-triangle: point-, "
+              "edge-triangle and crossing); pairs: share of reference contacts reported, depth: weighted by "
+              "penetration\n", contacts[0], contacts[1]);
 }
 
 void tube_table() {
@@ -231,6 +305,7 @@ int main(int argc, char** argv) {
   step_table(steps);
   stability_table();
   recall_table(steps);
+  detector_table(steps);
   tube_table();
   controller_table();
   return 0;
