@@ -123,9 +123,15 @@ double segment_triangle_exact(const Eigen::Vector3d& p0, const Eigen::Vector3d& 
   // Both ends above the triangle's interior and no crossing: the segment lies over the triangle, the distance to the
   // plane is linear along it, so an end is the closest point and the edges need no test.
   if ((b0.array() > 0).all() && (b1.array() > 0).all()) return best;
-  // Edge-triangle: the segment against each edge.
+  // Edge-triangle: the segment against each edge, unless their bounding spheres are already farther than the best.
   const Eigen::Vector3d* v[3] = {&a, &b, &c};
+  const Eigen::Vector3d m = 0.5 * (p0 + p1);
+  const double hl = 0.5 * d.norm();
   for (int k = 0; k < 3; ++k) {
+    const Eigen::Vector3d& e0 = *v[k];
+    const Eigen::Vector3d& e1k = *v[(k + 1) % 3];
+    const double reach = best + hl + 0.5 * (e1k - e0).norm();
+    if ((m - 0.5 * (e0 + e1k)).squaredNorm() >= reach * reach) continue;
     double ss = 0, tt = 0;
     const double dd = segment_segment(p0, p1, *v[k], *v[(k + 1) % 3], ss, tt);
     if (dd < best) {
@@ -735,7 +741,8 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
       const double shrink =
           2 * (seg_near_move_[static_cast<std::size_t>(p.a)] + near_b[static_cast<std::size_t>(p.b)]);
       double left = margin[static_cast<std::size_t>(i)] - shrink;
-      double far = gap[static_cast<std::size_t>(i)] - shrink;
+      // No distance of the neighbourhood has come closer than the displacements of its nodes: half the shrink.
+      double far = gap[static_cast<std::size_t>(i)] - 0.5 * shrink;
       if (far > kMarginEps) {
         // Its whole neighbourhood is still out of contact: the pair waits where it is (not evaluated, not reported).
         ++st.settled;
