@@ -104,7 +104,9 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     }
   };
   auto tested_cell = [&](int seg, int tri) {
-    return cell_ok_[static_cast<std::size_t>(seg) * static_cast<std::size_t>(ncell) + static_cast<std::size_t>(tri / 2)] != 0;
+    const std::size_t key =
+        static_cast<std::size_t>(seg) * static_cast<std::size_t>(ncell) + static_cast<std::size_t>(tri / 2);
+    return cell_ok_[key] != 0;
   };
   auto seg_tri = [&](int seg, int e) {
     if (!tested_cell(seg, e - nseg) || !overlap(seg, e)) return;

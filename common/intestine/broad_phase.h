@@ -4,7 +4,8 @@
 // sorted along the axis over which the elements spread most (insertion sort from the last step's order, which is
 // nearly sorted when the body moves little), segments and triangles each in their own list; each segment is swept
 // forward over the segments and the triangles that start inside its extent, each triangle over the segments that
-// start inside its own (so every overlapping pair once, and no triangle-triangle pair is ever looked at), and the pairs whose boxes also overlap on the two other axes go to the reference's exact
+// start inside its own (so every overlapping pair once, and no triangle-triangle pair is ever looked at), and the
+// pairs whose boxes also overlap on the two other axes go to the reference's exact
 // narrow phase (segment_contact, triangle_contact: segment-segment, and segment-triangle with the point-triangle,
 // edge-triangle and crossing cases). Mesentery-mesentery pairs are not tested, as in the reference.
 //

@@ -264,10 +264,16 @@ void StochasticDetector::set_random_pairs(int segment_pairs, int mesentery_pairs
 void StochasticDetector::reset(std::uint64_t seed) noexcept {
   rng_ = seed;
   seg_count_ = cell_count_ = 0;
-  for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_, &seg_clear_, &cell_clear_, &seg_memo_stamp_,
-                  &cell_memo_stamp_}) std::fill(t->begin(), t->end(), 0u);
+  clear_tables();
   stamp_ = 0;
   have_prev_ = false;
+}
+
+void StochasticDetector::clear_tables() noexcept {
+  for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_, &seg_clear_, &cell_clear_,
+                  &seg_memo_stamp_, &cell_memo_stamp_}) {
+    std::fill(t->begin(), t->end(), 0u);
+  }
 }
 
 void StochasticDetector::cache_step(const Eigen::Matrix3Xd& x) noexcept {
@@ -298,14 +304,16 @@ void StochasticDetector::cache_step(const Eigen::Matrix3Xd& x) noexcept {
                                 (x.col(n[2]) - g).squaredNorm(), (x.col(n3) - g).squaredNorm()}));
   }
   // Displacements since the last step (infinite on the first): bound how much any element distance has changed.
+  // node_move_ holds squares; the elements' are square roots of the largest.
   for (int n = 0; n < nodes_; ++n) {
-    node_move_[static_cast<std::size_t>(n)] = have_prev_ ? (x.col(n) - x_prev_.col(n)).norm() : kInf;
+    node_move_[static_cast<std::size_t>(n)] = have_prev_ ? (x.col(n) - x_prev_.col(n)).squaredNorm() : kInf;
   }
   x_prev_ = x.leftCols(nodes_);
   have_prev_ = true;
   for (int a = 0; a < nseg_; ++a) {
-    seg_move_[static_cast<std::size_t>(a)] = std::max(node_move_[static_cast<std::size_t>(seg_node_[2 * a])],
-                                                      node_move_[static_cast<std::size_t>(seg_node_[2 * a + 1])]);
+    const double m0 = node_move_[static_cast<std::size_t>(seg_node_[2 * static_cast<std::size_t>(a)])];
+    const double m1 = node_move_[static_cast<std::size_t>(seg_node_[2 * static_cast<std::size_t>(a) + 1])];
+    seg_move_[static_cast<std::size_t>(a)] = std::sqrt(std::max(m0, m1));
   }
   for (int a = 0; a < nseg_; ++a) {
     double m = seg_move_[static_cast<std::size_t>(a)];
@@ -317,8 +325,8 @@ void StochasticDetector::cache_step(const Eigen::Matrix3Xd& x) noexcept {
     const int* n = &tri_node_[6 * static_cast<std::size_t>(c)];
     const int n3 = tri_node_[6 * static_cast<std::size_t>(c) + 5];
     cell_move_[static_cast<std::size_t>(c)] =
-        std::max({node_move_[static_cast<std::size_t>(n[0])], node_move_[static_cast<std::size_t>(n[1])],
-                  node_move_[static_cast<std::size_t>(n[2])], node_move_[static_cast<std::size_t>(n3)]});
+        std::sqrt(std::max({node_move_[static_cast<std::size_t>(n[0])], node_move_[static_cast<std::size_t>(n[1])],
+                            node_move_[static_cast<std::size_t>(n[2])], node_move_[static_cast<std::size_t>(n3)]}));
   }
   const int cw = topo_.cols - 1, cr = topo_.rows - 1;
   for (int r = 0; r < cr; ++r) {
@@ -388,8 +396,8 @@ double StochasticDetector::eval_cell(const Eigen::Matrix3Xd& x, int seg, int cel
 
 double StochasticDetector::eval(const Eigen::Matrix3Xd& x, bool mes, int a, int b, double bound,
                                 ActivePair& out) noexcept {
-  const std::size_t key = mes ? static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_) + static_cast<std::size_t>(b)
-                              : static_cast<std::size_t>(a) * static_cast<std::size_t>(nseg_) + static_cast<std::size_t>(b);
+  const std::size_t key =
+      static_cast<std::size_t>(a) * static_cast<std::size_t>(mes ? ncell_ : nseg_) + static_cast<std::size_t>(b);
   auto& stamp = (mes ? cell_memo_stamp_ : seg_memo_stamp_)[key];
   auto& index = (mes ? cell_memo_index_ : seg_memo_index_)[key];
   Memo* m = nullptr;
@@ -548,30 +556,37 @@ double StochasticDetector::converge_cell(const Eigen::Matrix3Xd& x, ActivePair& 
   return -std::numeric_limits<double>::infinity();
 }
 
-double StochasticDetector::reach_bound(bool mes, int a, int b, int moves) const noexcept {
+bool StochasticDetector::beyond_reach(bool mes, int a, int b, int moves, double drop) const noexcept {
   // Each move changes the segment by at most one and the other element by at most one (segment, or cell row and
-  // column), so the pairs reached lie in these index ranges.
-  double lb = std::numeric_limits<double>::infinity();
+  // column), so the pairs reached lie in these index ranges; each is farther than `drop` when its bounding spheres
+  // are (centres farther apart than drop + both radii; squared, stopping at the first that is not).
   const int a0 = std::max(0, a - moves), a1 = std::min(nseg_ - 1, a + moves);
-  auto gap = [](const Eigen::Vector4d& u, const Eigen::Vector4d& v) {
-    return (u.head<3>() - v.head<3>()).norm() - u[3] - v[3];
+  auto far = [drop](const Eigen::Vector4d& u, const Eigen::Vector4d& v) {
+    const double reach = drop + u[3] + v[3];
+    return (u.head<3>() - v.head<3>()).squaredNorm() > reach * reach;
   };
   if (!mes) {
     const int b0 = std::max(0, b - moves), b1 = std::min(nseg_ - 1, b + moves);
     for (int i = a0; i <= a1; ++i) {
-      for (int j = b0; j <= b1; ++j) lb = std::min(lb, gap(seg_sphere_[i], seg_sphere_[j]));
+      for (int j = b0; j <= b1; ++j) {
+        if (!far(seg_sphere_[static_cast<std::size_t>(i)], seg_sphere_[static_cast<std::size_t>(j)])) return false;
+      }
     }
-    return lb;
+    return true;
   }
   const int cw = topo_.cols - 1, r = b / cw, c = b % cw;
   const int r0 = std::max(0, r - moves), r1 = std::min(topo_.rows - 2, r + moves);
   const int c0 = std::max(0, c - moves), c1 = std::min(cw - 1, c + moves);
   for (int i = a0; i <= a1; ++i) {
     for (int rr = r0; rr <= r1; ++rr) {
-      for (int cc = c0; cc <= c1; ++cc) lb = std::min(lb, gap(seg_sphere_[i], cell_sphere_[rr * cw + cc]));
+      for (int cc = c0; cc <= c1; ++cc) {
+        if (!far(seg_sphere_[static_cast<std::size_t>(i)], cell_sphere_[static_cast<std::size_t>(rr * cw + cc)])) {
+          return false;
+        }
+      }
     }
   }
-  return lb;
+  return true;
 }
 
 bool StochasticDetector::claim(std::vector<std::uint32_t>& owner, int key) noexcept {
@@ -698,8 +713,7 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
   DetectStats st;
   tests_ = 0;
   if (++stamp_ == 0) {  // wrapped: clear the tables so that no stale stamp matches
-    for (auto* t : {&seg_owner_, &cell_owner_, &seg_reported_, &cell_reported_, &seg_clear_, &cell_clear_, &seg_memo_stamp_,
-                  &cell_memo_stamp_}) std::fill(t->begin(), t->end(), 0u);
+    clear_tables();
     stamp_ = 1;
   }
   const int nseg = topo_.segments(), ncell = topo_.cells();
@@ -781,7 +795,7 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
       }
       if (!ok || owner[static_cast<std::size_t>(a * width + b)] == stamp_) continue;  // tracked already
       // Every pair its convergence could reach is farther than the drop distance: it would be dropped.
-      if (reach_bound(mes, a, b, params_.new_pair_moves) > drop) continue;
+      if (beyond_reach(mes, a, b, params_.new_pair_moves, drop)) continue;
       ActivePair p;
       p.a = a;
       p.b = b;

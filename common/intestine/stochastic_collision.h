@@ -149,8 +149,9 @@ class StochasticDetector {
   double converge_segments(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept;
   double converge_cell(const Eigen::Matrix3Xd& x, ActivePair& p, int moves) noexcept;
   void cache_step(const Eigen::Matrix3Xd& x) noexcept;
-  // A lower bound of the distance of every pair that `moves` moves can reach from (a, b) (bounding spheres).
-  double reach_bound(bool mesentery, int a, int b, int moves) const noexcept;
+  void clear_tables() noexcept;  // every stamp table to 0
+  // True when every pair that `moves` moves can reach from (a, b) is farther than `drop` (bounding spheres).
+  bool beyond_reach(bool mesentery, int a, int b, int moves, double drop) const noexcept;
   bool cell_ok(int seg, int cell) const noexcept {
     return seg >= 0 && seg < nseg_ && cell >= 0 && cell < ncell_ &&
            cell_ok_[static_cast<std::size_t>(seg) * static_cast<std::size_t>(ncell_) + static_cast<std::size_t>(cell)];
@@ -194,7 +195,8 @@ class StochasticDetector {
   std::vector<Eigen::Vector4d> cell_sphere_;  // per cell (both triangles)
   Eigen::Matrix3Xd x_prev_;                  // positions at the last detect()
   bool have_prev_ = false;
-  std::vector<double> node_move_, seg_move_, cell_move_;  // displacement since the last step, m (element: largest)
+  // Displacement since the last step: node_move_ squared (m^2), an element's its largest node's (m).
+  std::vector<double> node_move_, seg_move_, cell_move_;
   std::vector<double> seg_near_move_, cell_near_move_;    // the largest over the element and its neighbours
   std::vector<double> seg_margin_, cell_margin_;          // per active pair: margin left of its last convergence
   std::vector<double> seg_gap_, cell_gap_;                // per active pair: how far its neighbourhood is from contact

@@ -352,9 +352,10 @@ TEST(StochasticCollisionTest, StochasticDetectionAndResponseUntangleCraftedCross
 // A mesentery fold pushed onto the middle of an intestine segment far from it along the chain (what a probe pressing
 // the membrane against a loop does): the four nodes of cell (row 1, column 70) are moved so that the cell stands
 // across segment 30, (a) pierced at its middle (segment crossing the triangle) and (b) with one edge 5 mm from the
-// segment's middle (edge-triangle: the closest points are the middle of the segment and of that edge). No intestine node moves, so
-// no segment-segment pair comes close: the segment tests alone (the paper's) never see it; the point/edge-triangle
-// cases do, in the reference, in the exact broad phase and in the stochastic detector's intestine-mesentery pairs.
+// segment's middle (edge-triangle: the closest points are the middle of the segment and of that edge). No intestine
+// node moves, so no segment-segment pair comes close: the segment tests alone (the paper's) never see it; the
+// point/edge-triangle cases do, in the reference, in the exact broad phase and in the stochastic detector's
+// intestine-mesentery pairs.
 TEST(StochasticCollisionTest, MembraneFoldOnASegmentIsCaughtOnlyByTheTriangleCases) {
   const IntestineModel model(IntestineParams{});
   const CollisionTopology& topo = model.topology();
