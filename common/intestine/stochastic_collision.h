@@ -30,7 +30,14 @@
 // than the distance to beat is rejected without the exact test (and its lower bound is kept). A tracked pair that
 // converged keeps its margin (how much closer than every neighbour it was); while the nodes around it have moved
 // less than that margin allows (the distances are 1-Lipschitz in the node positions), it is still the local minimum
-// and only its own distance is evaluated.
+// and only its own distance is evaluated. Those steps give the same pairs and contacts as converging in full. Two
+// further savings change which pairs are tracked, not the contacts of a step's reach: a pair whose whole
+// neighbourhood was out of contact by a gap waits, unevaluated and unmoved, until the displacement of the nodes
+// around it could have closed the gap; a new random pair is not converged when every pair its moves could reach is
+// farther than the drop distance (it would be dropped). Every pair is evaluated at most once a step (a memo shared
+// by the convergence and the contact zones).
+// Measured (intestine_bench --quick, 2 cores): detection p50 about 110 us, p99 about 170 us of thread CPU at n = 10,
+// from 344 / 426; the exact broad phase (broad_phase.h) about 200 / 280 us, the brute force about 800 / 900 us.
 //
 // Phases: construction allocates (pair arrays, the merge tables); detect() allocates nothing and is deterministic for
 // a given seed and input. detect_brute_force() tests every element pair (with a bounding-box cull): the reference
