@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
 
 #include "core/error.h"
@@ -102,6 +103,31 @@ MassSpring::MassSpring(Eigen::Matrix3Xd rest, std::vector<double> mass, std::vec
     const auto us = static_cast<std::size_t>(s);
     panel_offset_[us + 1] = panel_offset_[us] + 9 * static_cast<std::size_t>(last_slot_[us] - s + 1);
   }
+  if (factor_size() > static_cast<std::size_t>(std::numeric_limits<int>::max())) {
+    throw_error("mass-spring: the factor's envelope is too large (", factor_size(), " entries)");
+  }
+  // Each spring's blocks: block (a, b), a >= b, at panel b's offset + 3 (a - b), column stride 3 (last(b) - b + 1).
+  auto block = [&](int a, int b, int& offset, int& stride) {
+    const auto ub = static_cast<std::size_t>(b);
+    offset = static_cast<int>(panel_offset_[ub]) + 3 * (a - b);
+    stride = 3 * (last_slot_[ub] - b + 1);
+  };
+  spring_blocks_.resize(springs_.size());
+  for (std::size_t k = 0; k < springs_.size(); ++k) {
+    SpringBlocks& sb = spring_blocks_[k];
+    sb.spring = static_cast<int>(k);
+    const int a = slot_[static_cast<std::size_t>(springs_[k].i)], b = slot_[static_cast<std::size_t>(springs_[k].j)];
+    if (a >= 0) block(a, a, sb.diag_i, sb.stride_i);
+    if (b >= 0) block(b, b, sb.diag_j, sb.stride_j);
+    if (a >= 0 && b >= 0) block(std::max(a, b), std::min(a, b), sb.off, sb.stride);
+  }
+  auto low = [&](const SpringBlocks& sb) {
+    const int a = slot_[static_cast<std::size_t>(springs_[static_cast<std::size_t>(sb.spring)].i)],
+              b = slot_[static_cast<std::size_t>(springs_[static_cast<std::size_t>(sb.spring)].j)];
+    return a < 0 ? b : b < 0 ? a : std::min(a, b);
+  };
+  std::stable_sort(spring_blocks_.begin(), spring_blocks_.end(),
+                   [&](const SpringBlocks& x, const SpringBlocks& y) { return low(x) < low(y); });
 }
 
 double MassSpring::potential_energy(const Eigen::Matrix3Xd& x) const {
@@ -160,29 +186,25 @@ struct Panels {
       for (int r = 0; r < 3; ++r) b[c * h + r] += m(r, c);
     }
   }
-  // Adds s (alpha u u^T + beta I) at (si, si) and (sj, sj) and subtracts it at (si, sj): a spring's block pattern.
-  // Fixed nodes (slot -1) are skipped.
-  void add_spring(int si, int sj, const Eigen::Vector3d& u, double alpha, double beta) const {
-    const double xx = alpha * u.x() * u.x() + beta, yy = alpha * u.y() * u.y() + beta,
-                 zz = alpha * u.z() * u.z() + beta, xy = alpha * u.x() * u.y(), xz = alpha * u.x() * u.z(),
-                 yz = alpha * u.y() * u.z();
-    for (const int s : {si, sj}) {
-      if (s < 0) continue;
-      const int h = rows(s);
-      double* b = panel(s);
+  // Adds alpha u u^T + beta I at a spring's two diagonal blocks and subtracts it at its off-diagonal one.
+  void add_spring(const SpringBlocks& sb, const double* u, double alpha, double beta) const {
+    const double xx = alpha * u[0] * u[0] + beta, yy = alpha * u[1] * u[1] + beta, zz = alpha * u[2] * u[2] + beta,
+                 xy = alpha * u[0] * u[1], xz = alpha * u[0] * u[2], yz = alpha * u[1] * u[2];
+    auto diagonal = [&](int offset, int h) {
+      double* b = a + offset;
       b[0] += xx;
       b[1] += xy;
       b[2] += xz;
       b[h + 1] += yy;
       b[h + 2] += yz;
       b[2 * h + 2] += zz;
-    }
-    if (si < 0 || sj < 0) return;
-    const int lo = std::min(si, sj), hi = std::max(si, sj);
-    const int h = rows(lo);
-    double* b = panel(lo) + 3 * (hi - lo);
-    double* b1 = b + h;
-    double* b2 = b1 + h;
+    };
+    if (sb.diag_i >= 0) diagonal(sb.diag_i, sb.stride_i);
+    if (sb.diag_j >= 0) diagonal(sb.diag_j, sb.stride_j);
+    if (sb.off < 0) return;
+    double* b = a + sb.off;
+    double* b1 = b + sb.stride;
+    double* b2 = b1 + sb.stride;
     b[0] -= xx;
     b[1] -= xy;
     b[2] -= xz;
@@ -192,6 +214,51 @@ struct Panels {
     b2[0] -= xz;
     b2[1] -= yz;
     b2[2] -= zz;
+  }
+
+  // Column block K of L seen from row block J: rows J..last(K) (len scalars from l0, l1, l2) and the block L(J, K).
+  struct Source {
+    const double *l0, *l1, *l2;
+    int len;
+    double w[9];  // w[3 c + m] = L(J + c, K + m)
+    Source(const Panels& m, int k, int j) {
+      const int hk = m.rows(k), off = 3 * (j - k);
+      len = hk - off;
+      l0 = m.panel(k) + off;
+      l1 = l0 + hk;
+      l2 = l1 + hk;
+      for (int c = 0; c < 3; ++c) {
+        w[3 * c] = l0[c];
+        w[3 * c + 1] = l1[c];
+        w[3 * c + 2] = l2[c];
+      }
+    }
+  };
+  // P(from..to, :) -= L(.., K) L(J, K)^T for one source block, and for two at once (one pass over P).
+  static void update(double* __restrict p0, double* __restrict p1, double* __restrict p2,
+                     const double* __restrict a0, const double* __restrict a1, const double* __restrict a2,
+                     const double* w, int from, int to) {
+    const double w00 = w[0], w01 = w[1], w02 = w[2], w10 = w[3], w11 = w[4], w12 = w[5], w20 = w[6], w21 = w[7],
+                 w22 = w[8];
+    for (int t = from; t < to; ++t) {
+      p0[t] -= (a0[t] * w00 + a1[t] * w01) + a2[t] * w02;
+      p1[t] -= (a0[t] * w10 + a1[t] * w11) + a2[t] * w12;
+      p2[t] -= (a0[t] * w20 + a1[t] * w21) + a2[t] * w22;
+    }
+  }
+  static void update2(double* __restrict p0, double* __restrict p1, double* __restrict p2,
+                      const double* __restrict a0, const double* __restrict a1, const double* __restrict a2,
+                      const double* __restrict b0, const double* __restrict b1, const double* __restrict b2,
+                      const double* wa, const double* wb, int len) {
+    const double a00 = wa[0], a01 = wa[1], a02 = wa[2], a10 = wa[3], a11 = wa[4], a12 = wa[5], a20 = wa[6],
+                 a21 = wa[7], a22 = wa[8];
+    const double b00 = wb[0], b01 = wb[1], b02 = wb[2], b10 = wb[3], b11 = wb[4], b12 = wb[5], b20 = wb[6],
+                 b21 = wb[7], b22 = wb[8];
+    for (int t = 0; t < len; ++t) {
+      p0[t] -= ((a0[t] * a00 + a1[t] * a01) + a2[t] * a02) + ((b0[t] * b00 + b1[t] * b01) + b2[t] * b02);
+      p1[t] -= ((a0[t] * a10 + a1[t] * a11) + a2[t] * a12) + ((b0[t] * b10 + b1[t] * b11) + b2[t] * b12);
+      p2[t] -= ((a0[t] * a20 + a1[t] * a21) + a2[t] * a22) + ((b0[t] * b20 + b1[t] * b21) + b2[t] * b22);
+    }
   }
 
   // In-place Cholesky A = L L^T by node blocks, left-looking, with the forward substitution L y = b fused in
@@ -206,34 +273,32 @@ struct Panels {
       double* p0 = panel(j);
       double* p1 = p0 + h;
       double* p2 = p1 + h;
-      // P(J.., :) -= L(J.., K) L(J, K)^T for every column block K with L(J, K) != 0 (rows J..last(K)).
-      for (int k = sys.first_slot(j); k < j; ++k) {
-        const int hk = rows(k), off = 3 * (j - k), len = hk - off;
-        const double* l0 = panel(k) + off;
-        const double* l1 = l0 + hk;
-        const double* l2 = l1 + hk;
-        const double w00 = l0[0], w01 = l1[0], w02 = l2[0];  // L(J + c, K + m) = w_cm
-        const double w10 = l0[1], w11 = l1[1], w12 = l2[1];
-        const double w20 = l0[2], w21 = l1[2], w22 = l2[2];
-        for (int t = 0; t < len; ++t) {
-          const double a0 = l0[t], a1 = l1[t], a2 = l2[t];
-          p0[t] -= (a0 * w00 + a1 * w01) + a2 * w02;
-          p1[t] -= (a0 * w10 + a1 * w11) + a2 * w12;
-          p2[t] -= (a0 * w20 + a1 * w21) + a2 * w22;
-        }
+      // P(J.., :) -= L(J.., K) L(J, K)^T for every column block K with L(J, K) != 0 (rows J..last(K)), two blocks
+      // K at a time (one pass over P for both); a later K reaches as far down as an earlier one or further.
+      int k = sys.first_slot(j);
+      for (; k + 1 < j; k += 2) {
+        const Source a(*this, k, j), b(*this, k + 1, j);
+        update2(p0, p1, p2, a.l0, a.l1, a.l2, b.l0, b.l1, b.l2, a.w, b.w, a.len);
+        update(p0, p1, p2, b.l0, b.l1, b.l2, b.w, a.len, b.len);
       }
-      // The diagonal block: 3 x 3 Cholesky.
+      if (k < j) {
+        const Source a(*this, k, j);
+        update(p0, p1, p2, a.l0, a.l1, a.l2, a.w, 0, a.len);
+      }
+      // The diagonal block: 3 x 3 Cholesky, in the order that keeps the chain of divisions and square roots short
+      // (the pivots d are those of L D L^T; L's diagonal is sqrt(d), its reciprocal sqrt(1 / d)).
       const double d0 = p0[0];
       if (!(d0 > 0) || !std::isfinite(d0)) return d0 > 0 ? -1 : d0;
-      const double l00 = std::sqrt(d0), i0 = 1.0 / l00;
-      const double l10 = p0[1] * i0, l20 = p0[2] * i0;
-      const double d1 = p1[1] - l10 * l10;
+      const double r0 = 1.0 / d0, i0 = std::sqrt(r0);
+      const double d1 = p1[1] - p0[1] * p0[1] * r0;
       if (!(d1 > 0) || !std::isfinite(d1)) return d1 > 0 ? -1 : d1;
-      const double l11 = std::sqrt(d1), i1 = 1.0 / l11;
-      const double l21 = (p1[2] - l20 * l10) * i1;
-      const double d2 = p2[2] - l20 * l20 - l21 * l21;
+      const double r1 = 1.0 / d1, i1 = std::sqrt(r1);
+      const double m21 = p1[2] - p0[2] * p0[1] * r0;
+      const double d2 = p2[2] - p0[2] * p0[2] * r0 - m21 * m21 * r1;
       if (!(d2 > 0) || !std::isfinite(d2)) return d2 > 0 ? -1 : d2;
-      const double l22 = std::sqrt(d2), i2 = 1.0 / l22;
+      const double i2 = std::sqrt(1.0 / d2);
+      const double l10 = p0[1] * i0, l20 = p0[2] * i0, l21 = m21 * i1;
+      const double l00 = d0 * i0, l11 = d1 * i1, l22 = d2 * i2;
       p0[0] = i0;  // the diagonal holds the reciprocal pivots: the solves multiply
       p0[1] = l10;
       p0[2] = l20;
@@ -272,12 +337,17 @@ struct Panels {
       const double* p1 = p0 + h;
       const double* p2 = p1 + h;
       double* bj = b + 3 * j;
-      double z0 = bj[0], z1 = bj[1], z2 = bj[2];
-      for (int t = 3; t < h; ++t) {
-        z0 -= p0[t] * bj[t];
-        z1 -= p1[t] * bj[t];
-        z2 -= p2[t] * bj[t];
+      // z = y_J - L(J+1.., J)^T x(J+1..), from the last row up: the rows of block J + 1, solved just before, come
+      // last, so little of the sum waits for them.
+      double z0 = 0, z1 = 0, z2 = 0;
+      for (int t = h - 1; t >= 3; --t) {
+        z0 += p0[t] * bj[t];
+        z1 += p1[t] * bj[t];
+        z2 += p2[t] * bj[t];
       }
+      z0 = bj[0] - z0;
+      z1 = bj[1] - z1;
+      z2 = bj[2] - z2;
       const double x2 = z2 * p2[2];
       const double x1 = (z1 - p1[2] * x2) * p1[1];
       const double x0 = (z0 - p0[1] * x1 - p0[2] * x2) * p0[0];
@@ -332,24 +402,66 @@ void assemble(const MassSpring& sys, const PenaltyContact* contacts, int count, 
     b[rows + 1] += d;
     b[2 * rows + 2] += d;
   }
-  for (const Spring& sp : sys.springs()) {
-    const Eigen::Vector3d d = x.col(sp.j) - x.col(sp.i);
-    const double l = d.norm();
-    if (!(l > 1e-12)) continue;
-    const double inv_l = 1.0 / l;
-    const Eigen::Vector3d u = d * inv_l;
-    const Eigen::Vector3d dv = v.col(sp.j) - v.col(sp.i);
-    const double udv = u.dot(dv);
-    // Ks = k ((1 - t) u u^T + t I), t = max(0, 1 - rest / l): df_i/dx_i = -Ks (positive semi-definite by the clamp).
-    const double t = std::max(0.0, 1.0 - sp.rest * inv_l);
-    const double kt = sp.stiffness * t;
-    // f_i + h (K v)_i, with (K v)_i = Ks (v_j - v_i).
-    const Eigen::Vector3d gi = (sp.stiffness * (l - sp.rest) + sp.damping * udv + h * (sp.stiffness - kt) * udv) * u +
-                               (h * kt) * dv;
-    g.col(sp.i) += gi;
-    g.col(sp.j) -= gi;
-    // h^2 Ks + h c u u^T = alpha u u^T + beta I.
-    m.add_spring(sys.slot(sp.i), sys.slot(sp.j), u, h2 * (sp.stiffness - kt) + h * sp.damping, h2 * kt);
+  // The springs in chunks, two passes each: first every spring's direction and coefficients (independent of each
+  // other, so the square roots and divisions of several springs overlap), then their sums into g and the matrix.
+  const Spring* springs = sys.springs().data();
+  const SpringBlocks* blocks = sys.spring_blocks().data();
+  const int spring_count = static_cast<int>(sys.spring_blocks().size());
+  const double* px = x.data();
+  const double* pv = v.data();
+  double* pg = g.data();
+  constexpr int kChunk = 32;
+  struct Term {
+    double u[3], e[3];   // direction, v_j - v_i
+    double a, b;         // f_i + h (K v)_i = a u + b (v_j - v_i)
+    double alpha, beta;  // h^2 Ks + h c u u^T = alpha u u^T + beta I
+    bool skip;           // (near) zero length
+  };
+  Term terms[kChunk];
+  for (int start = 0; start < spring_count; start += kChunk) {
+    const int end = std::min(spring_count, start + kChunk);
+    for (int k = start; k < end; ++k) {
+      const Spring& sp = springs[blocks[k].spring];
+      Term& tm = terms[k - start];
+      const double* xi = px + 3 * sp.i;
+      const double* xj = px + 3 * sp.j;
+      const double d0 = xj[0] - xi[0], d1 = xj[1] - xi[1], d2 = xj[2] - xi[2];
+      const double l = std::sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+      tm.skip = !(l > 1e-12);
+      const double inv_l = 1.0 / l;
+      tm.u[0] = d0 * inv_l;
+      tm.u[1] = d1 * inv_l;
+      tm.u[2] = d2 * inv_l;
+      const double* vi = pv + 3 * sp.i;
+      const double* vj = pv + 3 * sp.j;
+      tm.e[0] = vj[0] - vi[0];
+      tm.e[1] = vj[1] - vi[1];
+      tm.e[2] = vj[2] - vi[2];
+      const double udv = tm.u[0] * tm.e[0] + tm.u[1] * tm.e[1] + tm.u[2] * tm.e[2];
+      // Ks = k ((1 - t) u u^T + t I), t = max(0, 1 - rest / l): df_i/dx_i = -Ks (positive semi-definite by the
+      // clamp); (K v)_i = Ks (v_j - v_i).
+      const double kt = sp.stiffness * std::max(0.0, 1.0 - sp.rest * inv_l);
+      tm.a = sp.stiffness * (l - sp.rest) + sp.damping * udv + h * (sp.stiffness - kt) * udv;
+      tm.b = h * kt;
+      tm.alpha = h2 * (sp.stiffness - kt) + h * sp.damping;
+      tm.beta = h2 * kt;
+    }
+    for (int k = start; k < end; ++k) {
+      const Term& tm = terms[k - start];
+      if (tm.skip) continue;
+      const Spring& sp = springs[blocks[k].spring];
+      const double g0 = tm.a * tm.u[0] + tm.b * tm.e[0], g1 = tm.a * tm.u[1] + tm.b * tm.e[1],
+                   g2 = tm.a * tm.u[2] + tm.b * tm.e[2];
+      double* gi = pg + 3 * sp.i;
+      double* gj = pg + 3 * sp.j;
+      gi[0] += g0;
+      gi[1] += g1;
+      gi[2] += g2;
+      gj[0] -= g0;
+      gj[1] -= g1;
+      gj[2] -= g2;
+      m.add_spring(blocks[k], tm.u, tm.alpha, tm.beta);
+    }
   }
   for (int c = 0; c < count; ++c) {
     const PenaltyContact& pc = contacts[c];

@@ -57,6 +57,15 @@ struct PenaltyContact {
 
 class MassSpringWorkspace;
 
+/// Where a spring's three blocks sit in the factor's storage: offsets of the (3 x 3, column-major) blocks and their
+/// column strides; -1 for a block of a fixed node.
+struct SpringBlocks {
+  int spring = 0;                 // index into MassSpring::springs()
+  int diag_i = -1, stride_i = 0;  // block (slot i, slot i)
+  int diag_j = -1, stride_j = 0;  // block (slot j, slot j)
+  int off = -1, stride = 0;       // block (larger slot, smaller slot)
+};
+
 enum class IntegrateStatus : std::uint8_t {
   kOk = 0,
   kNonFinite,        // a non-finite force, velocity or position appeared: the state was restored
@@ -97,6 +106,8 @@ class MassSpring {
   std::size_t panel_offset(int s) const { return panel_offset_[static_cast<std::size_t>(s)]; }
   /// Doubles of the factor's storage (sum of the panels).
   std::size_t factor_size() const { return panel_offset_.back(); }
+  /// Every spring's blocks, in assembly order (by the smaller slot: the step writes the storage front to back).
+  const std::vector<SpringBlocks>& spring_blocks() const { return spring_blocks_; }
 
   /// Spring + gravity potential energy (J) of positions x (3 x N), gravity measured from the origin.
   double potential_energy(const Eigen::Matrix3Xd& x) const;
@@ -115,6 +126,7 @@ class MassSpring {
   std::vector<int> node_of_slot_;
   std::vector<int> first_slot_, last_slot_;
   std::vector<std::size_t> panel_offset_;  // free_count + 1 entries
+  std::vector<SpringBlocks> spring_blocks_;
   int free_count_ = 0;
   int node_band_ = 0;
 };
