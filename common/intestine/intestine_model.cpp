@@ -252,18 +252,34 @@ int touch(const IntestineModel& model, const Eigen::Matrix3Xd& x, const Probe& p
       const double w[2] = {1 - t, t};
       add(2, nodes, w, a + t * ab, reach_i);
     }
-    for (int tri = 0; tri < 2 * topo.cells(); ++tri) {
-      int nodes[3];
-      topo.triangle(tri, nodes);
-      const Eigen::Vector3d A = x.col(nodes[0]), B = x.col(nodes[1]), C = x.col(nodes[2]);
-      if (((A.cwiseMin(B).cwiseMin(C) - c).array() > reach_m).any() ||
-          ((c - A.cwiseMax(B).cwiseMax(C)).array() > reach_m).any()) {
-        continue;
+    // Mesentery cells: a cell whose four corners' box is out of reach skips both its triangles.
+    const double* px = x.data();
+    for (int r = 0; r + 1 < topo.rows; ++r) {
+      for (int col = 0; col + 1 < topo.cols; ++col) {
+        const double* q[4] = {px + 3 * topo.node(r, col), px + 3 * topo.node(r, col + 1),
+                              px + 3 * topo.node(r + 1, col), px + 3 * topo.node(r + 1, col + 1)};
+        bool out = false;
+        for (int k = 0; k < 3 && !out; ++k) {
+          const double lo = std::min(std::min(q[0][k], q[1][k]), std::min(q[2][k], q[3][k]));
+          const double hi = std::max(std::max(q[0][k], q[1][k]), std::max(q[2][k], q[3][k]));
+          out = lo - c[k] > reach_m || c[k] - hi > reach_m;
+        }
+        if (out) continue;
+        const int cell = r * (topo.cols - 1) + col;
+        for (int tri = 2 * cell; tri < 2 * cell + 2; ++tri) {
+          int nodes[3];
+          topo.triangle(tri, nodes);
+          const Eigen::Vector3d A = x.col(nodes[0]), B = x.col(nodes[1]), C = x.col(nodes[2]);
+          if (((A.cwiseMin(B).cwiseMin(C) - c).array() > reach_m).any() ||
+              ((c - A.cwiseMax(B).cwiseMax(C)).array() > reach_m).any()) {
+            continue;
+          }
+          Eigen::Vector3d bary;
+          const Eigen::Vector3d qc = closest_point_triangle(c, A, B, C, bary);
+          const double w[3] = {bary[0], bary[1], bary[2]};
+          add(3, nodes, w, qc, reach_m);
+        }
       }
-      Eigen::Vector3d bary;
-      const Eigen::Vector3d q = closest_point_triangle(c, A, B, C, bary);
-      const double w[3] = {bary[0], bary[1], bary[2]};
-      add(3, nodes, w, q, reach_m);
     }
   }
   r.contacts = np;

@@ -491,17 +491,12 @@ void assemble(const MassSpring& sys, const PenaltyContact* contacts, int count, 
 IntegrateStatus integrate(const MassSpring& sys, Integrator integrator, const PenaltyContact* contacts, int count,
                           double dt, Eigen::Matrix3Xd& x, Eigen::Matrix3Xd& v, MassSpringWorkspace& w) noexcept {
   const int n = sys.node_count();
-  w.x0_ = x;
-  w.v0_ = v;
-  auto restore = [&](IntegrateStatus s) {
-    x = w.x0_;
-    v = w.v0_;
-    return s;
-  };
   if (!(dt > 0) || !std::isfinite(dt)) return IntegrateStatus::kNonFinite;
   const auto& inv_mass = sys.inverse_mass();
 
   if (integrator == Integrator::kSymplecticEuler) {
+    w.x0_ = x;
+    w.v0_ = v;
     forces(sys, contacts, count, x, v, w.force_);
     for (int i = 0; i < n; ++i) {
       if (sys.fixed(i)) {
@@ -511,29 +506,53 @@ IntegrateStatus integrate(const MassSpring& sys, Integrator integrator, const Pe
       v.col(i) += (dt * inv_mass[static_cast<std::size_t>(i)]) * w.force_.col(i);
       x.col(i) += dt * v.col(i);
     }
-  } else {
-    std::fill(w.factor_.begin(), w.factor_.end(), 0.0);
-    const Panels panels{sys, w.factor_.data()};
-    assemble(sys, contacts, count, x, v, dt, w.force_, panels);
-    if (!finite(w.force_)) return restore(IntegrateStatus::kNonFinite);
-    // rhs = h (f + h K v), in slot order.
-    for (int s = 0; s < sys.free_count(); ++s) {
-      const int node = sys.node_of_slot(s);
-      for (int c = 0; c < 3; ++c) w.rhs_[static_cast<std::size_t>(3 * s + c)] = dt * w.force_(c, node);
+    if (!finite(x) || !finite(v)) {
+      x = w.x0_;
+      v = w.v0_;
+      return IntegrateStatus::kNonFinite;
     }
-    w.min_pivot_ = panels.factor(w.rhs_.data(), w.max_pivot_);
-    if (!(w.min_pivot_ > 0)) return restore(IntegrateStatus::kNotPositive);
-    panels.solve_back(w.rhs_.data());
-    for (int s = 0; s < sys.free_count(); ++s) {
-      const int node = sys.node_of_slot(s);
-      for (int c = 0; c < 3; ++c) v(c, node) += w.rhs_[static_cast<std::size_t>(3 * s + c)];
-      x.col(node) += dt * v.col(node);
-    }
-    for (int i = 0; i < n; ++i) {
-      if (sys.fixed(i)) v.col(i).setZero();
+    return IntegrateStatus::kOk;
+  }
+  // Implicit: x and v are written only once the new values are known to be finite (nothing to restore).
+  std::fill(w.factor_.begin(), w.factor_.end(), 0.0);
+  const Panels panels{sys, w.factor_.data()};
+  assemble(sys, contacts, count, x, v, dt, w.force_, panels);
+  if (!finite(w.force_)) return IntegrateStatus::kNonFinite;
+  // rhs = h (f + h K v), in slot order.
+  const int free = sys.free_count();
+  double* rhs = w.rhs_.data();
+  for (int s = 0; s < free; ++s) {
+    const double* g = w.force_.col(sys.node_of_slot(s)).data();
+    rhs[3 * s] = dt * g[0];
+    rhs[3 * s + 1] = dt * g[1];
+    rhs[3 * s + 2] = dt * g[2];
+  }
+  w.min_pivot_ = panels.factor(rhs, w.max_pivot_);
+  if (!(w.min_pivot_ > 0)) return IntegrateStatus::kNotPositive;
+  panels.solve_back(rhs);
+  // v += dv, x += h v: checked first, then written.
+  bool ok = true;
+  for (int s = 0; s < free; ++s) {
+    const int node = sys.node_of_slot(s);
+    for (int c = 0; c < 3; ++c) {
+      const double vn = v(c, node) + rhs[3 * s + c];
+      ok = ok && std::isfinite(vn) && std::isfinite(x(c, node) + dt * vn);
     }
   }
-  if (!finite(x) || !finite(v)) return restore(IntegrateStatus::kNonFinite);
+  for (int i = 0; i < n; ++i) {
+    if (sys.fixed(i)) ok = ok && x.col(i).allFinite();
+  }
+  if (!ok) return IntegrateStatus::kNonFinite;
+  for (int s = 0; s < free; ++s) {
+    const int node = sys.node_of_slot(s);
+    for (int c = 0; c < 3; ++c) {
+      v(c, node) += rhs[3 * s + c];
+      x(c, node) += dt * v(c, node);
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    if (sys.fixed(i)) v.col(i).setZero();
+  }
   return IntegrateStatus::kOk;
 }
 

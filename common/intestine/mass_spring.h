@@ -148,7 +148,7 @@ class MassSpringWorkspace {
   std::vector<double> factor_;  // the panels (MassSpring::panel_offset): the matrix, then its Cholesky factor L
   std::vector<double> rhs_;     // 3 free nodes, slot order: the right-hand side, then the solution dv
   Eigen::Matrix3Xd force_;      // 3 x N: f (explicit), f + h K v (implicit)
-  Eigen::Matrix3Xd x0_, v0_;    // backup for the non-finite guard
+  Eigen::Matrix3Xd x0_, v0_;    // backup for the non-finite guard of the explicit step
   double min_pivot_ = 0;
   double max_pivot_ = 0;
 };
