@@ -1,6 +1,7 @@
 #include "haptic_app.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
@@ -270,18 +271,43 @@ void HapticApp::tick(std::uint64_t k) {
   const int contacts = organ_->contacts();
   if (log_writer_ != nullptr) {
     if (char* line = log_writer_->begin_line()) {
-      const std::size_t size = log_writer_->slot_bytes();
-      const Eigen::Vector3d& f = result[0].device_force;
-      int len = std::snprintf(line, size, "%llu,%.9f,%.17g,%.17g,%.17g,%d", static_cast<unsigned long long>(k), t,
-                              f.x(), f.y(), f.z(), contacts);
-      for (int i = 0; n > 1 && i < n && len > 0 && static_cast<std::size_t>(len) < size; ++i) {
-        const Eigen::Vector3d& fi = result[static_cast<std::size_t>(i)].device_force;
-        len += std::snprintf(line + len, size - static_cast<std::size_t>(len), ",%.17g,%.17g,%.17g,%d", fi.x(),
-                             fi.y(), fi.z(), organ_->instrument_contacts(i));
+      // Numbers as the shortest text that reads back to the same double (std::to_chars: about ten times cheaper on
+      // the loop thread than printf's %.17g, and bit-exact on reload); t with 9 decimals as before.
+      char* p = line;
+      char* const end = line + log_writer_->slot_bytes() - 1;  // room for the newline
+      bool ok = true;
+      const auto put = [&](auto value) {
+        if (!ok) return;
+        const auto r = std::to_chars(p, end, value);
+        ok = r.ec == std::errc() && r.ptr < end;
+        if (ok) {
+          p = r.ptr;
+          *p++ = ',';
+        }
+      };
+      const auto put_vec = [&](const Eigen::Vector3d& v) {
+        put(v.x());
+        put(v.y());
+        put(v.z());
+      };
+      put(static_cast<unsigned long long>(k));
+      if (ok) {
+        const auto r = std::to_chars(p, end, t, std::chars_format::fixed, 9);
+        ok = r.ec == std::errc() && r.ptr < end;
+        if (ok) {
+          p = r.ptr;
+          *p++ = ',';
+        }
       }
-      if (len > 0 && static_cast<std::size_t>(len) + 1 < size) {
-        line[len++] = '\n';
-        log_writer_->commit_line(static_cast<std::size_t>(len));
+      put_vec(result[0].device_force);
+      put(contacts);
+      for (int i = 0; n > 1 && i < n; ++i) {
+        put_vec(result[static_cast<std::size_t>(i)].device_force);
+        put(organ_->instrument_contacts(i));
+      }
+      if (ok) {
+        p[-1] = '\n';  // the last field's comma
+        log_writer_->commit_line(static_cast<std::size_t>(p - line));
       }
     }
   }

@@ -206,8 +206,11 @@ TEST_F(DeviceSim, TrajectoryDrivesEachInstrumentAndLosesOnlyTheSilencedOne) {
     std::stringstream ls(line);
     for (std::string x; std::getline(ls, x, ',');) f.push_back(std::stod(x));
     if (f.size() < 14) continue;
+    // By tick number (1 kHz): the log prints t with 9 decimals, which may read back just below the recording's
+    // exact k * 0.001 and count the first tick with input again as lost (found flaky: t 1.763 at the boundary).
     const double t = f[1];
-    if (t < rows[l.first].t + 0.01 || t >= rows[l.second].t) continue;
+    const long tick = std::lround(f[0]);
+    if (tick < std::lround(rows[l.first].t * 1000) + 10 || tick >= std::lround(rows[l.second].t * 1000)) continue;
     ++lost_rows;
     EXPECT_EQ(std::hypot(f[6], f[7], f[8]), 0.0) << "left's force while lost, t " << t;
     right_pressing += std::hypot(f[10], f[11], f[12]) > 0.01 ? 1 : 0;
