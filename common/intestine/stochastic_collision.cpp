@@ -181,7 +181,9 @@ bool CollisionTopology::segments_tested(int a, int b) const {
 bool CollisionTopology::cell_tested(int segment, int cell) const {
   if (segment < 0 || segment >= segments() || cell < 0 || cell >= cells()) return false;
   const int r = cell / (cols - 1), c = cell % (cols - 1);
-  if (r == 0 && std::abs(c - segment) <= cell_exclusion) return false;
+  // Row 0, and every row in the tapered columns at either end (the tube lies on its narrowed mesentery there).
+  const bool taper = c < taper_columns || c >= (cols - 1) - taper_columns;
+  if ((r == 0 || taper) && std::abs(c - segment) <= cell_exclusion) return false;
   // Never a cell that shares a node with the segment.
   const int sa = node(0, segment), sb = node(0, segment + 1);
   for (int rr = r; rr <= r + 1; ++rr) {

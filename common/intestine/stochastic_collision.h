@@ -61,6 +61,8 @@ struct CollisionTopology {
   double mesentery_half_thickness = 0.005;    // m
   int segment_exclusion = 2;     // segments a, b with |a - b| <= this are neighbours and never tested
   int cell_exclusion = 2;        // cells of grid row 0 within this many columns of a segment are never tested
+  int taper_columns = 0;         // columns at each end where the mesentery narrows: there cells of EVERY row within
+                                 // cell_exclusion columns of a segment are never tested (the tube lies on them)
 
   int segments() const { return cols - 1; }
   int cells() const { return (rows - 1) * (cols - 1); }
