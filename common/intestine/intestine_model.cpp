@@ -28,13 +28,13 @@ void axis_frame(const Eigen::Vector3d& axis, Eigen::Vector3d& e0, Eigen::Vector3
 struct FoldedSine {
   double radius, span, shape, amplitude;
   int folds;
+  double end;  // phi at the curve's end: 2 pi folds, or (tapered mesentery) 2 pi folds - pi, ends apart on the vessel
   Eigen::Vector2d at(double phi) const {  // (arc along the circumference, along the vessel), m
-    const double theta = span / (2 * kPi * folds) * (phi + 0.5 * shape * std::sin(2 * phi));
+    const double theta = span / end * (phi + 0.5 * shape * std::sin(2 * phi));
     return {radius * theta, amplitude * std::cos(phi)};
   }
   double length(int samples) const {
     double l = 0;
-    const double end = 2 * kPi * folds;
     Eigen::Vector2d prev = at(0);
     for (int i = 1; i <= samples; ++i) {
       const Eigen::Vector2d p = at(end * i / samples);
@@ -55,6 +55,21 @@ const char* to_string(StepStatus status) {
     case StepStatus::kSolverFailed: return "implicit solve failed (state restored)";
   }
   return "?";
+}
+
+double mesentery_width_factor(const IntestineParams& p, int column) {
+  if (!(p.mesentery_taper > 0)) return 1.0;
+  const double taper = p.mesentery_taper * (p.columns - 1);
+  const double d = std::min(column, p.columns - 1 - column);
+  return d >= taper ? 1.0 : std::sin(0.5 * kPi * (d + 0.5) / (taper + 0.5));
+}
+
+double mesentery_root_extension(const IntestineParams& p) {
+  return p.mesentery_taper > 0 ? 4 * p.intestine_radius + 0.5 * p.mesentery_thickness : 0.0;
+}
+
+int mesentery_taper_columns(const IntestineParams& p) {
+  return p.mesentery_taper > 0 ? static_cast<int>(std::ceil(p.mesentery_taper * (p.columns - 1))) : 0;
 }
 
 MassSpring IntestineModel::build(const IntestineParams& p, double& amplitude, double& segment_length) {
@@ -80,6 +95,10 @@ MassSpring IntestineModel::build(const IntestineParams& p, double& amplitude, do
   if (!p.axis_direction.allFinite() || p.axis_direction.norm() < 1e-9 || !p.axis_origin.allFinite()) {
     throw_error("intestine: axis_direction must be a non-zero vector and axis_origin finite");
   }
+  if (!(p.mesentery_taper >= 0 && p.mesentery_taper <= 0.45)) {
+    throw_error("intestine: mesentery_taper ", p.mesentery_taper,
+                " is out of [0, 0.45] (the fraction of the length at each end over which the mesentery narrows)");
+  }
   const double arc = p.cylinder_radius * p.angular_span;
   if (p.length <= arc) {
     throw_error("intestine: length ", p.length, " m must exceed the arc the curve covers (", arc,
@@ -87,7 +106,8 @@ MassSpring IntestineModel::build(const IntestineParams& p, double& amplitude, do
   }
 
   // Amplitude of the folds such that the curve is `length` long (the length grows with the amplitude: bisection).
-  FoldedSine curve{p.cylinder_radius, p.angular_span, p.fold_shape, 0.0, p.folds};
+  const double curve_end = p.mesentery_taper > 0 ? 2 * kPi * p.folds - kPi : 2 * kPi * p.folds;
+  FoldedSine curve{p.cylinder_radius, p.angular_span, p.fold_shape, 0.0, p.folds, curve_end};
   const int fine = 200 * p.folds * 10;
   double lo = 0, hi = p.length;
   for (int it = 0; it < 60; ++it) {
@@ -100,7 +120,7 @@ MassSpring IntestineModel::build(const IntestineParams& p, double& amplitude, do
   const int cols = p.columns, rows = p.rows;
   std::vector<Eigen::Vector2d> dense(static_cast<std::size_t>(fine) + 1);
   std::vector<double> acc(static_cast<std::size_t>(fine) + 1, 0.0);
-  const double end = 2 * kPi * p.folds;
+  const double end = curve_end;
   for (int i = 0; i <= fine; ++i) {
     dense[static_cast<std::size_t>(i)] = curve.at(end * i / fine);
     if (i > 0) {
@@ -123,11 +143,19 @@ MassSpring IntestineModel::build(const IntestineParams& p, double& amplitude, do
     const double f = seg > 0 ? std::clamp((target - acc[k]) / seg, 0.0, 1.0) : 0.0;
     const Eigen::Vector2d q = (1 - f) * dense[k] + f * dense[k + 1];
     const double theta = theta0 + q.x() / p.cylinder_radius;
-    const Eigen::Vector3d on_axis = p.axis_origin + q.y() * e0;
+    // Tapered ends: besides narrowing, the curve is carried along the vessel beyond the folds' range [-A, A] (the
+    // duodenojejunal flexure and the ileocecal junction lie at the two ends of the root, beyond the fan of folds), by
+    // root_extension (1 - w) away from the vessel's centre on the side of its end, so that the narrowed ends meet the
+    // vessel where no other fold's sheet is (every crest's sheet meets it at s = +-A).
+    const double w = mesentery_width_factor(p, c);
+    const double end_side = (2 * c < cols - 1 ? dense.front().y() : dense.back().y()) >= 0 ? 1.0 : -1.0;
+    const double s = q.y() + end_side * mesentery_root_extension(p) * (1.0 - w);
+    const Eigen::Vector3d on_axis = p.axis_origin + s * e0;
     const Eigen::Vector3d radial = std::cos(theta) * e1 + std::sin(theta) * e2;
-    // Row r at radius R (1 - r / (rows - 1)): row 0 on the cylinder, the last row on the vessel.
+    // Row r at radius R w (1 - r / (rows - 1)): row 0 on the cylinder (narrowed by w near the ends), the last row on
+    // the vessel.
     for (int r = 0; r < rows; ++r) {
-      const double rad = p.cylinder_radius * (1.0 - static_cast<double>(r) / (rows - 1));
+      const double rad = p.cylinder_radius * w * (1.0 - static_cast<double>(r) / (rows - 1));
       rest.col(r * cols + c) = on_axis + rad * radial;
     }
   }
@@ -181,6 +209,7 @@ IntestineModel::IntestineModel(const IntestineParams& params)
   topology_.mesentery_half_thickness = 0.5 * params_.mesentery_thickness;
   topology_.segment_exclusion = params_.segment_exclusion;
   topology_.cell_exclusion = params_.cell_exclusion;
+  topology_.taper_columns = mesentery_taper_columns(params_);
 }
 
 IntestineState::IntestineState(const IntestineModel& model, std::uint64_t seed)

@@ -54,6 +54,16 @@ struct IntestineParams {
   int folds = 5;                     // periods of the folded sine around the cylinder
   double angular_span = 5.65486677646;  // rad (0.9 turn): angle covered around the vessel, < 2 pi keeps the ends apart
   double fold_shape = 1.0;           // 0..2: 0 a plain sine, 1 vertical legs and round crests, 2 legs leaning back
+  // The mesentery narrows towards both ends of the intestine (paper section 7): over this fraction of the length at
+  // each end (0..0.45; 0: full width everywhere) every row's distance from the vessel is scaled by
+  // sin(pi/2 (d + 1/2) / (T + 1/2)), d the column's distance from its end and T = taper (columns - 1): the width
+  // would reach zero half a segment past the last mass (7.5 % of cylinder_radius at the end masses with 0.1 and 100
+  // columns). The fold curve then runs 4.5 instead of 5 periods (folds - 1/2) so that its two ends lie apart along
+  // the vessel instead of side by side, the tapered columns are carried along the vessel beyond the folds' range by
+  // mesentery_root_extension() (1 - w) (the ends attach at the two ends of the root, beyond the fan of folds, where
+  // no crest's sheet meets the vessel), and the tube lying on its own narrowed mesentery there is not a collision
+  // (CollisionTopology::taper_columns).
+  double mesentery_taper = 0.0;
   Eigen::Vector3d axis_origin = Eigen::Vector3d::Zero();  // m, centre of the curve on the vessel
   Eigen::Vector3d axis_direction = Eigen::Vector3d::UnitX();  // the vessel (normalized on use)
   int columns = 100;                 // masses along the intestine, >= 4
@@ -85,6 +95,15 @@ struct IntestineParams {
   ResponseParams response;           // iterations
   int contact_capacity = 1024;       // contacts per step (more are counted in StepReport::contacts_overflow)
 };
+
+/// The mesentery's width at intestine column `column` as a fraction of cylinder_radius (1 without a taper).
+double mesentery_width_factor(const IntestineParams& params, int column);
+/// How far beyond the folds' range along the vessel (m) the tapered ends are carried, scaled by 1 - width factor:
+/// 4 intestine_radius + mesentery_thickness / 2 (one radius and the half thickness clear the crests' sheets at
+/// s = +-amplitude, three radii of margin), 0 without a taper.
+double mesentery_root_extension(const IntestineParams& params);
+/// Columns at each end inside the taper (0 without one).
+int mesentery_taper_columns(const IntestineParams& params);
 
 /// The immutable model: parameters, rest shape, mass-spring system, collision topology.
 class IntestineModel {

@@ -531,8 +531,8 @@ VisualSpec read_visual(const Reader& r, const Field& f) {
 
 IntestineSpec read_intestine(const Reader& r, const Field& f) {
   const Map m(r, f,
-              {"length", "cylinder_radius", "folds", "angular_span", "fold_shape", "axis_origin", "axis_direction",
-               "columns", "rows", "intestine_radius", "mesentery_thickness", "intestine_node_mass",
+              {"length", "cylinder_radius", "folds", "angular_span", "fold_shape", "mesentery_taper", "axis_origin",
+               "axis_direction", "columns", "rows", "intestine_radius", "mesentery_thickness", "intestine_node_mass",
                "mesentery_node_mass", "structural_stiffness", "shear_stiffness", "bending_stiffness", "spring_damping",
                "drag", "gravity", "integrator", "probe_radius", "probe_stiffness", "self_collisions", "random_pairs",
                "random_mesentery_pairs", "seed", "response_iterations", "contact_capacity"});
@@ -550,6 +550,8 @@ IntestineSpec read_intestine(const Reader& r, const Field& f) {
   read_number("angular_span", p.angular_span, {0, 2 * 3.14159265358979323846, true, false},
            "angle in rad covered around the vessel, < 2 pi keeps the ends apart");
   read_number("fold_shape", p.fold_shape, closed(0, 2), "0 a plain sine, 1 vertical legs and round crests");
+  read_number("mesentery_taper", p.mesentery_taper, closed(0, 0.45),
+              "fraction of the length at each end over which the mesentery narrows to the vessel, 0..0.45 (0: none)");
   if (m.has("axis_origin")) p.axis_origin = r.vec3(m.at("axis_origin"), "centre of the curve on the vessel, m");
   if (m.has("axis_direction")) p.axis_direction = r.direction(m.at("axis_direction"), "non-zero vessel direction");
   if (m.has("columns")) {
@@ -685,7 +687,7 @@ std::uint64_t Scene::hash() const {
   // The intestine's parameters (other models hash as before).
   if (model == "intestine") {
     const intestine::IntestineParams& p = intestine.params;
-    for (double v : {p.length, p.cylinder_radius, p.angular_span, p.fold_shape, p.intestine_radius,
+    for (double v : {p.length, p.cylinder_radius, p.angular_span, p.fold_shape, p.mesentery_taper, p.intestine_radius,
                      p.mesentery_thickness, p.intestine_node_mass, p.mesentery_node_mass, p.structural_stiffness,
                      p.shear_stiffness, p.bending_stiffness, p.spring_damping, p.drag, p.probe_stiffness,
                      p.probe_force_limit, p.detection.drop_factor, intestine.probe_radius}) {

@@ -225,7 +225,8 @@ TEST(SceneLoad, IntestineKeysFillTheModelParameters) {
                                    "name: gut\nmodel: intestine\n"
                                    "intestine:\n"
                                    "  length: 3.0\n  cylinder_radius: 0.12\n  folds: 4\n  angular_span: 5.0\n"
-                                   "  fold_shape: 0.5\n  axis_origin: [0, 0, 0.1]\n  axis_direction: [0, 2, 0]\n"
+                                   "  fold_shape: 0.5\n  mesentery_taper: 0.2\n  axis_origin: [0, 0, 0.1]\n"
+                                   "  axis_direction: [0, 2, 0]\n"
                                    "  columns: 80\n  rows: 5\n  intestine_radius: 0.015\n  mesentery_thickness: 0\n"
                                    "  intestine_node_mass: 0.01\n  mesentery_node_mass: 0.003\n"
                                    "  structural_stiffness: 1000\n  shear_stiffness: 200\n  bending_stiffness: 20\n"
@@ -241,6 +242,7 @@ TEST(SceneLoad, IntestineKeysFillTheModelParameters) {
   EXPECT_EQ(p.folds, 4);
   EXPECT_EQ(p.angular_span, 5.0);
   EXPECT_EQ(p.fold_shape, 0.5);
+  EXPECT_EQ(p.mesentery_taper, 0.2);
   EXPECT_EQ(p.axis_origin, Eigen::Vector3d(0, 0, 0.1));
   EXPECT_EQ(p.axis_direction, Eigen::Vector3d(0, 1, 0));  // normalized
   EXPECT_EQ(p.columns, 80);
@@ -621,7 +623,8 @@ TEST(SceneHash, IntestineParametersEnterTheHash) {
   EXPECT_EQ(h0, load_scene(write(dir / "c.yaml", base + "visual: {target_fps: 20}\n")).hash());
   for (const char* change : {"intestine: {columns: 90}\n", "intestine: {random_pairs: 11}\n", "intestine: {seed: 2}\n",
                              "intestine: {probe_radius: 0.02}\n", "intestine: {gravity: [0, 0, -9]}\n",
-                             "intestine: {integrator: symplectic_euler}\n", "tool: {force_limit: 4}\n"}) {
+                             "intestine: {integrator: symplectic_euler}\n", "intestine: {mesentery_taper: 0.1}\n",
+                             "tool: {force_limit: 4}\n"}) {
     EXPECT_NE(h0, load_scene(write(dir / "d.yaml", base + change)).hash()) << change;
   }
 }
@@ -855,6 +858,10 @@ INSTANTIATE_TEST_SUITE_P(
                   "key 'intestine.intestine_radius'", "out of range"},
         ErrorCase{"IntestineShort", kIntestine + "intestine:\n  length: 0.5\n", 4, "key 'intestine.length'",
                   "does not exceed the arc"},
+        ErrorCase{"IntestineTaper", kIntestine + "intestine: {mesentery_taper: 0.5}\n", 3,
+                  "key 'intestine.mesentery_taper'", "out of range"},
+        ErrorCase{"IntestineTaperNegative", kIntestine + "intestine: {mesentery_taper: -0.1}\n", 3,
+                  "key 'intestine.mesentery_taper'", "out of range"},
         ErrorCase{"IntestineSpan", kIntestine + "intestine: {angular_span: 7}\n", 3, "key 'intestine.angular_span'",
                   "out of range"},
         ErrorCase{"IntestineStiffness", kIntestine + "intestine: {structural_stiffness: -1}\n", 3,
