@@ -212,6 +212,7 @@ void HapticApp::tick(std::uint64_t k) {
 
   // --- every instrument's contacts in one solve (the organ couples them), then each one's force stage ---
   std::array<ContactTick, kMaxInstruments> result;
+  std::array<int, kMaxInstruments> contacts_of{};  // each instrument's contacts this tick (stats and log)
   organ_->step(inputs.data(), n, dt_, result.data());
 
   // --- hand-off: the publisher thread writes each force (devices), the contact frame (visual node), organ topics ---
@@ -259,10 +260,11 @@ void HapticApp::tick(std::uint64_t k) {
     ir.contact_points = static_cast<std::uint32_t>(r.points_in_contact);
     ir.saturated = r.saturated;
     out.flags |= flags;
-    const int c = organ_->instrument_contacts(i);
+    const int c = contacts_of[si] = organ_->instrument_contacts(i);
     in.contacts_max = std::max(in.contacts_max, c);
     if (c > 0) ++in.contact_ticks;
     in.force_max_n = std::max(in.force_max_n, r.device_force.norm());
+    force_max_n_ = std::max(force_max_n_, in.force_max_n);
   }
   organ_->fill_outputs(out.organ);
   publisher_->commit();
@@ -303,7 +305,7 @@ void HapticApp::tick(std::uint64_t k) {
       put(contacts);
       for (int i = 0; n > 1 && i < n; ++i) {
         put_vec(result[static_cast<std::size_t>(i)].device_force);
-        put(organ_->instrument_contacts(i));
+        put(contacts_of[static_cast<std::size_t>(i)]);
       }
       if (ok) {
         p[-1] = '\n';  // the last field's comma
@@ -313,7 +315,6 @@ void HapticApp::tick(std::uint64_t k) {
   }
   if (contacts > contacts_max_) contacts_max_ = contacts;
   if (contacts > 0) ++contact_ticks_;
-  for (int i = 0; i < n; ++i) force_max_n_ = std::max(force_max_n_, result[static_cast<std::size_t>(i)].device_force.norm());
 }
 
 int HapticApp::run() {

@@ -271,6 +271,7 @@ void LiverContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
     return;
   }
   // The solution's nodes are in first-seen request order: each belongs to the instrument that requested it first.
+  // (One instrument: the same sum, in the same order, as the solve's tool_force.)
   std::array<Eigen::Vector3d, kMaxInstruments> force;
   for (auto& f : force) f.setZero();
   for (int l = 0; l < solution_.count; ++l) {
@@ -284,7 +285,6 @@ void LiverContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
     node_instrument_[static_cast<std::size_t>(l)] = owner;
     force[static_cast<std::size_t>(owner)] -= solution_.lambda[static_cast<std::size_t>(l)];
   }
-  if (count_ == 1) force[0] = solution_.tool_force;  // one instrument: exactly as before issue 19
   for (int t = 0; t < count_; ++t) {
     if (geometry_[static_cast<std::size_t>(t)] == nullptr) continue;
     finish(t, force[static_cast<std::size_t>(t)], dir_sum[static_cast<std::size_t>(t)], out[t]);
@@ -389,8 +389,6 @@ void LiverContacts::step_patch(double dt, ContactTick* out) noexcept {
   each_point([&](int t, int i, int g, const ToolGeometry& geometry) {
     const auto si = static_cast<std::size_t>(g);
     const double jaw = jaw_[static_cast<std::size_t>(t)];
-    const double mu = tools_[static_cast<std::size_t>(t)].friction;
-    (void)mu;
     PointContact& c = points_[si];
     track(geometry, i, g, !have_previous_[static_cast<std::size_t>(t)]);
     if (c.grasp && jaw > kGraspOpenJaw) {
@@ -749,7 +747,9 @@ void LiverContacts::step_patch(double dt, ContactTick* out) noexcept {
       }
     }
   });
-  if (count_ == 1) force[0] = s.tool_force;  // one instrument: exactly as before issue 19
+  // One instrument: the solve's own sum over the union nodes (bit-identical to before issue 19; the per-point sum
+  // above is the same force in another order of additions).
+  if (count_ == 1) force[0] = s.tool_force;
   for (int t = 0; t < count_; ++t) {
     if (geometry_[static_cast<std::size_t>(t)] == nullptr) continue;
     finish(t, force[static_cast<std::size_t>(t)], dir_sum[static_cast<std::size_t>(t)], out[t]);
