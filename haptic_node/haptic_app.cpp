@@ -235,17 +235,14 @@ void HapticApp::tick(std::uint64_t k) {
       flags |= msg::kFlagInputLost;
     }
     if (r.nonfinite) {
-      ++nonfinite_rejected_;
       ++in.nonfinite_rejected;
       flags |= msg::kFlagNonFiniteHeld;
     }
     if (r.over_capacity) {
-      ++over_capacity_events_;
       ++in.over_capacity_events;
       flags |= msg::kFlagOverCapacity;
     }
     if (r.saturated) {
-      ++saturated_ticks_;
       ++in.saturated_ticks;
       flags |= msg::kFlagSaturated;
     }
@@ -388,9 +385,17 @@ void HapticApp::shutdown() {
   j["deadline_misses"] = deadline_misses_;
   j["contacts_max"] = contacts_max_;
   j["force_max_n"] = force_max_n_;
-  j["nonfinite_rejected"] = nonfinite_rejected_;
-  j["over_capacity_events"] = over_capacity_events_;
-  j["saturated_ticks"] = saturated_ticks_;
+  // Totals over the instruments (instrument-ticks; one instrument: ticks).
+  std::uint64_t nonfinite_rejected = 0, over_capacity_events = 0, saturated_ticks = 0;
+  for (int i = 0; i < instrument_count_; ++i) {
+    const Instrument& in = instruments_[static_cast<std::size_t>(i)];
+    nonfinite_rejected += in.nonfinite_rejected;
+    over_capacity_events += in.over_capacity_events;
+    saturated_ticks += in.saturated_ticks;
+  }
+  j["nonfinite_rejected"] = nonfinite_rejected;
+  j["over_capacity_events"] = over_capacity_events;
+  j["saturated_ticks"] = saturated_ticks;
   j["contact_ticks"] = contact_ticks_;
   j["input"] = live_ ? "device" : "replay";
   j["input_lost_ticks"] = input_lost_ticks_;

@@ -120,9 +120,6 @@ class HapticApp {
   std::int64_t deadline_misses_ = 0;
   int contacts_max_ = 0;
   double force_max_n_ = 0;
-  std::uint64_t nonfinite_rejected_ = 0;
-  std::uint64_t over_capacity_events_ = 0;
-  std::uint64_t saturated_ticks_ = 0;
   std::uint64_t input_lost_ticks_ = 0;      // ticks with at least one instrument's input lost
   std::uint64_t contact_ticks_ = 0;
   std::uint64_t record_writer_stats_ = 0;   // lines dropped (ring full) or failed to write
