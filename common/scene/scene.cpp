@@ -492,12 +492,20 @@ HapticSpec read_haptic(const Reader& r, const Field& f) {
 }
 
 VisualSpec read_visual(const Reader& r, const Field& f) {
-  const Map m(r, f, {"rate_hz", "width", "height", "camera", "png_every", "vtk", "video", "surface", "target_fps"});
+  const Map m(r, f, {"rate_hz", "width", "height", "camera", "png_every", "vtk", "video", "surface", "target_fps",
+                     "stream_fps", "stream_quality"});
   VisualSpec v;
   if (m.has("rate_hz")) v.rate_hz = r.number(m.at("rate_hz"), closed(1, 1000), "frame rate in Hz, e.g. 50");
   if (m.has("target_fps")) {
     v.target_fps = r.number(m.at("target_fps"), closed(1, 1000),
                             "frame rate in Hz the intestine's level of detail is adapted to hold, e.g. 60");
+  }
+  if (m.has("stream_fps")) {
+    v.stream_fps = r.number(m.at("stream_fps"), closed(0, 120),
+                            "rate in Hz of the JPEG frames streamed on surgsim/frame for the web view; 0 = off");
+  }
+  if (m.has("stream_quality")) {
+    v.stream_quality = r.integer(m.at("stream_quality"), 1, 100, "JPEG quality of the streamed frames, e.g. 75");
   }
   if (m.has("width")) v.width = r.integer(m.at("width"), 16, 8192, "image width in pixels");
   if (m.has("height")) v.height = r.integer(m.at("height"), 16, 8192, "image height in pixels");

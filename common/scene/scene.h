@@ -40,6 +40,8 @@ struct VisualSpec {
   bool video = false;      // assemble an MP4 with ffmpeg at exit when available
   std::string surface;     // absolute path of a finer visual surface embedded in the mesh; empty = boundary
   double target_fps = 0;   // Hz, target of the intestine's frame-rate controller (paper eq. 15), 1..1000; 0 = rate_hz
+  double stream_fps = 0;   // Hz, frames JPEG-encoded onto surgsim/frame for the web view (issue 18); 0 = off, 0..120
+  int stream_quality = 75; // JPEG quality of the streamed frames, 1..100 (not in the scene hash: no physics)
 };
 
 struct Scene {
