@@ -6,8 +6,9 @@ liver's top surface under the trocar is at z ~ 0.042, i.e. insertion ~ 0.158 m t
 Two hands (config/liver_two_tools.yaml): at pitch = yaw = 0 the grasper's tip touches the rest surface of the free left
 lobe at insertion 0.1727 m (at (-0.100, 0.010, 0.020)) and the probe's at 0.1770 m (at (-0.071, 0.011, 0.027)), found
 by casting each shaft's ray on the generated 1500-node liver; tests/common/scene/scene_test.cpp checks them.
-Intestine geometry (config/intestine.yaml): vessel along x through the origin, the folds hang below it once gravity
-has acted (about 0.5 s): x in [-0.19, 0.20], y in [-0.12, 0.13], z in [-0.15, 0.04] m, intestine radius 2 cm. Trocar
+Intestine geometry (config/intestine.yaml): vessel along x through the origin; the rest shape spans x in [-0.28, 0.28],
+y in [-0.15, 0.15], z in [-0.12, 0.15] m (with the tapered mesentery), then the folds hang below the vessel under
+gravity; intestine radius 2 cm. (The motions were designed on the untapered shape and still reach the folds.) Trocar
 at (0, 0.40, -0.12), shaft along -y at pitch = yaw = 0 (tip at y = 0.40 - insertion); positive pitch raises the tip,
 yaw swings it along x. Units: s, rad, m.
 Run: /usr/bin/python3 scripts/make_trajectories.py [liver|intestine]   (stdlib only; no argument: all)

@@ -164,16 +164,17 @@ TEST(IntestineOrganTest, EachInstrumentIsClampedToItsOwnDeviceLimit) {
 TEST(IntestineOrganTest, StepWithTwoInstrumentsAllocatesNothing) {
   const Scene scene = two_tool_scene(8.0, 8.0);
   IntestineOrgan organ(scene, 2000);
-  Eigen::Vector3d out;
-  ToolGeometry g[2] = {pressing(organ, scene, 20, 0.01, out), pressing(organ, scene, 70, 0.01, out)};
+  Eigen::Vector3d out[2];
+  ToolGeometry g[2] = {pressing(organ, scene, 20, 0.01, out[0]), pressing(organ, scene, 70, 0.01, out[1])};
   const InstrumentInput in[2] = {{&g[0], 0.0}, {&g[1], 0.0}};
   ContactTick t[2];
   for (int k = 0; k < 200; ++k) organ.step(in, 2, 1e-3, t);
   test::AllocationCounter counter;
   int touching[2] = {0, 0};
   for (int k = 0; k < 800; ++k) {
-    g[0].tip.z() -= 5e-5;  // sweep through the folds
-    g[1].tip.y() -= 5e-5;
+    // Sweep each probe inwards, towards the vessel, through the folds (whatever the rest shape's orientation there).
+    g[0].tip -= 5e-5 * out[0];
+    g[1].tip -= 5e-5 * out[1];
     organ.step(in, 2, 1e-3, t);
     for (int i = 0; i < 2; ++i) touching[i] += t[i].points_in_contact > 0;
   }

@@ -41,14 +41,18 @@ TEST(IntestineView, DrawsTubeAndMesenteryOfABodyState) {
   EXPECT_EQ(view.lod(), intestine::kTubeMaxLod);  // starts at the finest level
   ASSERT_GT(view.tube_vertices(), 0);
   EXPECT_GT(view.tube_triangles(), 1000);
-  // The tube surrounds the intestine's points: every vertex within about a radius of the axis' bounding box.
+  // The tube surrounds the intestine's points: every vertex within about a radius of the axis' bounding box. The axis
+  // is a spline through the points, which may bulge past their box by a small fraction of a segment where the curve
+  // turns at the box's edge (0.9 mm, 2 % of a segment, in the shipped scene): 5 % of the mean segment is allowed.
   const Eigen::Map<const Eigen::Matrix3Xd> pts(x.data(), 3, scene.intestine.params.columns);
   const Eigen::Vector3f lo = pts.rowwise().minCoeff().cast<float>(), hi = pts.rowwise().maxCoeff().cast<float>();
-  const float r = static_cast<float>(scene.intestine.params.intestine_radius) * 1.01f;
+  const double segment = scene.intestine.params.length / (scene.intestine.params.columns - 1);
+  const float r = static_cast<float>(scene.intestine.params.intestine_radius * 1.01 + 0.05 * segment);
   for (int v = 0; v < view.tube_vertices(); ++v) {
     const Eigen::Vector3f p = view.tube_positions().row(v).transpose();
     ASSERT_TRUE(p.allFinite());
-    ASSERT_TRUE(((p.array() >= lo.array() - r) && (p.array() <= hi.array() + r)).all()) << v;
+    ASSERT_TRUE(((p.array() >= lo.array() - r) && (p.array() <= hi.array() + r)).all())
+        << v << " at " << p.transpose() << " box " << lo.transpose() << " .. " << hi.transpose() << " margin " << r;
   }
   renderer->begin_frame(scene.visual.camera);
   view.draw(*renderer);
