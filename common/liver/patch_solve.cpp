@@ -15,14 +15,17 @@ PatchSolver::PatchSolver(const Tensors& tensors, const std::string& block_name)
         return *b;
       }()) {
   guu_.setZero(3 * kMaxContacts, 3 * kMaxContacts);
+  wuu_.setZero(3 * kMaxContacts, 3 * kMaxContacts);
   a_.setZero(kMaxPatchRows, kMaxPatchRows);
   for (auto& m : m_) m.setZero();
 }
 
-Eigen::Matrix3d PatchSolver::g(int a, int b) const noexcept { return guu_.block<3, 3>(3 * a, 3 * b); }
+Eigen::Matrix3d PatchSolver::g(int a, int b) const noexcept { return w_->block<3, 3>(3 * a, 3 * b); }
 
-ContactStatus PatchSolver::prepare(const PatchConstraints& c) noexcept {
+ContactStatus PatchSolver::prepare(const PatchConstraints& c, const Eigen::Matrix3d* rotations,
+                                   RotationHalves halves) noexcept {
   prepared_nodes_ = 0;
+  w_ = &guu_;
   const int n = c.node_count;
   if (n < 0 || n > kMaxContacts || c.patch_count < 0 || c.patch_count > kMaxPatches) return ContactStatus::kOverCapacity;
   for (int u = 0; u < n; ++u) {
@@ -63,6 +66,20 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c) noexcept {
   }
   for (int u = 0; u < n; ++u) g_nodes_[static_cast<std::size_t>(u)] = c.nodes[static_cast<std::size_t>(u)];
   g_count_ = n;
+  // Corotational: W_ab = R_a G_ab R_b^T (symmetric like G: the lower half, mirrored); a one-half variant is not
+  // symmetric and is warped block by block.
+  if (rotations != nullptr) {
+    for (int b = 0; b < n; ++b) {
+      const Eigen::Matrix3d& rb = rotations[b];
+      for (int a = halves == RotationHalves::kBoth ? b : 0; a < n; ++a) {
+        const Eigen::Matrix3d w = warp_block(rotations[a], guu_.block<3, 3>(3 * a, 3 * b), rb, halves);
+        wuu_.block<3, 3>(3 * a, 3 * b) = w;
+        if (halves == RotationHalves::kBoth && a != b) wuu_.block<3, 3>(3 * b, 3 * a) = w.transpose();
+      }
+    }
+    w_ = &wuu_;
+  }
+  const Eigen::MatrixXd& w = *w_;
   // M_pq = sum_i sum_j w_pi w_qj G_ij: first H_q(u) = sum_j w_qj G_{u j}, then M_pq = sum_i w_pi H_q(i).
   for (int q = 0; q < c.patch_count; ++q) {
     const int q0 = c.patch_start[static_cast<std::size_t>(q)], q1 = c.patch_start[static_cast<std::size_t>(q + 1)];
@@ -74,10 +91,10 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c) noexcept {
         Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
         for (int f = q0; f < q1; ++f)
           h.noalias() += c.entry_weight[static_cast<std::size_t>(f)] *
-                         guu_.block<3, 3>(3 * ue, 3 * c.entry_node[static_cast<std::size_t>(f)]);
+                         w.block<3, 3>(3 * ue, 3 * c.entry_node[static_cast<std::size_t>(f)]);
         m.noalias() += c.entry_weight[static_cast<std::size_t>(e)] * h;
       }
-      if (p == q) m = (0.5 * (m + m.transpose())).eval();
+      if (p == q && halves == RotationHalves::kBoth) m = (0.5 * (m + m.transpose())).eval();
       m_[static_cast<std::size_t>(p * kMaxPatches + q)] = m;
       m_[static_cast<std::size_t>(q * kMaxPatches + p)] = m.transpose();
     }
@@ -157,7 +174,7 @@ void PatchSolver::node_forces(const PatchConstraints& c, const double* mu, Eigen
 Eigen::Vector3d PatchSolver::union_displacement(int u, const Eigen::Vector3d* lambda, int n) const noexcept {
   Eigen::Vector3d out = Eigen::Vector3d::Zero();
   if (u < 0 || u >= prepared_nodes_) return out;
-  for (int v = 0; v < n && v < prepared_nodes_; ++v) out.noalias() += guu_.block<3, 3>(3 * u, 3 * v) * lambda[v];
+  for (int v = 0; v < n && v < prepared_nodes_; ++v) out.noalias() += w_->block<3, 3>(3 * u, 3 * v) * lambda[v];
   return out;
 }
 

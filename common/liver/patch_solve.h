@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <string>
 
+#include "liver/corotation.h"
 #include "liver/superposition.h"
 
 namespace surgsim {
@@ -52,7 +53,14 @@ class PatchSolver {
   /// prepare()'s first nodes in the same order (a held or pressing contact keeps its nodes: nothing is read again; a
   /// second instrument's new nodes are read alone); the values are those a full read gives, bit for bit. Refuses fixed, interior, non-row or out-of-range nodes, non-finite or
   /// negative weights (the status; nothing is usable then).
-  ContactStatus prepare(const PatchConstraints& c) noexcept;
+  ContactStatus prepare(const PatchConstraints& c) noexcept { return prepare(c, nullptr); }
+  /// Corotational (issue 16, liver/corotation.h): as prepare(c), then every block is warped, W_ab = R_a G_ab R_b^T
+  /// with rotations[u] the rotation of union node u (null: G unwarped, as prepare(c)). Everything after it
+  /// (compliance(), factor(), solve(), node_forces(), union_displacement(), g()) is in the world frame: the row
+  /// directions and node forces are world vectors, the displacements the rotated response. `halves` other than
+  /// kBoth is a test seam (the one-half mistakes). The raw G stays cached for the next prepare.
+  ContactStatus prepare(const PatchConstraints& c, const Eigen::Matrix3d* rotations,
+                        RotationHalves halves = RotationHalves::kBoth) noexcept;
   /// Run phase, after prepare(): A = [d_k^T M_{p(k) p(l)} d_l] and its Cholesky factor, for the rows whose `enabled`
   /// entry is non-zero (null: all). A row that depends on earlier ones (pivot below 1e-9 of its diagonal) gives
   /// kNearSingular and its index in dependent_row().
@@ -76,6 +84,8 @@ class PatchSolver {
   const Tensors& tensors_;
   const TensorBlock& block_;
   Eigen::MatrixXd guu_;   // 3 kMaxContacts square
+  Eigen::MatrixXd wuu_;   // 3 kMaxContacts square: the warped blocks (corotational prepare)
+  const Eigen::MatrixXd* w_ = &guu_;  // the blocks in use: guu_ or wuu_
   std::array<Eigen::Matrix3d, kMaxPatches * kMaxPatches> m_;
   Eigen::MatrixXd a_;     // kMaxPatchRows square: A, then its factor
   std::array<int, kMaxPatchRows> order_{};  // enabled rows in order

@@ -421,6 +421,18 @@ NonlinearSpec read_nonlinear(const Reader& r, const Field& f) {
   return nl;
 }
 
+LiverOptions read_liver(const Reader& r, const Field& f) {
+  const Map m(r, f, {"deformation", "curves"});
+  LiverOptions o;
+  if (m.has("deformation")) {
+    o.deformation = r.one_of(m.at("deformation"), {"linear", "corotational"}) == "corotational"
+                        ? LiverDeformation::kCorotational
+                        : LiverDeformation::kLinear;
+  }
+  if (m.has("curves")) o.organ_curves = r.one_of(m.at("curves"), {"cylinder", "organ"}) == "organ";
+  return o;
+}
+
 ToolSpec read_tool(const Reader& r, const Field& f) {
   const Map m(r, f,
               {"name", "trocar", "axis", "shaft_length", "shaft_radius", "shaft_points", "shaft_spacing", "jaw_length",
@@ -668,6 +680,13 @@ std::uint64_t Scene::hash() const {
     h.value<std::int32_t>(nonlinear.degree);
   }
 
+  // The liver's run-time model (issue 16): hashed only when not the default, so older scenes keep their hash.
+  if (!liver.defaults()) {
+    h.str("liver-options");
+    h.value<std::uint8_t>(static_cast<std::uint8_t>(liver.deformation));
+    h.value<std::uint8_t>(liver.organ_curves);
+  }
+
   // Every instrument, in order (a second instrument changes the hash; one instrument hashes as before issue 19,
   // its name excepted).
   for (std::size_t i = 0; i < tools.size(); ++i) {
@@ -745,8 +764,8 @@ Scene load_scene(const std::string& path) {
   }
 
   const Map top(r, {root, "", 1},
-                {"name", "model", "mesh", "material", "fixed", "nonlinear", "tool", "tools", "haptic", "visual",
-                 "intestine", "trajectory"});
+                {"name", "model", "mesh", "material", "fixed", "nonlinear", "liver", "tool", "tools", "haptic",
+                 "visual", "intestine", "trajectory"});
   Scene s;
   s.file = abs.string();
   s.dir = abs.parent_path().string();
@@ -796,6 +815,20 @@ Scene load_scene(const std::string& path) {
                "differs from instrument 0's: all contacts are solved together with one model",
                "give every instrument the same contact_model");
       }
+    }
+  }
+  if (top.has("liver")) {
+    if (s.model != "liver") {
+      r.fail(top.at("liver").line, "liver", "is only read for 'model: liver'", "set 'model: liver' or remove the section");
+    }
+    s.liver = read_liver(r, top.at("liver"));
+    if (s.liver.deformation == LiverDeformation::kCorotational && s.tools[0].contact_model != ContactModel::kPatch) {
+      r.fail(top.at("liver").line, "liver.deformation", "corotational needs the patch contact model",
+             "set tool.contact_model: patch, or liver.deformation: linear");
+    }
+    if (s.liver.organ_curves && s.nonlinear.enabled()) {
+      r.fail(top.at("liver").line, "liver.curves", "organ is given together with nonlinear: curve files",
+             "remove the 'nonlinear' section (organ curves are computed from the organ itself) or set curves: cylinder");
     }
   }
   if (top.has("haptic")) s.haptic = read_haptic(r, top.at("haptic"));

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "intestine/intestine_spec.h"
+#include "liver/corotation.h"
 #include "liver/liver_spec.h"
 #include "mesh/mesh_source.h"
 #include "tool/tool.h"
@@ -44,6 +45,13 @@ struct VisualSpec {
   int stream_quality = 75; // JPEG quality of the streamed frames, 1..100 (not in the scene hash: no physics)
 };
 
+/// The liver's run-time model (issue 16), YAML `liver: {deformation: linear | corotational, curves: cylinder | organ}`.
+struct LiverOptions {
+  LiverDeformation deformation = LiverDeformation::kLinear;  // corotational: warped compliance (liver/corotation.h)
+  bool organ_curves = false;  // curves: organ: P and Q fitted on the organ's own Newton indentations (cached)
+  bool defaults() const { return deformation == LiverDeformation::kLinear && !organ_curves; }
+};
+
 struct Scene {
   std::string name;        // e.g. "liver"
   std::string file;        // absolute path of the YAML it came from
@@ -53,6 +61,7 @@ struct Scene {
   Material material;
   FixedRegion fixed;
   NonlinearSpec nonlinear;
+  LiverOptions liver;       // read for model "liver" only
   /// The instruments (issue 19): 1..kMaxInstruments, from the `tools:` list or the single `tool:` key (one
   /// instrument named "tool"). Never empty. Instrument i is ToolCommand/ForceFeedback instrument i.
   std::vector<ToolSpec> tools = {ToolSpec{}};
