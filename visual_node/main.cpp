@@ -40,6 +40,13 @@ int main(int argc, char** argv) {
   cli.add_option("--dds-profiles", o.dds_profiles, "Fast DDS XML profiles file (default config/dds/profiles.xml)");
   cli.add_option("--dds-participant", o.dds_participant, "Participant profile: surgsim_default, surgsim_shm, surgsim_udp, "
                  "surgsim_udp_peers, surgsim_ds_client (default $SURGSIM_DDS_PARTICIPANT or surgsim_default)");
+  cli.add_option("--stream-fps", o.stream_fps,
+                 "Publish the rendered frames JPEG-compressed on surgsim/frame at this rate for surgsim-web, Hz "
+                 "(0 = off; default: the scene's visual.stream_fps, itself 0)")
+      ->check(CLI::Range(0.0, 120.0));
+  cli.add_option("--stream-quality", o.stream_quality,
+                 "JPEG quality of the streamed frames, 1..100 (default: the scene's visual.stream_quality, 75)")
+      ->check(CLI::Range(1, 100));
   cli.add_flag("--quiet", o.quiet, "Print nothing but errors");
   CLI11_PARSE(cli, argc, argv);
 

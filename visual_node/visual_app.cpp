@@ -17,6 +17,7 @@
 #include "core/error.h"
 #include "dds_support.h"
 #include "frame_output.h"
+#include "frame_stream.h"
 #include "instruments.h"
 #include "mesher/scene_mesh.h"
 #include "organ_view.h"
@@ -97,6 +98,7 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
   watch_.mark_dds_ready(monotonic_ns());
   organ_->subscribe(dds_->participant());  // e.g. the intestine's BodyState
   dds_priority.reset();  // this thread renders at its previous scheduling
+  start_stream();
   if (!options_.quiet) {
     const auto& p = dds_->participant();
     std::cerr << "visual_node: DDS " << p.profile() << ": " << p.description() << "; DDS threads " << dds_threads_note_
@@ -116,7 +118,53 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
   }
 }
 
-VisualApp::~VisualApp() = default;
+VisualApp::~VisualApp() {
+  stream_.reset();  // the encoder thread writes on the DDS writer: joined before the participant goes
+}
+
+void VisualApp::start_stream() {
+  stream_fps_ = options_.stream_fps >= 0 ? options_.stream_fps : scene_.visual.stream_fps;
+  const int quality = options_.stream_quality > 0 ? options_.stream_quality : scene_.visual.stream_quality;
+  if (!(stream_fps_ > 0)) return;
+  if (!(stream_fps_ <= 120) || quality < 1 || quality > 100) {
+    throw_error("--stream-fps ", stream_fps_, " / --stream-quality ", quality,
+                " out of range: the stream rate is 0..120 Hz and the JPEG quality 1..100");
+  }
+  if (options_.headless) {
+    std::cerr << "visual_node: --headless draws nothing: the frame stream (stream_fps " << stream_fps_
+              << ") is off\n";
+    stream_fps_ = 0;
+    return;
+  }
+  auto& p = dds_->participant();
+  auto* writer = p.writer(p.topic(kFrameTopic, new msg::FramePubSubType()), kFrameWriterProfile);
+  FrameStreamOptions so;
+  so.width = scene_.visual.width;
+  so.height = scene_.visual.height;
+  so.quality = quality;
+  so.max_bytes = msg::kMaxFrameBytes;
+  stream_ = std::make_unique<FrameStream>(so, [writer](const msg::Frame& f) { writer->write(const_cast<msg::Frame*>(&f)); });
+  if (!options_.quiet) {
+    std::cerr << "visual_node: streaming JPEG frames (quality " << quality << ") at " << stream_fps_ << " Hz on "
+              << kFrameTopic << "\n";
+  }
+}
+
+void VisualApp::offer_stream_frame(const msg::ContactFrame& frame, bool have_frame) {
+  const std::uint64_t now = monotonic_ns();
+  if (!stream_ || now < next_stream_ns_) return;
+  const auto period = static_cast<std::uint64_t>(1e9 / stream_fps_);
+  next_stream_ns_ = next_stream_ns_ + period > now ? next_stream_ns_ + period : now + period;
+  Image* slot = stream_->acquire();  // null: the encoder is still busy, this picture is dropped (counted)
+  if (slot == nullptr) return;
+  if (!renderer_->read_image(*slot)) slot->resize(0, 0);
+  FrameStamp st;
+  st.frame_number = frames_rendered_;
+  st.render_stamp_ns = now;
+  st.haptic_stamp_ns = have_frame ? frame.stamp_ns() : 0;
+  st.haptic_seq = have_frame ? frame.seq() : 0;
+  stream_->submit(st);
+}
 
 void VisualApp::check_scene_identity() {
   // Check the haptic side's scene identity once it is known; refuse to draw frames of another scene.
@@ -211,6 +259,7 @@ void VisualApp::render_frame(const msg::ContactFrame& frame, bool have_frame, bo
   last_work_ms_ = static_cast<double>(work_end - work0) * 1e-6;
   organ_->frame_done(static_cast<double>(work_end - work0) * 1e-9);
   ++frames_rendered_;
+  offer_stream_frame(frame, have_frame);
   if (output_->due(frames_rendered_) && renderer_->read_image(image_)) {
     output_->write(image_, frames_rendered_, frame.seq(), have_frame ? frame.sim_time() : -1.0, *organ_, drawn);
   }
@@ -322,6 +371,7 @@ void VisualApp::shutdown() {
   j["instrument_states_ignored"] = instrument_states_ignored_;  // states naming no instrument of the scene
   j["dds_participant"] = dds_->participant().profile();
   j["dds_threads"] = dds_threads_note_;
+  if (stream_) stream_->add_stats(j, stream_fps_);
   watch_.add_stats(j);
   organ_->add_stats(j);
   if (!options_.stats.empty()) write_json_file(options_.stats, j);

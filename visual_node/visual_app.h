@@ -39,6 +39,7 @@ class ContactFrame;
 using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 class FrameOutput;
+class FrameStream;
 class OrganView;
 class Renderer;
 class VisualDds;
@@ -59,6 +60,8 @@ struct VisualOptions {
   bool video = false;            // assemble out/video.mp4 with ffmpeg at exit (also when the scene asks)
   std::string tube_skinning = "gpu";  // intestine tube: "gpu" (vertex shader) or "cpu" (skinned vertices uploaded)
   int dds_rt_priority = 20;      // SCHED_FIFO priority of the DDS threads (receive, events); 0 = normal scheduling
+  double stream_fps = -1;        // >= 0 overrides the scene's visual.stream_fps (JPEG frames on surgsim/frame; 0 = off)
+  int stream_quality = -1;       // 1..100 overrides the scene's visual.stream_quality
   bool quiet = false;
 };
 
@@ -83,6 +86,10 @@ class VisualApp {
   /// The instruments of a fresh contact frame (instruments_); states naming no instrument of the scene are counted
   /// and the first such frame is named on stderr.
   void take_frame_instruments(const msg::ContactFrame& frame);
+  /// Init: the frame stream of the web view when asked (visual.stream_fps or --stream-fps), writing surgsim/frame.
+  void start_stream();
+  /// When a streamed picture is due and the encoder is idle: the picture read into its slot and handed over.
+  void offer_stream_frame(const msg::ContactFrame& frame, bool have_frame);
   /// Deformation, drawing (the organ, every instrument, the markers) and the PNG of one frame: `frame` is the newest
   /// frame taken (shown when `have_frame`), `fresh` when it arrived since the last one.
   void render_frame(const msg::ContactFrame& frame, bool have_frame, bool fresh);
@@ -108,6 +115,9 @@ class VisualApp {
   std::unique_ptr<FrameOutput> output_;     // PNG, frames.csv, VTK, video
   HapticWatch watch_;                       // built before the constructor body: its clock origin is the node's start
   std::unique_ptr<VisualDds> dds_;
+  std::unique_ptr<FrameStream> stream_;     // the web view's JPEG frames (null when off)
+  double stream_fps_ = 0;
+  std::uint64_t next_stream_ns_ = 0;        // the next streamed picture is due then (monotonic)
   std::atomic<bool> stop_requested_{false};
 
   double rate_hz_ = 50;

@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """Every struct of idl/Surgsim.idl is annotated @final (the wire format is XCDR1, final: another vendor's generator
 must not guess its extensibility), and the only keys are the `instrument` members of the per-instrument streams
-(ToolCommand, ForceFeedback: issue 19, wire version v2). Usage: check_idl_final.py IDL_FILE"""
+(ToolCommand, ForceFeedback: issue 19, wire version v2). Every sequence and string is bounded (samples are
+preallocated). The web view's Frame (issue 18) is keyless and its JPEG payload a bounded sequence<octet, N>. Usage: check_idl_final.py IDL_FILE"""
 import re
 import sys
 
@@ -40,6 +41,20 @@ for struct, member in KEYED.items():
     if keys.get(struct) != member:
         bad.append(f'{path}: struct {struct} must be keyed by `@key unsigned long {member};` (one instance per '
                    'instrument)')
+# Every sequence and string is bounded: samples are preallocated, the loop never allocates.
+for i, line in enumerate(lines):
+    code = line.split('//', 1)[0]
+    for m in re.finditer(r'\b(sequence|string)\s*(<[^>]*>)?', code):
+        if m.group(1) == 'string' and m.group(2) is None and re.search(r'\bstring\s*<', code) is None:
+            bad.append(f'{path}:{i + 1}: unbounded string: write string<N>')
+        elif m.group(1) == 'sequence' and (m.group(2) is None or ',' not in m.group(2)):
+            bad.append(f'{path}:{i + 1}: unbounded sequence: write sequence<T, N>')
+# The frame of the web view (issue 18): keyless (one stream), its JPEG a bounded octet sequence.
+frame = re.search(r'struct\s+Frame\s*\{(.*?)\};', text, re.S)
+if frame is None:
+    bad.append(f'{path}: struct Frame (surgsim/frame, issue 18) is missing')
+elif not re.search(r'sequence\s*<\s*octet\s*,\s*\w+\s*>\s+jpeg\s*;', frame.group(1)):
+    bad.append(f'{path}: struct Frame must carry its JPEG as `sequence<octet, kMaxFrameBytes> jpeg;` (bounded)')
 if not re.search(r'module\s+v2\b', text):
     bad.append(f'{path}: the types must be in module surgsim::msg::v2 (the wire version of issue 19)')
 print('\n'.join(bad) if bad else f'check_idl_final: {structs} structs, all @final; keyed by instrument: '
