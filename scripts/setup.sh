@@ -13,6 +13,8 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev                # tests and benchmarks
   iproute2 procps                     # two-host tests (namespaces), process control in scripts
   openssl                             # test CA and certificates for the DDS Security profile
+  libturbojpeg0-dev libboost-dev      # surgsim-web: JPEG frames (libturbojpeg), HTTP + WebSocket (Boost.Beast, headers)
+  chromium chromium-driver python3-selenium fonts-liberation  # the web view's tests: a real headless browser
 )
 [ "${SURGSIM_WITH_VIDEO:-0}" = 1 ] && packages+=(ffmpeg)
 [ "${SURGSIM_WITH_REPORT:-0}" = 1 ] && packages+=(python3-numpy python3-matplotlib)   # scripts/report.sh plots
