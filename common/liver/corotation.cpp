@@ -12,7 +12,33 @@ const char* to_string(LiverDeformation deformation) {
 int extract_rotation(const Eigen::Matrix3d& a_in, Eigen::Quaterniond& q, int max_iterations) noexcept {
   const double scale = a_in.norm();
   if (!(scale > 0) || !std::isfinite(scale)) return 0;
-  const Eigen::Matrix3d a = a_in / scale;
+  // A + cof(A) has the same rotation as A (A = Q S gives cof(A) = Q cof(S)) and is of full rank when A has rank 2:
+  // a flat ring (every point on a plane) converges as fast as a solid one.
+  Eigen::Matrix3d a = a_in / scale;
+  Eigen::Matrix3d cof;
+  cof.col(0) = a.col(1).cross(a.col(2));
+  cof.col(1) = a.col(2).cross(a.col(0));
+  cof.col(2) = a.col(0).cross(a.col(1));
+  a += cof;
+  // det > 0: the scaled Newton iteration of Higham (1986), X <- (g X + X^-T / g) / 2, quadratic, to the orthogonal
+  // polar factor (a proper rotation since det > 0).
+  const double det = a.determinant();
+  if (det > 1e-12) {
+    Eigen::Matrix3d x = a;
+    int it = 0;
+    for (; it < max_iterations; ++it) {
+      const Eigen::Matrix3d xi = x.inverse();
+      const double g = std::sqrt(std::sqrt(xi.squaredNorm() / x.squaredNorm()));
+      const Eigen::Matrix3d next = 0.5 * (g * x + xi.transpose() / g);
+      const double change = (next - x).norm();
+      x = next;
+      if (change < 1e-15) break;
+    }
+    q = Eigen::Quaterniond(x);
+    q.normalize();
+    return it;
+  }
+  // det <= 0 (an inverted ring): Mueller's iteration from the previous rotation stays a proper rotation.
   int it = 0;
   for (; it < max_iterations; ++it) {
     const Eigen::Matrix3d r = q.toRotationMatrix();

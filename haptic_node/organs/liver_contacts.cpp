@@ -32,7 +32,8 @@ int total_capacity(const std::vector<ToolSpec>& tools) {
 }  // namespace
 
 LiverContacts::LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors& tensors,
-                             const std::vector<ToolSpec>& tools, const NonlinearLaw* law)
+                             const std::vector<ToolSpec>& tools, const NonlinearLaw* law,
+                             LiverDeformation deformation)
     : mesh_(mesh),
       tensors_(tensors),
       haptic_(haptic_block(tensors)),
@@ -40,7 +41,21 @@ LiverContacts::LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, co
       model_(tools.front().contact_model),
       law_(law),
       grid_(mesh, surface),
-      superposition_(tensors, "haptic", total_capacity(tools)) {
+      superposition_(tensors, "haptic", total_capacity(tools)),
+      deformation_(deformation) {
+  if (deformation_ == LiverDeformation::kCorotational) {
+    if (model_ != ContactModel::kPatch)
+      throw_error("LiverContacts: liver.deformation corotational needs tool.contact_model patch");
+    rotations_ = std::make_unique<NodeRotations>(mesh, surface);
+    worker_rotations_ = std::make_unique<NodeRotations>(mesh, surface);
+    const auto nv = static_cast<Eigen::Index>(mesh.nodes.rows());
+    solution_index_.assign(static_cast<std::size_t>(nv), -1);
+    worker_u_.setZero(nv, 3);
+    for (int i = 0; i < 3; ++i) {
+      from_worker_.slot(i).u.setZero(nv, 3);
+      from_worker_.slot(i).q.assign(static_cast<std::size_t>(nv), Eigen::Quaterniond::Identity());
+    }
+  }
   if (model_ != ContactModel::kPatch) return;
   const ToolSpec& tool_ = tools_.front();  // the tip radius of the patch surface: the first instrument's
   std::vector<std::uint8_t> free(static_cast<std::size_t>(mesh.nodes.rows()), 0);
@@ -50,6 +65,72 @@ LiverContacts::LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, co
   surface_ = std::make_unique<ContactSurface>(mesh, surface, free, radius_);
   patch_solver_ = std::make_unique<PatchSolver>(tensors, "haptic");
   constraints_ = std::make_unique<PatchConstraints>();
+}
+
+void LiverContacts::rotate_union(const PatchConstraints& k) noexcept {
+  from_worker_.take();
+  const RotationField& bg = from_worker_.front();
+  // Displacements of the previous tick: the solution's own nodes exactly, the others from the background field.
+  const auto disp = [&](int node) -> Eigen::Vector3d {
+    const int l = solution_index_[static_cast<std::size_t>(node)];
+    if (l >= 0 && l < solution_.count) return solution_.displacement[static_cast<std::size_t>(l)];
+    return bg.valid ? Eigen::Vector3d(bg.u.row(node).transpose()) : Eigen::Vector3d::Zero();
+  };
+  for (int u = 0; u < k.node_count; ++u) {
+    const int node = k.nodes[static_cast<std::size_t>(u)];
+    // A node new to the contact starts from the background rotation (the loop's own may be old).
+    if (bg.valid && solution_index_[static_cast<std::size_t>(node)] < 0)
+      rotations_->set(node, bg.q[static_cast<std::size_t>(node)]);
+    rotations_->update(node, disp);
+    union_rotation_[static_cast<std::size_t>(u)] = rotations_->rotation(node);
+  }
+}
+
+void LiverContacts::publish_solution() noexcept {
+  for (int i = 0; i < indexed_count_; ++i) solution_index_[static_cast<std::size_t>(indexed_nodes_[static_cast<std::size_t>(i)])] = -1;
+  indexed_count_ = solution_.count;
+  RotationInput& in = to_worker_.back();
+  in.count = solution_.count;
+  for (int l = 0; l < solution_.count; ++l) {
+    const auto sl = static_cast<std::size_t>(l);
+    indexed_nodes_[sl] = solution_.nodes[sl];
+    solution_index_[static_cast<std::size_t>(solution_.nodes[sl])] = l;
+    in.nodes[sl] = solution_.nodes[sl];
+    in.lambda[sl] = solution_.lambda[sl];
+  }
+  to_worker_.publish();
+}
+
+void LiverContacts::refresh_rotations() noexcept {
+  if (deformation_ != LiverDeformation::kCorotational) return;
+  to_worker_.take();
+  const RotationInput& in = to_worker_.front();
+  NodeRotations& rot = *worker_rotations_;
+  // Fixed-point step: u from the current rotations, then the rotations from u.
+  for (int l = 0; l < in.count; ++l)
+    worker_rest_lambda_[static_cast<std::size_t>(l)] =
+        rot.rotation(in.nodes[static_cast<std::size_t>(l)]).transpose() * in.lambda[static_cast<std::size_t>(l)];
+  worker_u_.setZero();
+  for (int r = 0; r < haptic_.row_count(); ++r) {
+    const int node = haptic_.row_nodes[static_cast<std::size_t>(r)];
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (int l = 0; l < in.count; ++l) {
+      const int c = tensors_.column_of_node[static_cast<std::size_t>(in.nodes[static_cast<std::size_t>(l)])];
+      if (c >= 0) sum.noalias() += haptic_.block3(r, c) * worker_rest_lambda_[static_cast<std::size_t>(l)];
+    }
+    worker_u_.row(node) = (rot.rotation(node) * sum).transpose();
+  }
+  if (in.count == 0) {
+    rot.reset();
+  } else {
+    const auto disp = [this](int k) -> Eigen::Vector3d { return worker_u_.row(k).transpose(); };
+    for (int n = 0; n < rot.node_count(); ++n) rot.update(n, disp, 2 * NodeRotations::kTickIterations);
+  }
+  RotationField& out = from_worker_.back();
+  out.u = worker_u_;
+  for (int n = 0; n < rot.node_count(); ++n) out.q[static_cast<std::size_t>(n)] = rot.quaternion(n);
+  out.valid = true;
+  from_worker_.publish();
 }
 
 void LiverContacts::reset() noexcept {
@@ -137,6 +218,7 @@ void LiverContacts::step(const InstrumentInput* inputs, int count, ContactTick* 
     step_triangle(h, out);
   }
   count_instrument_nodes();
+  if (deformation_ == LiverDeformation::kCorotational) publish_solution();
 }
 
 void LiverContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
@@ -587,7 +669,12 @@ void LiverContacts::step_patch(double dt, ContactTick* out) noexcept {
     for (int t = 0; t < count_; ++t)
       if (geometry_[static_cast<std::size_t>(t)] != nullptr) out[t].*flag = true;
   };
-  status_ = patch_solver_->prepare(k);
+  if (deformation_ == LiverDeformation::kCorotational) {
+    rotate_union(k);
+    status_ = patch_solver_->prepare(k, union_rotation_.data());
+  } else {
+    status_ = patch_solver_->prepare(k);
+  }
   if (status_ != ContactStatus::kOk) {
     if (status_ == ContactStatus::kNonFinite) flag_all(&ContactTick::nonfinite);
     drop_solution();

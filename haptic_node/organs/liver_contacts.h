@@ -39,6 +39,7 @@
 
 #include "liver/bucket_grid.h"
 #include "liver/contact_surface.h"
+#include "liver/corotation.h"
 #include "liver/patch_solve.h"
 #include "mesh/mesh.h"
 #include "scene/scene.h"
@@ -106,8 +107,12 @@ class LiverContacts {
 
   /// Init (allocates). `tensors` must hold the "haptic" block; all references must outlive this object. `tools`:
   /// the instruments (1..kMaxInstruments, one contact model: the first's).
+  /// `deformation` kCorotational (patch model only; throws otherwise) warps the compliance by per-node rotations
+  /// (liver/corotation.h): the contact nodes' rotations are recomputed every tick from the previous solution and a
+  /// field of every surface node refreshed by refresh_rotations(), which the owner calls off the loop thread.
   LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors& tensors,
-                const std::vector<ToolSpec>& tools, const NonlinearLaw* law = nullptr);
+                const std::vector<ToolSpec>& tools, const NonlinearLaw* law = nullptr,
+                LiverDeformation deformation = LiverDeformation::kLinear);
   /// One instrument.
   LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors& tensors, const ToolSpec& tool,
                 const NonlinearLaw* law = nullptr)
@@ -122,6 +127,14 @@ class LiverContacts {
     const InstrumentInput in{&geometry, jaw};
     step(&in, 1, &out, dt);
   }
+  /// Corotational only (else nothing): the displacement u_n = R_n sum_l G(n, k_l) R_l^T lambda_l of every row of
+  /// the haptic block under the newest solution step() published, then the rotation of every surface node from
+  /// it, published back to step() (lock-free, latest value). Call it from ONE thread other than step()'s at >= 100
+  /// Hz (LiverOrgan runs it at 200 Hz), or between steps in tests. No allocation.
+  void refresh_rotations() noexcept;
+  LiverDeformation deformation() const { return deformation_; }
+  /// The loop's rotations (corotational; null otherwise): the contact nodes' are those of the last step().
+  const NodeRotations* rotations() const { return rotations_.get(); }
   /// Drops every contact of every instrument and forgets the previous tool positions.
   void reset() noexcept;
   /// Drops instrument t's contacts (its input is lost) and forgets its previous position.
@@ -201,6 +214,32 @@ class LiverContacts {
   std::array<unsigned char, kMaxPatchRows> enabled_{};
   std::array<Eigen::Vector3d, kMaxContacts> lambda_{};
   long dropped_nodes_ = 0;
+  // --- corotational (issue 16) ---
+  struct RotationInput {  // loop -> refresh_rotations(): the last solution's forces (world frame)
+    int count = 0;
+    std::array<int, kMaxContacts> nodes{};
+    std::array<Eigen::Vector3d, kMaxContacts> lambda{};
+  };
+  struct RotationField {  // refresh_rotations() -> loop: every node's displacement and rotation
+    bool valid = false;
+    Eigen::MatrixX3d u;                    // #V x 3, m
+    std::vector<Eigen::Quaterniond> q;     // #V
+  };
+  /// The union nodes' rotations for this tick (from the previous solution and the background field).
+  void rotate_union(const PatchConstraints& k) noexcept;
+  /// solution_index_ and the worker's input from the new solution.
+  void publish_solution() noexcept;
+  LiverDeformation deformation_ = LiverDeformation::kLinear;
+  std::unique_ptr<NodeRotations> rotations_;          // loop thread
+  std::array<Eigen::Matrix3d, kMaxContacts> union_rotation_{};
+  std::vector<int> solution_index_;                   // #V: index in solution_ of the last step, or -1
+  std::array<int, kMaxContacts> indexed_nodes_{};
+  int indexed_count_ = 0;
+  TripleBuffer<RotationInput> to_worker_;
+  TripleBuffer<RotationField> from_worker_;
+  std::unique_ptr<NodeRotations> worker_rotations_;   // refresh_rotations()' thread
+  Eigen::MatrixX3d worker_u_;
+  std::array<Eigen::Vector3d, kMaxContacts> worker_rest_lambda_{};
 };
 
 }  // namespace surgsim

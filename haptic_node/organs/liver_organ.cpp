@@ -1,5 +1,6 @@
 #include "organs/liver_organ.h"
 
+#include <chrono>
 #include <string>
 
 #include "liver/liver_setup.h"
@@ -16,7 +17,28 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
   tensor_hash_ = setup.key.combined();
   law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene.nonlinear, scene.material));
   contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene.tools,
-                                              law_->identity() ? nullptr : law_.get());
+                                              law_->identity() ? nullptr : law_.get(), scene.liver.deformation);
+  if (scene.liver.deformation == LiverDeformation::kCorotational) {
+    // Off the loop thread: the rotations of every surface node at kRotationRefreshHz (the loop keeps its contact
+    // nodes' own every tick); absolute deadlines, a late refresh is skipped, not caught up.
+    rotation_thread_ = std::thread([this] {
+      using Clock = std::chrono::steady_clock;
+      const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1 / kRotationRefreshHz));
+      auto next = Clock::now();
+      while (!stop_rotations_.load(std::memory_order_relaxed)) {
+        contacts_->refresh_rotations();
+        next += period;
+        const auto now = Clock::now();
+        if (next < now) next = now;
+        std::this_thread::sleep_until(next);
+      }
+    });
+  }
+}
+
+LiverOrgan::~LiverOrgan() {
+  stop_rotations_.store(true);
+  if (rotation_thread_.joinable()) rotation_thread_.join();
 }
 
 void LiverOrgan::step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept {
@@ -36,7 +58,7 @@ ContactEntry LiverOrgan::contact_entry(int l) const noexcept {
 
 std::string LiverOrgan::describe() const {
   return std::to_string(mesh_.nodes.rows()) + " nodes, " + std::to_string(mesh_.tets.rows()) + " tets, " +
-         std::to_string(surface_.nodes.size()) + " surface nodes; ";
+         std::to_string(surface_.nodes.size()) + " surface nodes; " + to_string(contacts_->deformation()) + "; ";
 }
 
 }  // namespace surgsim

@@ -2,7 +2,9 @@
 // the precomputed tensors (from the cache both nodes share), the quasi non-linear law and the contact model
 // (LiverContacts: bucket grid, unilateral contacts and grasps, mutual-influence correction, device clamp).
 #pragma once
+#include <atomic>
 #include <memory>
+#include <thread>
 
 #include "liver/nonlinear_law.h"
 #include "liver/precompute.h"
@@ -16,6 +18,10 @@ class LiverOrgan final : public HapticOrgan {
  public:
   /// Init (allocates; may precompute the tensors, with progress on `progress`). Throws surgsim::Error.
   LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress);
+  /// Stops the rotation thread (corotational).
+  ~LiverOrgan() override;
+  LiverOrgan(const LiverOrgan&) = delete;
+  LiverOrgan& operator=(const LiverOrgan&) = delete;
 
   const char* model_name() const override { return "liver"; }
   using HapticOrgan::step;
@@ -42,6 +48,10 @@ class LiverOrgan final : public HapticOrgan {
   std::uint64_t tensor_hash_ = 0;
   std::unique_ptr<NonlinearLaw> law_;      // identity when the scene has no curves
   std::unique_ptr<LiverContacts> contacts_;
+  // Corotational (issue 16): every surface node's rotation refreshed off the loop thread.
+  static constexpr double kRotationRefreshHz = 200;
+  std::atomic<bool> stop_rotations_{false};
+  std::thread rotation_thread_;
 };
 
 }  // namespace surgsim

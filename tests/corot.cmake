@@ -1,0 +1,3 @@
+# Issue 16: corotational precomputed compliance and organ curves (common/liver/corotation, organ_curves; the haptic
+# liver's corotational contacts; build/bench/large_deformation_bench).
+surgsim_test(common_corotation_test SOURCES common/liver/corotation_test.cpp ${ALLOC} LIBS surgsim_liver surgsim_scene)
