@@ -1,3 +1,4 @@
 # Issue 16: corotational precomputed compliance and organ curves (common/liver/corotation, organ_curves; the haptic
 # liver's corotational contacts; build/bench/large_deformation_bench).
 surgsim_test(common_corotation_test SOURCES common/liver/corotation_test.cpp ${ALLOC} LIBS surgsim_liver surgsim_scene)
+surgsim_test(common_organ_curves_test SOURCES common/liver/organ_curves_test.cpp LIBS surgsim_liver surgsim_scene)
