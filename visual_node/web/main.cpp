@@ -87,9 +87,11 @@ int main(int argc, char** argv) {
       if (i >= 0 && traj.size() > 0) traj.at(i, 0.0, o.start_pose);
     }
     if (o.token.empty()) o.token = web::random_token();
-    if (o.token.find_first_not_of("0123456789abcdefABCDEF-_") != std::string::npos || o.token.size() < 8) {
-      std::cerr << "surgsim-web: --token must be at least 8 characters of [0-9a-zA-Z-_] hex-like (got '" << o.token
-                << "')\n";
+    if (o.token.find_first_not_of("0123456789abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ-_") !=
+            std::string::npos ||
+        o.token.size() < 8) {
+      std::cerr << "surgsim-web: --token '" << o.token << "' must be at least 8 characters of 0-9, a-z, A-Z, - and _ "
+                << "(it goes into a URL)\n";
       return 2;
     }
 

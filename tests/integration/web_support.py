@@ -1,0 +1,129 @@
+"""What the web view's tests share (issue 18): the three real processes on a private DDS domain, surgsim-web's URL and
+/stats, a headless Debian chromium through selenium, and waiting for a condition with a timeout (never a speed
+assertion). Usage from a test: `with Run(bin_dir, out_dir, ...) as run: ...`."""
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import time
+import urllib.error
+import urllib.request
+
+TOKEN = 'webtest0123456789'
+
+
+def wait_for(what, condition, timeout, poll=0.05):
+    """Polls `condition()` until it returns a true value (returned) or `timeout` seconds pass (AssertionError)."""
+    end = time.monotonic() + timeout
+    last = None
+    while time.monotonic() < end:
+        last = condition()
+        if last:
+            return last
+        time.sleep(poll)
+    raise AssertionError(f'timed out after {timeout} s waiting for {what} (last: {last!r})')
+
+
+def private_domain(salt=0):
+    return 1 + (os.getpid() * 7 + salt) % 200
+
+
+class Run:
+    """The haptic node (replaying `trajectory`, or live from the device topic when None), the visual node streaming
+    frames, and surgsim-web, on a private domain. Logs and stats in out_dir."""
+
+    def __init__(self, bin_dir, out_dir, config_dir, cache_dir, trajectory=None, haptic_duration=60,
+                 stream_fps=20, salt=0, start_haptic=True):
+        self.bin = bin_dir
+        self.out = out_dir
+        shutil.rmtree(out_dir, ignore_errors=True)
+        os.makedirs(out_dir)
+        self.env = dict(os.environ, SURGSIM_DOMAIN=str(private_domain(salt)), SURGSIM_CONFIG_DIR=config_dir,
+                        SURGSIM_CACHE_DIR=cache_dir)
+        self.trajectory = trajectory
+        self.haptic_duration = haptic_duration
+        self.stream_fps = stream_fps
+        self.start_haptic_now = start_haptic
+        self.procs = {}
+        self.url = None
+        self.port = None
+
+    def _start(self, name, args):
+        log = open(os.path.join(self.out, name + '.log'), 'w')
+        self.procs[name] = subprocess.Popen(args, env=self.env, stdout=subprocess.PIPE if name == 'web' else log,
+                                            stderr=log, text=True)
+        return self.procs[name]
+
+    def __enter__(self):
+        self._start('visual', [f'{self.bin}/visual_node', '--scene', 'liver', '--out', f'{self.out}/frames',
+                               '--png-every', '0', '--stream-fps', str(self.stream_fps), '--stats',
+                               f'{self.out}/visual.json'])
+        web = self._start('web', [f'{self.bin}/surgsim-web', '--scene', 'liver', '--port', '0', '--token', TOKEN,
+                                  '--stats', f'{self.out}/web.json'])
+        line = web.stdout.readline()
+        m = re.search(r'(http://\S+)', line)
+        assert m, f'surgsim-web printed no URL: {line!r} (see {self.out}/web.log)'
+        self.url = m.group(1)
+        self.port = int(re.search(r':(\d+)/', self.url).group(1))
+        if self.start_haptic_now:
+            self.start_haptic()
+        return self
+
+    def start_haptic(self):
+        args = [f'{self.bin}/haptic_node', '--scene', 'liver', '--stats', f'{self.out}/haptic.json',
+                '--wait-for-visual', '20']
+        if self.trajectory:
+            args += ['--replay', self.trajectory]
+        else:
+            args += ['--input', 'device', '--duration', str(self.haptic_duration), '--input-timeout', '0.1']
+        self._start('haptic', args)
+
+    def stop(self, name, timeout=15):
+        p = self.procs.get(name)
+        if p is None or p.poll() is not None:
+            return p.returncode if p else None
+        p.send_signal(signal.SIGINT)
+        try:
+            return p.wait(timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+            raise AssertionError(f'{name} did not stop within {timeout} s of SIGINT')
+
+    def __exit__(self, *exc):
+        for name in ('haptic', 'visual', 'web'):
+            try:
+                self.stop(name)
+            except AssertionError:
+                if exc[0] is None:
+                    raise
+        return False
+
+    def stats(self):
+        """surgsim-web's /stats."""
+        with urllib.request.urlopen(f'http://127.0.0.1:{self.port}/stats?token={TOKEN}', timeout=5) as r:
+            return json.loads(r.read())
+
+    def json(self, name):
+        with open(os.path.join(self.out, name)) as f:
+            return json.load(f)
+
+
+def browser(out_dir, name):
+    """A headless Debian chromium driven by chromedriver (python3-selenium)."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = '/usr/bin/chromium'
+    for a in ('--headless=new', '--no-sandbox', '--disable-gpu', '--disable-dev-shm-usage', '--window-size=1200,860',
+              f'--user-data-dir={out_dir}/chromium-{name}', '--disable-background-timer-throttling',
+              '--disable-renderer-backgrounding', '--disable-backgrounding-occluded-windows'):
+        opts.add_argument(a)
+    service = Service('/usr/bin/chromedriver', log_path=os.path.join(out_dir, f'chromedriver-{name}.log'))
+    return webdriver.Chrome(service=service, options=opts)
+
+
+def page_state(driver):
+    return driver.execute_script('return window.surgsim ? JSON.parse(JSON.stringify(window.surgsim)) : null;')
