@@ -2,3 +2,4 @@
 # liver's corotational contacts; build/bench/large_deformation_bench).
 surgsim_test(common_corotation_test SOURCES common/liver/corotation_test.cpp ${ALLOC} LIBS surgsim_liver surgsim_scene)
 surgsim_test(common_organ_curves_test SOURCES common/liver/organ_curves_test.cpp LIBS surgsim_liver surgsim_scene)
+surgsim_test(haptic_liver_corotation_test SOURCES haptic_node/organs/liver_corotation_test.cpp ${ALLOC} LIBS surgsim_haptic)

@@ -9,12 +9,15 @@
 // one-half variants through RotationHalves).
 //
 // Rotations. R_n is the shape-matching rotation of node n's one-ring on the boundary surface (the node and its
-// surface neighbours): A_n = sum_k (x_k - xbar)(X_k - Xbar)^T over the ring, X rest and x = X + u deformed positions,
+// surface neighbours): A_n = sum_k (x_k - xbar)(X_k - Xbar)^T over the ring, X rest and x = X + u~ positions,
 // R_n = the rotation maximizing tr(R^T A_n) (the rotational part of the polar decomposition; a flat ring, rank 2,
-// still gives a proper rotation: the normal follows the two in-plane axes). It is computed by the iteration of
-// Mueller, Bender, Chentanez and Macklin (2016), warm-started from the node's previous rotation: a few iterations a
-// tick, no allocation, no SVD. The displacements come from the previous solve (rotations lag one tick in the haptic
-// loop: at 1 kHz a lobe turning at 90 degrees/s is 0.09 degrees behind).
+// still gives a proper rotation: the normal follows the two in-plane axes). It is computed by
+// Higham's scaled Newton iteration for the polar factor (Mueller et al. 2016's iteration for an inverted ring): no
+// allocation, no SVD. The displacements are the REST-FRAME response u~ = G R^T lambda of the previous solve, not the
+// rotated one R u~: estimated from the rotated response the rotation feeds back on itself (a grasp dragged 2 cm
+// across a 4 cm slab ran away from 31 to 160 degrees in tests/haptic_node/organs/liver_corotation_test.cpp); from
+// u~ it is the rotation of the linear field, a fixed point without that loop. In the haptic loop the rotations lag
+// one tick (at 1 kHz a lobe turning at 90 degrees/s is 0.09 degrees behind).
 //
 // Free configuration. The response is added to the organ's configuration without contact, x_free = Q X + t, where
 // (Q, t) is the rigid frame of the fixed set (shape matching of the fixed nodes: the identity while the attachment

@@ -257,4 +257,12 @@ OrganCurves load_or_compute_organ_curves(const ElasticModel& model, const OrganC
   return curves;
 }
 
+NonlinearLaw load_organ_law(const TetMesh& mesh, const Material& material, const FixedSet& fixed,
+                            std::uint64_t tensor_key, const std::string& cache_dir, std::ostream* log,
+                            const OrganCurveSettings& settings) {
+  const ElasticModel model = build_elastic_model(mesh, material, fixed);
+  const OrganCurves curves = load_or_compute_organ_curves(model, settings, tensor_key, cache_dir, log);
+  return fit_organ_law(curves, settings.degree);
+}
+
 }  // namespace surgsim

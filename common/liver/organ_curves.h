@@ -83,4 +83,10 @@ OrganCurves load_or_compute_organ_curves(const ElasticModel& model, const OrganC
                                          std::uint64_t tensor_key, const std::string& cache_dir, std::ostream* log,
                                          OrganCurvesOutcome* outcome = nullptr);
 
+/// A scene's organ law (liver.curves: organ): the model of `mesh`, `material`, `fixed`, its curves loaded or computed
+/// for `tensor_key` in `cache_dir`, fitted with settings.degree. Throws surgsim::Error.
+NonlinearLaw load_organ_law(const TetMesh& mesh, const Material& material, const FixedSet& fixed,
+                            std::uint64_t tensor_key, const std::string& cache_dir, std::ostream* log,
+                            const OrganCurveSettings& settings = OrganCurveSettings());
+
 }  // namespace surgsim

@@ -70,10 +70,11 @@ LiverContacts::LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, co
 void LiverContacts::rotate_union(const PatchConstraints& k) noexcept {
   from_worker_.take();
   const RotationField& bg = from_worker_.front();
-  // Displacements of the previous tick: the solution's own nodes exactly, the others from the background field.
+  // Rest-frame displacements G R^T lambda of the previous tick: the solution's own nodes exactly, the others from
+  // the background field.
   const auto disp = [&](int node) -> Eigen::Vector3d {
     const int l = solution_index_[static_cast<std::size_t>(node)];
-    if (l >= 0 && l < solution_.count) return solution_.displacement[static_cast<std::size_t>(l)];
+    if (l >= 0 && l < solution_.count) return rest_displacement_[static_cast<std::size_t>(l)];
     return bg.valid ? Eigen::Vector3d(bg.u.row(node).transpose()) : Eigen::Vector3d::Zero();
   };
   for (int u = 0; u < k.node_count; ++u) {
@@ -94,6 +95,7 @@ void LiverContacts::publish_solution() noexcept {
   for (int l = 0; l < solution_.count; ++l) {
     const auto sl = static_cast<std::size_t>(l);
     indexed_nodes_[sl] = solution_.nodes[sl];
+    rest_displacement_[sl] = rotations_->rotation(solution_.nodes[sl]).transpose() * solution_.displacement[sl];
     solution_index_[static_cast<std::size_t>(solution_.nodes[sl])] = l;
     in.nodes[sl] = solution_.nodes[sl];
     in.lambda[sl] = solution_.lambda[sl];
@@ -106,7 +108,8 @@ void LiverContacts::refresh_rotations() noexcept {
   to_worker_.take();
   const RotationInput& in = to_worker_.front();
   NodeRotations& rot = *worker_rotations_;
-  // Fixed-point step: u from the current rotations, then the rotations from u.
+  // Fixed-point step: the rest-frame response u~ = G R^T lambda from the current rotations, then the rotations from
+  // u~ (liver/corotation.h: not from the rotated response, which feeds back and runs away).
   for (int l = 0; l < in.count; ++l)
     worker_rest_lambda_[static_cast<std::size_t>(l)] =
         rot.rotation(in.nodes[static_cast<std::size_t>(l)]).transpose() * in.lambda[static_cast<std::size_t>(l)];
@@ -118,7 +121,7 @@ void LiverContacts::refresh_rotations() noexcept {
       const int c = tensors_.column_of_node[static_cast<std::size_t>(in.nodes[static_cast<std::size_t>(l)])];
       if (c >= 0) sum.noalias() += haptic_.block3(r, c) * worker_rest_lambda_[static_cast<std::size_t>(l)];
     }
-    worker_u_.row(node) = (rot.rotation(node) * sum).transpose();
+    worker_u_.row(node) = sum.transpose();  // the rest-frame response: the rotations come from it
   }
   if (in.count == 0) {
     rot.reset();

@@ -127,8 +127,8 @@ class LiverContacts {
     const InstrumentInput in{&geometry, jaw};
     step(&in, 1, &out, dt);
   }
-  /// Corotational only (else nothing): the displacement u_n = R_n sum_l G(n, k_l) R_l^T lambda_l of every row of
-  /// the haptic block under the newest solution step() published, then the rotation of every surface node from
+  /// Corotational only (else nothing): the rest-frame response u~_n = sum_l G(n, k_l) R_l^T lambda_l of every row
+  /// of the haptic block under the newest solution step() published, then the rotation of every surface node from
   /// it, published back to step() (lock-free, latest value). Call it from ONE thread other than step()'s at >= 100
   /// Hz (LiverOrgan runs it at 200 Hz), or between steps in tests. No allocation.
   void refresh_rotations() noexcept;
@@ -220,9 +220,9 @@ class LiverContacts {
     std::array<int, kMaxContacts> nodes{};
     std::array<Eigen::Vector3d, kMaxContacts> lambda{};
   };
-  struct RotationField {  // refresh_rotations() -> loop: every node's displacement and rotation
+  struct RotationField {  // refresh_rotations() -> loop: every node's rest-frame displacement and rotation
     bool valid = false;
-    Eigen::MatrixX3d u;                    // #V x 3, m
+    Eigen::MatrixX3d u;                    // #V x 3, m: G R^T lambda (rest frame)
     std::vector<Eigen::Quaterniond> q;     // #V
   };
   /// The union nodes' rotations for this tick (from the previous solution and the background field).
@@ -234,6 +234,7 @@ class LiverContacts {
   std::array<Eigen::Matrix3d, kMaxContacts> union_rotation_{};
   std::vector<int> solution_index_;                   // #V: index in solution_ of the last step, or -1
   std::array<int, kMaxContacts> indexed_nodes_{};
+  std::array<Eigen::Vector3d, kMaxContacts> rest_displacement_{};  // R_n^T u_n of the last solution's nodes
   int indexed_count_ = 0;
   TripleBuffer<RotationInput> to_worker_;
   TripleBuffer<RotationField> from_worker_;

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "liver/liver_setup.h"
+#include "liver/organ_curves.h"
 #include "mesher/scene_mesh.h"
 
 namespace surgsim {
@@ -15,7 +16,10 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
   const LiverTensorSetup setup = liver_tensor_setup(scene.material, scene.fixed, mesh_, cache_dir, scene.file);
   tensors_ = load_liver_tensors(setup, mesh_, scene.material, {"haptic"}, progress, nullptr, scene.file);
   tensor_hash_ = setup.key.combined();
-  law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene.nonlinear, scene.material));
+  law_ = std::make_unique<NonlinearLaw>(
+      scene.liver.organ_curves
+          ? load_organ_law(mesh_, scene.material, setup.fixed, tensor_hash_, cache_dir, progress)
+          : load_nonlinear_law(scene.nonlinear, scene.material));
   contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene.tools,
                                               law_->identity() ? nullptr : law_.get(), scene.liver.deformation);
   if (scene.liver.deformation == LiverDeformation::kCorotational) {

@@ -7,6 +7,7 @@
 #include "core/clock.h"
 #include "core/error.h"
 #include "liver/liver_setup.h"
+#include "liver/organ_curves.h"
 #include "mesher/scene_mesh.h"
 #include "render/renderer.h"
 
@@ -28,8 +29,12 @@ LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
   tensors_ = load_liver_tensors(setup, mesh_, scene.material, {"visual"}, options.log, nullptr, scene.file);
   tensor_hash_ = setup.key.combined();
 
-  law_ = std::make_unique<NonlinearLaw>(load_nonlinear_law(scene.nonlinear, scene.material));
-  deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, &tensors_, law_->identity() ? nullptr : law_.get());
+  law_ = std::make_unique<NonlinearLaw>(
+      scene.liver.organ_curves
+          ? load_organ_law(mesh_, scene.material, setup.fixed, tensor_hash_, options.cache_dir, options.log)
+          : load_nonlinear_law(scene.nonlinear, scene.material));
+  deformer_ = std::make_unique<SurfaceDeformer>(mesh_, surface_, &tensors_, law_->identity() ? nullptr : law_.get(),
+                                                scene.liver.deformation);
   if (!scene.visual.surface.empty()) {
     // A finer visual surface embedded in the mechanical boundary (within 1 % of the organ's size).
     const double size = (mesh_.nodes.colwise().maxCoeff() - mesh_.nodes.colwise().minCoeff()).norm();

@@ -11,7 +11,7 @@
 namespace surgsim {
 
 SurfaceDeformer::SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors* tensors,
-                                 const NonlinearLaw* law)
+                                 const NonlinearLaw* law, LiverDeformation deformation)
     : law_(law) {
   // Compact the boundary to its own vertices (the GPU never sees interior nodes).
   visible_nodes_ = surface.nodes;
@@ -40,6 +40,42 @@ SurfaceDeformer::SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface
   for (std::size_t v = 0; v < visible_nodes_.size(); ++v) {
     block_row_[v] = block.row_of_node[static_cast<std::size_t>(visible_nodes_[v])];
   }
+  if (deformation == LiverDeformation::kCorotational) {
+    rotations_ = std::make_unique<NodeRotations>(mesh, surface);
+    rest_lambda_.assign(kMaxContacts, Eigen::Vector3d::Zero());
+  }
+}
+
+ContactStatus SurfaceDeformer::displace(const int* nodes, const Eigen::Vector3d* lambda, int m, Eigen::VectorXd& u,
+                                        bool rotate_rows) noexcept {
+  if (rotations_ == nullptr) return superposition_->displacements(nodes, lambda, m, u);
+  if (m > kMaxContacts) return ContactStatus::kOverCapacity;
+  for (int l = 0; l < m; ++l) {
+    const int n = nodes[l];
+    if (n < 0 || n >= rotations_->node_count()) return ContactStatus::kInvalidNode;
+    rest_lambda_[static_cast<std::size_t>(l)] = rotations_->rotation(n).transpose() * lambda[l];
+  }
+  const ContactStatus status = superposition_->displacements(nodes, rest_lambda_.data(), m, u);
+  if (status != ContactStatus::kOk || !rotate_rows) return status;
+  const TensorBlock& block = superposition_->block();
+  for (int r = 0; r < block.row_count(); ++r)
+    u.segment<3>(3 * r) = rotations_->rotation(block.row_nodes[static_cast<std::size_t>(r)]) * u.segment<3>(3 * r);
+  return ContactStatus::kOk;
+}
+
+ContactStatus SurfaceDeformer::update_rotations(const int* nodes, const Eigen::Vector3d* lambda, int m) noexcept {
+  if (rotations_ == nullptr) return ContactStatus::kOk;
+  const TensorBlock& block = superposition_->block();
+  const auto disp = [&](int k) -> Eigen::Vector3d {
+    const int r = block.row_of_node[static_cast<std::size_t>(k)];
+    return r >= 0 ? Eigen::Vector3d(u_.segment<3>(3 * r)) : Eigen::Vector3d::Zero();
+  };
+  for (int pass = 0; pass < kCorotationalPasses; ++pass) {
+    const ContactStatus status = displace(nodes, lambda, m, u_, false);  // the rest-frame response
+    if (status != ContactStatus::kOk) return status;
+    for (const int n : visible_nodes_) rotations_->update(n, disp);
+  }
+  return ContactStatus::kOk;
 }
 
 void SurfaceDeformer::embed(const TriSurface& fine, const TetMesh& mesh, const SurfaceMesh& surface,
@@ -94,13 +130,15 @@ void SurfaceDeformer::update_fine() noexcept {
 ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
                                      const Eigen::Vector3d& direction) noexcept {
   if (m == 0 || superposition_ == nullptr) {
+    if (rotations_ != nullptr) rotations_->reset();
     positions_ = rest_;
     max_displacement_ = 0;
     update_fine();
     return m == 0 ? ContactStatus::kOk : ContactStatus::kNotContactable;
   }
   if (m > kMaxContacts) return ContactStatus::kOverCapacity;
-  const ContactStatus status = superposition_->displacements(nodes, lambda, m, u_);
+  ContactStatus status = update_rotations(nodes, lambda, m);
+  if (status == ContactStatus::kOk) status = displace(nodes, lambda, m, u_);
   if (status != ContactStatus::kOk) return status;
   // Quasi non-linear law: P on the amplitude orthogonal to the constraint direction, every row in place.
   if (law_ != nullptr && direction.squaredNorm() > 0.5 && !law_->apply_displacements(u_, direction)) {
@@ -123,7 +161,10 @@ ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* la
   for (int l = 1; l < m && one_group; ++l) one_group = group(l) == first;
   if (one_group) return apply(nodes, lambda, m, first < instruments ? directions[first] : Eigen::Vector3d::Zero());
 
-  // Each group's share u_g = sum_{l in g} G(., k_l) lambda_l, bent about its direction, added up.
+  // Each group's share u_g = sum_{l in g} G(., k_l) lambda_l, bent about its direction, added up (corotational: the
+  // rotations from all contacts together, each share warped by them).
+  const ContactStatus rotated = update_rotations(nodes, lambda, m);
+  if (rotated != ContactStatus::kOk) return rotated;
   u_sum_.setZero();
   for (int g = 0; g <= instruments; ++g) {
     int count = 0;
@@ -134,7 +175,7 @@ ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* la
       ++count;
     }
     if (count == 0) continue;
-    const ContactStatus status = superposition_->displacements(group_nodes_.data(), group_lambda_.data(), count, u_);
+    const ContactStatus status = displace(group_nodes_.data(), group_lambda_.data(), count, u_);
     if (status != ContactStatus::kOk) return status;
     if (g < instruments && !law_->apply_displacements(u_, directions[g])) return ContactStatus::kNonFinite;
     u_sum_ += u_;

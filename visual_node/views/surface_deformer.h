@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "mesh/mesh.h"
+#include "liver/corotation.h"
 #include "liver/precompute.h"
 #include "liver/superposition.h"
 
@@ -18,8 +19,14 @@ class SurfaceDeformer {
  public:
   /// `tensors` (may be null: rest shape only) must hold the "visual" block and outlive this object.
   /// `law` (may be null: linear) applies P to the displacements orthogonal to the constraint direction.
+  /// `deformation` kCorotational (issue 16): the visual node recomputes the rotations itself from the
+  /// displacements (nothing more is sent): per frame, kCorotationalPasses fixed-point passes of
+  ///   u~_n = sum_l G(n, k_l) R_l^T lambda_l,  then R_n of every visible node from u~ (liver/corotation.h),
+  /// and the drawn u_n = R_n u~_n with the last rotations;
+  /// warm-started from the previous frame's rotations; the law's P comes after, on the warped u.
   SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors* tensors,
-                  const NonlinearLaw* law = nullptr);
+                  const NonlinearLaw* law = nullptr, LiverDeformation deformation = LiverDeformation::kLinear);
+  static constexpr int kCorotationalPasses = 2;
 
   /// Deforms for forces lambda (N) on m contact nodes (mesh indices). m = 0 restores the rest shape. On a bad
   /// input (unknown node, non-finite lambda) the previous shape is kept and the status says why. `direction`
@@ -56,6 +63,8 @@ class SurfaceDeformer {
   /// Largest displacement of any visible vertex in the current shape (m).
   double max_displacement() const { return max_displacement_; }
   bool has_tensors() const { return superposition_ != nullptr; }
+  /// The rotations in use (corotational; null otherwise).
+  const NodeRotations* rotations() const { return rotations_.get(); }
 
  private:
   std::vector<int> visible_nodes_;
@@ -81,6 +90,14 @@ class SurfaceDeformer {
   std::vector<int> group_nodes_;
   std::vector<Eigen::Vector3d> group_lambda_;
   double max_displacement_ = 0;
+  // --- corotational (issue 16) ---
+  /// u (3 per visual row) for forces lambda on m contact nodes: linear, or warped by the current rotations.
+  ContactStatus displace(const int* nodes, const Eigen::Vector3d* lambda, int m, Eigen::VectorXd& u,
+                         bool rotate_rows = true) noexcept;
+  /// The rotations of every visible node from the contacts (kCorotationalPasses passes); u_ holds the last pass's u.
+  ContactStatus update_rotations(const int* nodes, const Eigen::Vector3d* lambda, int m) noexcept;
+  std::unique_ptr<NodeRotations> rotations_;
+  std::vector<Eigen::Vector3d> rest_lambda_;  // kMaxContacts: R_l^T lambda_l
 };
 
 }  // namespace surgsim
