@@ -42,7 +42,9 @@ struct WebDds::State : DataReaderListener {
         put<std::uint64_t>(*m, 24, frame_in.render_stamp_ns());
         put<std::uint64_t>(*m, 32, frame_in.haptic_stamp_ns());
         if (!frame_in.jpeg().empty()) std::memcpy(&(*m)[kFrameHeaderBytes], frame_in.jpeg().data(), frame_in.jpeg().size());
+        const std::uint64_t now = monotonic_ns();
         std::lock_guard<std::mutex> lock(mutex);
+        if (now >= frame_in.render_stamp_ns()) arrival_us.add(static_cast<double>(now - frame_in.render_stamp_ns()) * 1e-3);
         frame = std::move(m);
         ++t.frames_received;
         t.frame_number = frame_in.frame_number();
@@ -105,6 +107,7 @@ struct WebDds::State : DataReaderListener {
   std::mutex mutex;
   Telemetry t;
   std::shared_ptr<const std::string> frame;
+  SampleRecorder arrival_us{1 << 18};
   std::array<std::pair<std::uint64_t, std::uint64_t>, 64> stamps{};  // (frame number, render stamp), ring
   msg::Frame frame_in;
   msg::ContactFrame contact_in;
@@ -138,6 +141,11 @@ std::shared_ptr<const std::string> WebDds::frame_since(std::uint64_t last_number
   std::lock_guard<std::mutex> lock(s_->mutex);
   if (!s_->frame || s_->t.frame_number == last_number) return nullptr;
   return s_->frame;
+}
+
+Percentiles WebDds::frame_arrival_us() {
+  std::lock_guard<std::mutex> lock(s_->mutex);
+  return s_->arrival_us.summary();
 }
 
 std::uint64_t WebDds::render_stamp_of(std::uint64_t number) {

@@ -62,6 +62,8 @@ class WebDds {
   std::shared_ptr<const std::string> frame_since(std::uint64_t last_number);
   /// Publishes the driven instrument's ToolCommand (stamped now).
   void publish(const Pose5& pose, std::uint64_t seq);
+  /// Render -> received here (us, same-host clocks) of every frame so far.
+  Percentiles frame_arrival_us();
   /// The render stamp of frame `number` when it is among the last frames received (0: unknown).
   std::uint64_t render_stamp_of(std::uint64_t number);
   const dds::Participant& participant() const;

@@ -417,8 +417,9 @@ std::string WebServer::Impl::stats_text() {
   j["frames_replaced"] = c.frames_replaced.load();
   {
     std::lock_guard<std::mutex> lock(delay_mutex);
-    j["render_to_page_us"] = to_json(delay_us.summary());
+    j["render_to_page_us"] = to_json(delay_us.summary());  // render -> the page displayed it, echoed back here
   }
+  j["render_to_server_us"] = to_json(dds.frame_arrival_us());  // render -> the frame arrived over DDS
   add_live(j);
   return j.dump();
 }

@@ -61,10 +61,14 @@ function drawForce() {
   ctx.clearRect(0, 0, c.width, c.height);
   const limit = (S.hello && S.hello.force_limit) || 8;
   const [fx, , fz] = S.force;
-  const cx = c.width / 2, cy = c.height / 2, scale = (c.height / 2 - 10) / limit;
-  ctx.strokeStyle = '#444'; ctx.beginPath(); ctx.arc(cx, cy, limit * scale, 0, 2 * Math.PI); ctx.stroke();
+  // The circle is the larger of 2 N and the largest force seen (the bar below is against the device limit).
+  const ring = Math.min(limit, Math.max(2, S.forceMax)), cx = c.width / 2, cy = c.height / 2;
+  const scale = (c.height / 2 - 12) / ring;
+  ctx.strokeStyle = '#444'; ctx.beginPath(); ctx.arc(cx, cy, ring * scale, 0, 2 * Math.PI); ctx.stroke();
+  ctx.fillStyle = '#777'; ctx.font = '10px monospace';
+  ctx.fillText(`${ring.toFixed(1)} N`, 4, 12); ctx.fillText('x \u2192  z \u2191 (front view)', 4, c.height - 4);
   const x = cx + fx * scale, y = cy - fz * scale;
-  ctx.strokeStyle = '#e0a030'; ctx.fillStyle = '#e0a030'; ctx.lineWidth = 3;
+  ctx.strokeStyle = '#e0a030'; ctx.fillStyle = '#e0a030'; ctx.lineWidth = 3; ctx.lineCap = 'round';
   ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(x, y); ctx.stroke();
   const a = Math.atan2(y - cy, x - cx);
   if (S.forceNorm > 1e-3) {
@@ -80,7 +84,7 @@ function drawForce() {
 
 // --- the WebSocket ---
 let ws = null;
-let pendingUrl = null, loading = false, shownNumber = 0;
+let pending = null, decoding = false;
 function connect() {
   const proto = location.protocol === 'https:' ? 'wss' : 'ws';
   ws = new WebSocket(`${proto}://${location.host}/ws?token=${encodeURIComponent(token)}`);
@@ -99,31 +103,27 @@ function send(obj) { if (ws && ws.readyState === 1) ws.send(JSON.stringify(obj))
 function onFrame(buf) {
   const d = new DataView(buf);
   if (buf.byteLength < 48 || d.getUint32(0, true) !== 0x31464753) return;  // "SGF1"
-  const number = Number(d.getBigUint64(16, true));
   S.frames++; S.frameSize = buf.byteLength - 48;
-  S.renderStamp = Number(d.getBigUint64(24, true));
-  const url = URL.createObjectURL(new Blob([buf.slice(48)], { type: 'image/jpeg' }));
-  if (loading) {                           // still decoding the previous one: keep only the newest
-    if (pendingUrl) URL.revokeObjectURL(pendingUrl.url);
-    pendingUrl = { url, number, w: d.getUint32(4, true), h: d.getUint32(8, true), q: d.getUint32(12, true) };
-    return;
-  }
-  show({ url, number, w: d.getUint32(4, true), h: d.getUint32(8, true), q: d.getUint32(12, true) });
+  const f = { number: Number(d.getBigUint64(16, true)), w: d.getUint32(4, true), h: d.getUint32(8, true),
+              q: d.getUint32(12, true), blob: new Blob([buf.slice(48)], { type: 'image/jpeg' }) };
+  if (decoding) { pending = f; return; }   // still decoding the previous one: keep only the newest
+  show(f);
 }
+// Decoded off the main thread (createImageBitmap), drawn on the canvas, then reported as shown.
 function show(f) {
-  loading = true;
-  const old = view.src;
-  view.onload = () => {
-    if (old && old.startsWith('blob:')) URL.revokeObjectURL(old);
-    S.lastFrame = f.number; shownNumber = f.number;
+  decoding = true;
+  createImageBitmap(f.blob).then((bitmap) => {
+    if (view.width !== f.w || view.height !== f.h) { view.width = f.w; view.height = f.h; }
+    view.getContext('2d').drawImage(bitmap, 0, 0);
+    bitmap.close();
+    S.lastFrame = f.number;
     send({ type: 'shown', frame: f.number });
     $('frameinfo').textContent = `frame ${f.number}  ${f.w}x${f.h}  JPEG q${f.q} ${(S.frameSize / 1024).toFixed(1)} KiB` +
       `  (${S.frames} received)`;
-    loading = false;
-    if (pendingUrl) { const p = pendingUrl; pendingUrl = null; show(p); }
-  };
-  view.onerror = () => { loading = false; };
-  view.src = f.url;
+  }).catch(() => { S.badFrames = (S.badFrames || 0) + 1; }).finally(() => {
+    decoding = false;
+    if (pending) { const p = pending; pending = null; show(p); }
+  });
 }
 
 function onText(m) {
