@@ -10,14 +10,15 @@
 #include "liver/fem.h"
 #include "liver/fixed_set.h"
 #include "liver_cli.h"
+#include "liver/liver_setup.h"
 #include "liver/precompute.h"
 #include "liver/tensor_cache.h"
 #include "mesher/scene_mesh.h"
 
 int main(int argc, char** argv) {
   using namespace surgsim;
-  std::string mesh_file, generate, scene_file, out, precision = "double", method = "direct";
-  int nodes = 1500, max_iter = 0, block = 192;
+  std::string mesh_file, generate, scene_file, out, precision = "auto", method = "direct";
+  int nodes = 1500, max_iter = 0, block = PrecomputeOptions().block_columns, threads = 0;
   double young = -1, poisson = -1, tol = 1e-10, memory_limit_mb = 4096;
   cli::FixedOptions fixed_opts;
   bool force = false, quiet = false;
@@ -40,12 +41,16 @@ int main(int argc, char** argv) {
   auto* o_box = app.add_option("--fixed-box", fixed_opts.boxes, "Fix nodes in a box: x0,y0,z0,x1,y1,z1 (m); repeatable");
   for (auto* o : {o_young, o_poisson, o_fixed, o_plane, o_box}) o->excludes(o_scene);
   app.add_option("--out", out, "Tensor cache file to write")->required();
-  app.add_option("--precision", precision, "Stored precision: float | double")->capture_default_str();
+  app.add_option("--precision", precision,
+                 "Stored precision: float | double | auto (as the scenes: double unless it passes 1 GiB)")
+      ->capture_default_str();
   app.add_option("--method", method, "direct (CHOLMOD, blocks of right-hand sides) | cg (one CG solve per column)")
       ->capture_default_str();
   app.add_option("--tol", tol, "CG relative residual per column")->capture_default_str();
   app.add_option("--max-iter", max_iter, "CG iteration limit per column (0: 10 x unknowns)")->capture_default_str();
-  app.add_option("--block", block, "Right-hand sides per CHOLMOD solve")->capture_default_str();
+  app.add_option("--block", block, "Unit right-hand sides per blocked supernodal solve")->capture_default_str();
+  app.add_option("--threads", threads, "Solving threads (0: every core; the result does not depend on it)")
+      ->capture_default_str();
   app.add_option("--memory-limit-mb", memory_limit_mb, "Refuse when the memory estimate exceeds this many MiB (0: no limit)")
       ->capture_default_str();
   app.add_flag("--force", force, "Recompute even if the cache is up to date");
@@ -80,10 +85,19 @@ int main(int argc, char** argv) {
     const ElasticModel model = build_elastic_model(mesh, material, fixed, where);
     const std::vector<int> contacts = contactable_nodes(mesh, fixed);
     if (contacts.empty()) throw_error(where, ": no free surface node to precompute (everything is fixed?)");
-    const std::vector<RowSet> rows = standard_row_sets(mesh, contacts);
+    const std::vector<RowSet> rows = standard_row_sets(mesh, fixed, contacts);
 
     PrecomputeOptions opts;
-    opts.precision = parse_precision(precision);
+    opts.symmetric = true;  // the haptic block (contacts x contacts) as one half, as the scenes store it
+    if (precision == "auto") {
+      PrecomputeOptions as_double = opts;
+      const double mib = static_cast<double>(estimate_tensor_bytes(static_cast<int>(contacts.size()), rows, as_double)) /
+                         (1024.0 * 1024.0);
+      opts.precision = mib > kFloatAboveMiB ? Precision::kFloat : Precision::kDouble;
+    } else {
+      opts.precision = parse_precision(precision);
+    }
+    opts.threads = threads;
     opts.method = parse_solve_method(method);
     opts.cg_tolerance = tol;
     opts.cg_max_iterations = max_iter;
@@ -124,8 +138,8 @@ int main(int argc, char** argv) {
                 out.c_str(), tensors.node_count, tensors.column_count(), tensors.blocks[0].row_count(),
                 tensors.column_count(), tensors.blocks[1].row_count(), tensors.column_count(), to_string(opts.precision),
                 static_cast<double>(std::filesystem::file_size(out)) / (1024.0 * 1024.0));
-    std::printf("method %s: analyze %.3f s, factor %.3f s, solve %.3f s, total %.3f s", to_string(opts.method),
-                report.analyze_s, report.factor_s, report.solve_s, report.total_s);
+    std::printf("method %s: analyze %.3f s, factor %.3f s, solve %.3f s (%d thread(s)), total %.3f s",
+                to_string(opts.method), report.analyze_s, report.factor_s, report.solve_s, report.threads, report.total_s);
     if (opts.method == SolveMethod::kCg)
       std::printf("; CG max %d iterations, worst residual %.2e%s", report.cg_max_iterations, report.cg_max_residual,
                   report.cg_all_converged ? "" : " (some columns hit the iteration limit)");

@@ -4,8 +4,18 @@
 
 #include <algorithm>
 #include <cstring>
+#include <vector>
 
 #include "core/error.h"
+
+extern "C" {
+// Fortran BLAS (the one CHOLMOD links: OpenBLAS on Debian through libblas.so.3).
+void dgemm_(const char* ta, const char* tb, const int* m, const int* n, const int* k, const double* alpha,
+            const double* a, const int* lda, const double* b, const int* ldb, const double* beta, double* c,
+            const int* ldc);
+void dtrsm_(const char* side, const char* uplo, const char* ta, const char* diag, const int* m, const int* n,
+            const double* alpha, const double* a, const int* lda, double* b, const int* ldb);
+}
 
 namespace surgsim {
 
@@ -19,6 +29,9 @@ struct CholmodSolver::Impl {
   cholmod_dense* y = nullptr;
   cholmod_dense* e = nullptr;
   bool factorized = false;
+  // Supernodal structure for solve_unit_columns (after factorize): inverse permutation, supernode of each permuted
+  // row, parent supernode (-1 at a root).
+  std::vector<int> pinv, super_of_row, parent;
 
   explicit Impl(const Options& o) : options(o) {
     cholmod_start(&common);
@@ -106,6 +119,110 @@ void CholmodSolver::factorize() {
                 "inverted");
   if (!ok || s.common.status < CHOLMOD_OK) s.fail("factorize");
   s.factorized = true;
+  const int n = static_cast<int>(s.l->n);
+  const auto* perm = static_cast<const int*>(s.l->Perm);
+  s.pinv.assign(static_cast<std::size_t>(n), 0);
+  for (int k = 0; k < n; ++k) s.pinv[static_cast<std::size_t>(perm[k])] = k;
+  s.super_of_row.clear();
+  s.parent.clear();
+  if (s.l->is_super) {
+    const int nsuper = static_cast<int>(s.l->nsuper);
+    const auto* super = static_cast<const int*>(s.l->super);
+    const auto* pi = static_cast<const int*>(s.l->pi);
+    const auto* ls = static_cast<const int*>(s.l->s);
+    s.super_of_row.resize(static_cast<std::size_t>(n));
+    for (int k = 0; k < nsuper; ++k)
+      for (int r = super[k]; r < super[k + 1]; ++r) s.super_of_row[static_cast<std::size_t>(r)] = k;
+    s.parent.assign(static_cast<std::size_t>(nsuper), -1);
+    for (int k = 0; k < nsuper; ++k) {
+      const int nscol = super[k + 1] - super[k];
+      if (pi[k + 1] - pi[k] > nscol) s.parent[static_cast<std::size_t>(k)] = s.super_of_row[static_cast<std::size_t>(ls[pi[k] + nscol])];
+    }
+  }
+}
+
+int CholmodSolver::permuted_row(int row) const { return impl_->pinv.at(static_cast<std::size_t>(row)); }
+
+std::vector<char> CholmodSolver::supernodes_for_rows(const std::vector<int>& rows) const {
+  const Impl& s = *impl_;
+  if (!s.factorized || !s.l->is_super) throw_error("CholmodSolver: supernodes_for_rows() needs a supernodal factor");
+  const std::size_t nsuper = s.parent.size();
+  std::vector<char> mark(nsuper, rows.empty() ? 1 : 0);
+  for (int r : rows)
+    for (int k = s.super_of_row.at(static_cast<std::size_t>(s.pinv.at(static_cast<std::size_t>(r)))); k >= 0 && !mark[static_cast<std::size_t>(k)];
+         k = s.parent[static_cast<std::size_t>(k)])
+      mark[static_cast<std::size_t>(k)] = 1;
+  return mark;
+}
+
+void CholmodSolver::solve_unit_columns(const int* rows, int count, const std::vector<char>& needed,
+                                       UnitSolveWork& w) const {
+  const Impl& s = *impl_;
+  if (!s.factorized || !s.l->is_super || !s.l->is_ll)
+    throw_error("CholmodSolver: solve_unit_columns() needs a supernodal LL' factor (factorize() first)");
+  const int n = static_cast<int>(s.l->n);
+  const int nsuper = static_cast<int>(s.l->nsuper);
+  if (needed.size() != static_cast<std::size_t>(nsuper)) throw_error("CholmodSolver: supernode mask of the wrong size");
+  const auto* super = static_cast<const int*>(s.l->super);
+  const auto* pi = static_cast<const int*>(s.l->pi);
+  const auto* px = static_cast<const int*>(s.l->px);
+  const auto* ls = static_cast<const int*>(s.l->s);
+  const auto* lx = static_cast<const double*>(s.l->x);
+  const std::size_t nn = static_cast<std::size_t>(n);
+  w.x.assign(nn * static_cast<std::size_t>(count), 0.0);
+  w.lo.assign(static_cast<std::size_t>(nsuper), -1);
+  w.hi.assign(static_cast<std::size_t>(nsuper), -1);
+  w.path.clear();
+  // The supernodes each unit column reaches: its own and its ancestors (the nonzeros of L^-1 e).
+  for (int j = 0; j < count; ++j) {
+    const int p = s.pinv.at(static_cast<std::size_t>(rows[j]));
+    w.x[static_cast<std::size_t>(p) + nn * static_cast<std::size_t>(j)] = 1.0;
+    for (int k = s.super_of_row[static_cast<std::size_t>(p)]; k >= 0; k = s.parent[static_cast<std::size_t>(k)]) {
+      auto& lo = w.lo[static_cast<std::size_t>(k)];
+      if (lo < 0) {
+        lo = j;
+        w.path.push_back(k);
+      }
+      w.hi[static_cast<std::size_t>(k)] = j;
+    }
+  }
+  std::sort(w.path.begin(), w.path.end());
+  const double one = 1.0, zero = 0.0, minus_one = -1.0;
+  // Forward: L y = e, supernode by supernode on the columns that reach it.
+  for (int k : w.path) {
+    const int k1 = super[k], nscol = super[k + 1] - k1, nsrow = pi[k + 1] - pi[k], nrow2 = nsrow - nscol;
+    const int c0 = w.lo[static_cast<std::size_t>(k)], nc = w.hi[static_cast<std::size_t>(k)] - c0 + 1;
+    const double* l = lx + px[k];
+    double* x1 = w.x.data() + k1 + nn * static_cast<std::size_t>(c0);
+    dtrsm_("L", "L", "N", "N", &nscol, &nc, &one, l, &nsrow, x1, &n);
+    if (nrow2 == 0) continue;
+    w.w.resize(static_cast<std::size_t>(nrow2) * static_cast<std::size_t>(nc));
+    dgemm_("N", "N", &nrow2, &nc, &nscol, &one, l + nscol, &nsrow, x1, &n, &zero, w.w.data(), &nrow2);
+    const int* rs = ls + pi[k] + nscol;
+    for (int j = 0; j < nc; ++j) {
+      double* xj = w.x.data() + nn * static_cast<std::size_t>(c0 + j);
+      const double* wj = w.w.data() + static_cast<std::size_t>(nrow2) * static_cast<std::size_t>(j);
+      for (int i = 0; i < nrow2; ++i) xj[rs[i]] -= wj[i];
+    }
+  }
+  // Backward: L' x = y over the needed supernodes (each needs only its ancestors, which are needed too).
+  for (int k = nsuper - 1; k >= 0; --k) {
+    if (!needed[static_cast<std::size_t>(k)]) continue;
+    const int k1 = super[k], nscol = super[k + 1] - k1, nsrow = pi[k + 1] - pi[k], nrow2 = nsrow - nscol;
+    const double* l = lx + px[k];
+    double* x1 = w.x.data() + k1;
+    if (nrow2 > 0) {
+      w.w.resize(static_cast<std::size_t>(nrow2) * static_cast<std::size_t>(count));
+      const int* rs = ls + pi[k] + nscol;
+      for (int j = 0; j < count; ++j) {
+        const double* xj = w.x.data() + nn * static_cast<std::size_t>(j);
+        double* wj = w.w.data() + static_cast<std::size_t>(nrow2) * static_cast<std::size_t>(j);
+        for (int i = 0; i < nrow2; ++i) wj[i] = xj[rs[i]];
+      }
+      dgemm_("T", "N", &nscol, &count, &nrow2, &minus_one, l + nscol, &nsrow, w.w.data(), &nrow2, &one, x1, &n);
+    }
+    dtrsm_("L", "L", "T", "N", &nscol, &count, &one, l, &nsrow, x1, &n);
+  }
 }
 
 bool CholmodSolver::factorized() const { return impl_->factorized; }

@@ -5,6 +5,7 @@
 #include <Eigen/SparseCore>
 #include <cstddef>
 #include <memory>
+#include <vector>
 
 namespace surgsim {
 
@@ -46,6 +47,26 @@ class CholmodSolver {
   /// CHOLMOD's workspace is reused between calls. Throws surgsim::Error on a size mismatch or CHOLMOD failure.
   void solve(const Eigen::Ref<const Eigen::MatrixXd>& b, Eigen::Ref<Eigen::MatrixXd> x);
   Eigen::MatrixXd solve(const Eigen::MatrixXd& b);
+
+  /// Scratch of solve_unit_columns(): one per thread, reused between calls (grows to the largest block).
+  struct UnitSolveWork {
+    std::vector<double> x;       // rows() x count, column-major, in the factor's permuted row order
+    std::vector<double> w;       // off-diagonal rows of a supernode x count
+    std::vector<int> path;       // supernodes the unit right-hand sides reach in the forward solve
+    std::vector<int> lo, hi;     // per supernode: first and last column whose forward solve reaches it
+  };
+  /// Position of row `row` of A in the factor's permuted order (x of solve_unit_columns is in that order).
+  int permuted_row(int row) const;
+  /// Supernodes holding these rows or an ancestor of them (the ones a backward solve must visit to get x at the
+  /// rows); all supernodes when `rows` is empty. After factorize(), supernodal factor only.
+  std::vector<char> supernodes_for_rows(const std::vector<int>& rows) const;
+  /// x = A^-1 [e_rows[0] .. e_rows[count-1]] on the supernodal factor with our own BLAS calls: the forward solve
+  /// visits only the supernodes each unit column reaches (and only the columns reaching them); the backward solve
+  /// only the supernodes of `needed` (supernodes_for_rows; x is exact at the rows it was made from, unspecified
+  /// elsewhere). Reads the factor only: several threads may call it at once, each with its own `work` (issue 17).
+  /// The result depends only on the factor and `rows` (same bits whatever the threads). Throws surgsim::Error
+  /// before factorize() or on a simplicial factor.
+  void solve_unit_columns(const int* rows, int count, const std::vector<char>& needed, UnitSolveWork& work) const;
 
  private:
   struct Impl;

@@ -55,7 +55,15 @@ LiverTensorSetup liver_tensor_setup(const Material& material, const FixedRegion&
   s.fixed = fixed_set_from_region(mesh, fixed);
   s.contacts = contactable_nodes(mesh, s.fixed);
   if (s.contacts.empty()) throw_error(where, ": key 'fixed': every surface node is fixed; nothing can be touched");
-  s.rows = standard_row_sets(mesh, s.contacts);
+  s.rows = standard_row_sets(mesh, s.fixed, s.contacts);
+  // Issue 17: the haptic block (contacts x contacts) is stored as one half; float once double would pass
+  // kFloatAboveMiB (a 20k-node liver: 2.5 GiB in double, 1.2 GiB in float, relative error ~1e-7).
+  s.options.symmetric = true;
+  PrecomputeOptions as_double = s.options;
+  as_double.precision = Precision::kDouble;
+  const double double_mib =
+      static_cast<double>(estimate_tensor_bytes(static_cast<int>(s.contacts.size()), s.rows, as_double)) / (1024.0 * 1024.0);
+  s.options.precision = double_mib > kFloatAboveMiB ? Precision::kFloat : Precision::kDouble;
   s.key = tensor_cache_key(mesh, material, s.fixed, s.contacts, s.rows, s.options);
   char name[64];
   std::snprintf(name, sizeof name, "/tensors-%016llx.bin", static_cast<unsigned long long>(s.key.combined()));
@@ -78,7 +86,7 @@ Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, c
   if (out.load.status == CacheStatus::kOk) return t;
   if (log != nullptr && out.load.status != CacheStatus::kMissing) {
     *log << "tensors: cache " << setup.cache_path << " is " << to_string(out.load.status) << " (" << out.load.detail
-         << "); rebuilding\n";
+         << "); rebuilding it (nothing to do by hand; a file that keeps failing can be deleted)\n";
   }
 
   const ElasticModel model = build_elastic_model(mesh, material, setup.fixed, where);
@@ -110,7 +118,8 @@ Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, c
   }
   if (log != nullptr) {
     *log << "tensors: " << setup.contacts.size() << " contactable nodes, precomputed in " << report.total_s
-         << " s (" << report.memory.describe() << ")" << (out.saved ? ", cached in " + setup.cache_path : "") << "\n";
+         << " s on " << report.threads << " thread(s), " << to_string(setup.options.precision) << " ("
+         << report.memory.describe() << ")" << (out.saved ? ", cached in " + setup.cache_path : "") << "\n";
   }
   keep_blocks(t, blocks);
   return t;

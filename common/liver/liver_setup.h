@@ -14,11 +14,14 @@
 
 namespace surgsim {
 
+/// Scenes store their tensors in float once double would take more than this (MiB; issue 17).
+constexpr double kFloatAboveMiB = 1024;
+
 struct LiverTensorSetup {
   FixedSet fixed;
   std::vector<int> contacts;     // contactable (free surface) nodes
   std::vector<RowSet> rows;      // "haptic" (surface x surface) and "visual" (boundary x surface)
-  PrecomputeOptions options;     // default: direct, double precision
+  PrecomputeOptions options;     // direct, symmetric haptic block, double (float above kFloatAboveMiB)
   TensorCacheKey key;
   std::string cache_path;        // <cache_dir>/tensors-<combined key, hex>.bin
 };

@@ -1,9 +1,16 @@
 #include "liver/precompute.h"
 
+#include <dlfcn.h>
+
 #include <Eigen/IterativeLinearSolvers>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <exception>
+#include <mutex>
+#include <numeric>
+#include <thread>
 
 #include "liver/cholmod_solver.h"
 #include "core/error.h"
@@ -18,9 +25,20 @@ Precision parse_precision(const std::string& text) {
   throw_error("unknown precision '", text, "' (expected float or double)");
 }
 
-Eigen::Matrix3d TensorBlock::block3(int r, int c) const {
-  if (g.size()) return g.block<3, 3>(3 * r, 3 * c);
-  return g_float.block<3, 3>(3 * r, 3 * c).cast<double>();
+void TensorBlock::column(Eigen::Index j, double* out) const {
+  const Eigen::Index rows = 3 * static_cast<Eigen::Index>(row_count());
+  if (!symmetric && g.size()) {
+    Eigen::Map<Eigen::VectorXd>(out, rows) = g.col(j);
+  } else if (!symmetric) {
+    Eigen::Map<Eigen::VectorXd>(out, rows) = g_float.col(j).cast<double>();
+  } else {
+    for (Eigen::Index i = 0; i < rows; ++i) out[i] = at(i, j);
+  }
+}
+
+std::size_t TensorBlock::stored_entries() const {
+  if (symmetric) return packed.size() + packed_float.size();
+  return static_cast<std::size_t>(g.size() + g_float.size());
 }
 
 const TensorBlock* Tensors::find(const std::string& name) const {
@@ -56,31 +74,78 @@ std::vector<RowSet> standard_row_sets(const TetMesh& mesh, const std::vector<int
   return {RowSet{"haptic", contacts}, RowSet{"visual", boundary_surface(mesh).nodes}};
 }
 
+std::vector<RowSet> standard_row_sets(const TetMesh& mesh, const FixedSet& fixed, const std::vector<int>& contact_nodes) {
+  std::vector<RowSet> sets = standard_row_sets(mesh, contact_nodes);
+  auto& visual = sets[1].nodes;
+  visual.erase(std::remove_if(visual.begin(), visual.end(), [&](int n) { return fixed.mask(n) == 7; }), visual.end());
+  return sets;
+}
+
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-std::size_t tensor_bytes(int contact_count, const std::vector<RowSet>& rows, Precision precision) {
-  std::size_t r = 0;
-  for (const auto& set : rows) r += set.nodes.size();
-  return 9 * r * static_cast<std::size_t>(contact_count) * static_cast<std::size_t>(precision);
+// Whether `set` is stored as a packed symmetric block: its rows are the contact nodes, in column order.
+bool packs_symmetric(const RowSet& set, const std::vector<int>& sorted_contacts, const PrecomputeOptions& options) {
+  return options.symmetric && set.nodes == sorted_contacts;
+}
+
+std::size_t tensor_bytes(int contact_count, const std::vector<RowSet>& rows, const PrecomputeOptions& options) {
+  const auto s = static_cast<std::size_t>(contact_count);
+  std::size_t entries = 0;
+  for (const auto& set : rows) {
+    // Without the sorted contact list here, a row set packs when it has S sorted nodes (checked exactly later).
+    const bool sym = options.symmetric && set.nodes.size() == s && std::is_sorted(set.nodes.begin(), set.nodes.end());
+    entries += sym ? 9 * s * (s + 1) / 2 : 9 * set.nodes.size() * s;
+  }
+  return entries * static_cast<std::size_t>(options.precision);
+}
+
+// OpenBLAS runs each call on one thread while our own threads solve (no oversubscription; the same bits for any
+// thread count); restores its setting after. A no-op with another BLAS.
+class BlasSingleThread {
+ public:
+  BlasSingleThread() {
+    set_ = reinterpret_cast<void (*)(int)>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+    auto get = reinterpret_cast<int (*)()>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads"));
+    if (set_ && get) {
+      saved_ = get();
+      set_(1);
+    }
+  }
+  ~BlasSingleThread() {
+    if (set_ && saved_ > 0) set_(saved_);
+  }
+  BlasSingleThread(const BlasSingleThread&) = delete;
+  BlasSingleThread& operator=(const BlasSingleThread&) = delete;
+
+ private:
+  void (*set_)(int) = nullptr;
+  int saved_ = 0;
+};
+
+int solving_threads(const PrecomputeOptions& options, int contact_count) {
+  int t = options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
+  const int block = std::max(1, options.block_columns);
+  const int blocks = (3 * contact_count + block - 1) / block;
+  return std::max(1, std::min(t, blocks));
 }
 
 MemoryEstimate base_estimate(const ElasticModel& model, int contact_count, const std::vector<RowSet>& rows,
                              const PrecomputeOptions& options) {
   MemoryEstimate m;
-  m.tensors = tensor_bytes(contact_count, rows, options.precision);
+  m.tensors = tensor_bytes(contact_count, rows, options);
   const std::size_t entry = sizeof(double) + sizeof(int);
   m.matrix = static_cast<std::size_t>(model.k.nonZeros() + model.k_ff.nonZeros()) * entry;
   const std::size_t nf = static_cast<std::size_t>(model.fixed.free_dof_count());
   if (options.method == SolveMethod::kDirect) {
     m.matrix += static_cast<std::size_t>(model.k_ff.nonZeros()) / 2 * entry;  // CHOLMOD's upper-triangle copy
-    // Right-hand sides, our solution block, and CHOLMOD's X, Y, E workspaces.
+    // Per solving thread: the solution block and the gathered off-diagonal rows (at most as many).
     const std::size_t block = std::min<std::size_t>(static_cast<std::size_t>(std::max(1, options.block_columns)),
                                                     3 * static_cast<std::size_t>(contact_count));
-    m.work = 4 * nf * block * sizeof(double);
+    m.work = 2 * nf * block * sizeof(double) * static_cast<std::size_t>(solving_threads(options, contact_count));
   } else {
     m.work = 8 * nf * sizeof(double);  // CG vectors and preconditioner
   }
@@ -110,6 +175,10 @@ void check_nodes(const ElasticModel& model, const std::vector<int>& nodes, const
 }
 
 }  // namespace
+
+std::size_t estimate_tensor_bytes(int contact_count, const std::vector<RowSet>& rows, const PrecomputeOptions& options) {
+  return tensor_bytes(contact_count, rows, options);
+}
 
 MemoryEstimate estimate_precompute_memory(const ElasticModel& model, int contact_count,
                                           const std::vector<RowSet>& rows, const PrecomputeOptions& options) {
@@ -178,7 +247,13 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
     for (std::size_t r = 0; r < set.nodes.size(); ++r) b.row_of_node[static_cast<std::size_t>(set.nodes[r])] = static_cast<int>(r);
     const Eigen::Index rr = 3 * static_cast<Eigen::Index>(set.nodes.size());
     // Every entry is written by store() below (zeros for fixed rows): no need to clear.
-    if (options.precision == Precision::kDouble)
+    b.symmetric = packs_symmetric(set, t.contact_nodes, options);
+    const std::size_t packed = 9 * set.nodes.size() * (set.nodes.size() + 1) / 2;
+    if (b.symmetric && options.precision == Precision::kDouble)
+      b.packed.resize(packed);
+    else if (b.symmetric)
+      b.packed_float.resize(packed);
+    else if (options.precision == Precision::kDouble)
       b.g.resize(rr, cols);
     else
       b.g_float.resize(rr, cols);
@@ -190,19 +265,33 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
     for (int node : t.blocks[k].row_nodes)
       for (int c = 0; c < 3; ++c) row_free[k].push_back(model.fixed.free_index()[static_cast<std::size_t>(3 * node + c)]);
 
-  // Copies solved columns [j0, j0 + x.cols()) into every block.
-  auto store = [&](const Eigen::MatrixXd& x, Eigen::Index j0) {
+  // Copies solved column j (x: the solution, entry f at x[perm(f)], perm = identity when null) into every block.
+  // A symmetric block takes rows 3c.. only (c = j / 3, the node column), the rest being the other half.
+  auto store = [&](const double* x, const int* perm, Eigen::Index j) {
+    const auto value = [&](int f) { return f < 0 ? 0.0 : x[perm ? perm[f] : f]; };
     for (std::size_t k = 0; k < t.blocks.size(); ++k) {
       TensorBlock& b = t.blocks[k];
       const auto& rf = row_free[k];
-      for (Eigen::Index j = 0; j < x.cols(); ++j)
-        for (std::size_t i = 0; i < rf.size(); ++i) {
-          const double v = rf[i] >= 0 ? x(rf[i], j) : 0.0;
+      if (b.symmetric) {
+        const std::size_t i0 = 3 * static_cast<std::size_t>(j / 3);
+        const std::size_t base = b.packed_index(static_cast<Eigen::Index>(i0), j);  // rows i0.. are contiguous by 3s
+        for (std::size_t i = i0; i < rf.size(); ++i) {
+          const std::size_t at = base + 3 * ((i - i0) / 3) * 3 + (i - i0) % 3;
+          const double v = value(rf[i]);
           if (options.precision == Precision::kDouble)
-            b.g(static_cast<Eigen::Index>(i), j0 + j) = v;
+            b.packed[at] = v;
           else
-            b.g_float(static_cast<Eigen::Index>(i), j0 + j) = static_cast<float>(v);
+            b.packed_float[at] = static_cast<float>(v);
         }
+        continue;
+      }
+      for (std::size_t i = 0; i < rf.size(); ++i) {
+        const double v = value(rf[i]);
+        if (options.precision == Precision::kDouble)
+          b.g(static_cast<Eigen::Index>(i), j) = v;
+        else
+          b.g_float(static_cast<Eigen::Index>(i), j) = static_cast<float>(v);
+      }
     }
   };
   const auto free_of_column = [&](Eigen::Index j) {
@@ -226,18 +315,59 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
     solver.factorize();
     rep.factor_s = seconds_since(tf);
     const auto tsolve = Clock::now();
-    const Eigen::Index block = copts.block_columns;
-    Eigen::MatrixXd e, x;
+    // Columns in the factor's row order, so that a block's unit vectors share their supernodes.
+    std::vector<int> order(static_cast<std::size_t>(cols)), pos(static_cast<std::size_t>(cols));
+    for (Eigen::Index j = 0; j < cols; ++j) pos[static_cast<std::size_t>(j)] = solver.permuted_row(free_of_column(j));
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return pos[static_cast<std::size_t>(a)] < pos[static_cast<std::size_t>(b)]; });
+    // The rows any block stores: the backward solves visit their supernodes and ancestors only.
+    std::vector<int> needed_rows;
+    for (const auto& rf : row_free)
+      for (int f : rf)
+        if (f >= 0) needed_rows.push_back(f);
+    std::sort(needed_rows.begin(), needed_rows.end());
+    needed_rows.erase(std::unique(needed_rows.begin(), needed_rows.end()), needed_rows.end());
+    const std::vector<char> needed = solver.supernodes_for_rows(needed_rows);
+    std::vector<int> perm(static_cast<std::size_t>(nf));
+    for (Eigen::Index f = 0; f < nf; ++f) perm[static_cast<std::size_t>(f)] = solver.permuted_row(static_cast<int>(f));
+
+    const Eigen::Index block = std::max(1, options.block_columns);
+    const Eigen::Index block_count = (cols + block - 1) / block;
+    rep.threads = solving_threads(options, s);
+    std::atomic<Eigen::Index> next{0};
+    std::atomic<bool> failed{false};
+    std::mutex progress_mutex;
+    Eigen::Index done = 0;
+    std::exception_ptr error;
     report_progress(0);
-    for (Eigen::Index j0 = 0; j0 < cols; j0 += block) {
-      const Eigen::Index nc = std::min(block, cols - j0);
-      e.setZero(nf, nc);
-      for (Eigen::Index j = 0; j < nc; ++j) e(free_of_column(j0 + j), j) = 1;
-      x.resize(nf, nc);
-      solver.solve(e, x);
-      store(x, j0);
-      report_progress(j0 + nc);
-    }
+    BlasSingleThread blas_single;
+    auto worker = [&]() {
+      CholmodSolver::UnitSolveWork work;
+      std::vector<int> rhs;
+      try {
+        for (Eigen::Index k = next++; k < block_count && !failed; k = next++) {
+          const Eigen::Index j0 = k * block, nc = std::min(block, cols - j0);
+          rhs.clear();
+          for (Eigen::Index c = 0; c < nc; ++c) rhs.push_back(free_of_column(order[static_cast<std::size_t>(j0 + c)]));
+          solver.solve_unit_columns(rhs.data(), static_cast<int>(nc), needed, work);
+          for (Eigen::Index c = 0; c < nc; ++c)
+            store(work.x.data() + static_cast<std::size_t>(c) * static_cast<std::size_t>(nf), perm.data(),
+                  order[static_cast<std::size_t>(j0 + c)]);
+          const std::lock_guard<std::mutex> lock(progress_mutex);
+          done += nc;
+          report_progress(done);
+        }
+      } catch (...) {
+        const std::lock_guard<std::mutex> lock(progress_mutex);
+        if (!error) error = std::current_exception();
+        failed = true;
+      }
+    };
+    std::vector<std::thread> pool;
+    for (int i = 1; i < rep.threads; ++i) pool.emplace_back(worker);
+    worker();
+    for (auto& th : pool) th.join();
+    if (error) std::rethrow_exception(error);
     rep.solve_s = seconds_since(tsolve);
   } else {
     const auto tsolve = Clock::now();
@@ -256,7 +386,7 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
       rep.cg_max_iterations = std::max(rep.cg_max_iterations, static_cast<int>(cg.iterations()));
       rep.cg_max_residual = std::max(rep.cg_max_residual, cg.error());
       if (cg.info() != Eigen::Success) rep.cg_all_converged = false;
-      store(x, j);
+      store(x.data(), nullptr, j);
       report_progress(j + 1);
     }
     rep.solve_s = seconds_since(tsolve);

@@ -188,7 +188,7 @@ ContactStatus Superposition::solve(const Contact* contacts, int m, ContactSoluti
   out.count = r.count;
   if (n == 0) return ContactStatus::kOk;
 
-  // G_CC (lower triangle, symmetrized from both stored halves).
+  // G_CC (lower triangle, symmetrized from both stored halves; a symmetric block gives the same entry twice).
   const Eigen::Index ld = gcc_.rows();
   double* a = gcc_.data();
   for (int lj = 0; lj < r.count; ++lj) {
@@ -197,11 +197,12 @@ ContactStatus Superposition::solve(const Contact* contacts, int m, ContactSoluti
     for (int li = lj; li < r.count; ++li) {
       const int ri = block_.row_of_node[static_cast<std::size_t>(out.nodes[static_cast<std::size_t>(li)])];
       const int ci = tensors_.column_of_node[static_cast<std::size_t>(out.nodes[static_cast<std::size_t>(li)])];
+      const Eigen::Matrix3d gij = block_.block3(ri, cj), gji = block_.block3(rj, ci);
       for (int b = 0; b < 3; ++b)
         for (int c = 0; c < 3; ++c) {
           const int i = 3 * li + c, j = 3 * lj + b;
           if (i < j) continue;
-          a[i + j * ld] = 0.5 * (g(3 * ri + c, 3 * cj + b) + g(3 * rj + b, 3 * ci + c));
+          a[i + j * ld] = 0.5 * (gij(c, b) + gji(b, c));
         }
     }
   }
@@ -246,9 +247,10 @@ ContactStatus Superposition::solve(const Contact* contacts, int m, ContactSoluti
     // u~_l = G_kk lambda_l.
     const int rk = block_.row_of_node[static_cast<std::size_t>(out.nodes[ul])];
     const int ck = tensors_.column_of_node[static_cast<std::size_t>(out.nodes[ul])];
+    const Eigen::Matrix3d gkk = block_.block3(rk, ck);
     for (int a = 0; a < 3; ++a) {
       double sum = 0;
-      for (int b = 0; b < 3; ++b) sum += g(3 * rk + a, 3 * ck + b) * out.lambda[ul][b];
+      for (int b = 0; b < 3; ++b) sum += gkk(a, b) * out.lambda[ul][b];
       out.corrected[ul][a] = sum;
     }
   }
@@ -273,8 +275,9 @@ ContactStatus Superposition::displacement(int node, const int* contact_nodes, co
     const int c = tensors_.column_of_node[static_cast<std::size_t>(k)];
     if (c < 0) return ContactStatus::kNotContactable;
     if (!lambda[l].allFinite()) return ContactStatus::kNonFinite;
+    const Eigen::Matrix3d grc = block_.block3(r, c);
     for (int b = 0; b < 3; ++b)
-      for (int a = 0; a < 3; ++a) u[a] += g(3 * r + a, 3 * c + b) * lambda[l][b];
+      for (int a = 0; a < 3; ++a) u[a] += grc(a, b) * lambda[l][b];
   }
   return ContactStatus::kOk;
 }
@@ -294,10 +297,13 @@ ContactStatus Superposition::displacements(const int* contact_nodes, const Eigen
     for (int b = 0; b < 3; ++b) {
       const double s = lambda[l][b];
       if (s == 0) continue;
-      if (block_.g.size())
+      if (block_.symmetric) {  // column 3c + b of the packed half: rows from column c down, then row c across
+        for (Eigen::Index i = 0; i < out.size(); ++i) out[i] += block_.at(i, 3 * c + b) * s;
+      } else if (block_.g.size()) {
         out.noalias() += block_.g.col(3 * c + b) * s;
-      else
+      } else {
         out.noalias() += block_.g_float.col(3 * c + b).cast<double>() * s;
+      }
     }
   }
   return ContactStatus::kOk;
@@ -343,12 +349,10 @@ PaperTensors::PaperTensors(const Tensors& tensors, const std::string& block_name
   }
   // T^u(:, k) = G(:, k) G_kk^-1.
   tu_.resize(3 * static_cast<Eigen::Index>(block_.row_count()), 3 * static_cast<Eigen::Index>(s));
+  Eigen::MatrixXd g3(tu_.rows(), 3);
   for (int c = 0; c < s; ++c) {
-    if (block_.g.size())
-      tu_.middleCols<3>(3 * c).noalias() = block_.g.middleCols<3>(3 * c) * tf_[static_cast<std::size_t>(c)];
-    else
-      tu_.middleCols<3>(3 * c).noalias() =
-          block_.g_float.middleCols<3>(3 * c).cast<double>() * tf_[static_cast<std::size_t>(c)];
+    for (int b = 0; b < 3; ++b) block_.column(3 * c + b, g3.col(b).data());
+    tu_.middleCols<3>(3 * c).noalias() = g3 * tf_[static_cast<std::size_t>(c)];
   }
 }
 

@@ -107,8 +107,6 @@ class Superposition {
                                       Eigen::Vector3d* lambda) const noexcept;
 
  private:
-  double g(Eigen::Index i, Eigen::Index j) const noexcept { return block_.at(i, j); }
-
   const Tensors& tensors_;
   const TensorBlock& block_;
   int capacity_;

@@ -16,7 +16,8 @@ namespace surgsim {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'U', 'R', 'G', 'T', 'N', 'S', 'R'};
-constexpr std::uint32_t kVersion = 1;
+// 1: dense blocks only. 2 (issue 17): a u32 layout per block (0 dense 3R x 3S, 1 symmetric packed half).
+constexpr std::uint32_t kVersion = 2;
 constexpr std::uint32_t kByteOrder = 0x01020304u;
 constexpr std::size_t kHeaderBytes = 8 + 4 * 4 + 8 + 3 * 8 + 4 * 8 + 3 * 8;
 
@@ -226,6 +227,7 @@ std::uint64_t precompute_settings_hash(const std::vector<int>& contact_nodes, co
   }
   h.value(static_cast<std::uint8_t>(options.precision));
   h.value(static_cast<std::uint8_t>(options.method));
+  if (options.symmetric) h.str("symmetric");
   if (options.method == SolveMethod::kCg) h.value(options.cg_tolerance).value(options.cg_max_iterations);
   return h.digest();
 }
@@ -278,8 +280,18 @@ void save_tensor_cache(const std::string& path, const Tensors& tensors, const Te
       w.write(b.name.data(), b.name.size());
       w.put<std::int64_t>(b.row_count());
       for (int r : b.row_nodes) w.put<std::int32_t>(r);
-      const std::size_t entries = 9 * static_cast<std::size_t>(b.row_count()) * static_cast<std::size_t>(tensors.column_count());
-      if (tensors.precision == Precision::kDouble) {
+      w.put<std::uint32_t>(b.symmetric ? 1u : 0u);
+      const auto rows = static_cast<std::size_t>(b.row_count());
+      const std::size_t entries = b.symmetric ? 9 * rows * (rows + 1) / 2 : 9 * rows * static_cast<std::size_t>(tensors.column_count());
+      if (b.symmetric) {
+        const std::size_t have = tensors.precision == Precision::kDouble ? b.packed.size() : b.packed_float.size();
+        if (have != entries || b.row_count() != tensors.column_count())
+          throw_error("tensor cache: symmetric block '", b.name, "' has the wrong size");
+        if (tensors.precision == Precision::kDouble)
+          w.write(b.packed.data(), entries * sizeof(double));
+        else
+          w.write(b.packed_float.data(), entries * sizeof(float));
+      } else if (tensors.precision == Precision::kDouble) {
         if (static_cast<std::size_t>(b.g.size()) != entries) throw_error("tensor cache: block '", b.name, "' has the wrong size");
         w.write(b.g.data(), entries * sizeof(double));
       } else {
@@ -324,7 +336,8 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
   h.version = hr.get<std::uint32_t>();
   if (h.version != kVersion)
     return result(CacheStatus::kStale, "format version " + std::to_string(h.version) + ", this build reads version " +
-                                           std::to_string(kVersion));
+                                           std::to_string(kVersion) + " only (never read as another version: " +
+                                           "recompute it, e.g. surgsim-precompute --force, or delete the file)");
   h.byte_order = hr.get<std::uint32_t>();
   h.precision = hr.get<std::uint32_t>();
   h.method = hr.get<std::uint32_t>();
@@ -397,7 +410,12 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
     if (!r.get(rows) || rows < 0 || rows > h.nodes) return corrupt("bad row count in block '" + b.name + "'");
     b.row_nodes.resize(static_cast<std::size_t>(rows));
     if (!r.read(b.row_nodes.data(), b.row_nodes.size() * sizeof(int))) return corrupt("truncated rows of '" + b.name + "'");
-    const std::uint64_t bytes = 9ull * static_cast<std::uint64_t>(rows) * static_cast<std::uint64_t>(h.contacts) * h.precision;
+    std::uint32_t layout = 0;
+    if (!r.get(layout) || layout > 1) return corrupt("bad layout of block '" + b.name + "'");
+    if (layout == 1 && rows != h.contacts) return corrupt("symmetric block '" + b.name + "' is not contacts x contacts");
+    const auto urows = static_cast<std::uint64_t>(rows);
+    const std::uint64_t entries = layout == 1 ? 9ull * urows * (urows + 1) / 2 : 9ull * urows * static_cast<std::uint64_t>(h.contacts);
+    const std::uint64_t bytes = entries * h.precision;
     if (bytes > r.left()) return corrupt("block '" + b.name + "' runs past the end of the file");
     const bool keep = blocks.empty() || std::find(blocks.begin(), blocks.end(), b.name) != blocks.end();
     if (!keep) {
@@ -412,7 +430,14 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
       b.row_of_node[static_cast<std::size_t>(node)] = static_cast<int>(i);
     }
     bool ok;
-    if (t.precision == Precision::kDouble) {
+    b.symmetric = layout == 1;
+    if (b.symmetric && t.precision == Precision::kDouble) {
+      b.packed.resize(static_cast<std::size_t>(entries));
+      ok = r.read(b.packed.data(), static_cast<std::size_t>(bytes));
+    } else if (b.symmetric) {
+      b.packed_float.resize(static_cast<std::size_t>(entries));
+      ok = r.read(b.packed_float.data(), static_cast<std::size_t>(bytes));
+    } else if (t.precision == Precision::kDouble) {
       b.g.resize(3 * rows, cols);
       ok = r.read(b.g.data(), static_cast<std::size_t>(bytes));
     } else {

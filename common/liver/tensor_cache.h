@@ -5,8 +5,10 @@
 // Layout (little-endian): header = magic "SURGTNSR", u32 version, u32 byte-order tag, u32 precision (4|8),
 // u32 method (0 direct, 1 cg), f64 cg tolerance, i64 nodes, i64 contact nodes, i64 blocks, u64 mesh / material /
 // fixed / settings hashes, u64 payload bytes, u64 payload checksum, u64 header checksum. Payload = i32 contact nodes
-// [S], u8 fixed masks [#V], then per block: u32 name length, name, i64 rows R, i32 row nodes [R], the 3R x 3S matrix
-// column-major in the stored precision.
+// [S], u8 fixed masks [#V], then per block: u32 name length, name, i64 rows R, i32 row nodes [R], u32 layout (0: the
+// 3R x 3S matrix column-major; 1: symmetric, R = S, the 9 R (R + 1) / 2 packed entries of TensorBlock::packed), in
+// the stored precision. Version 2 (issue 17; version 1 had no layout field): a file of another version is stale,
+// never parsed.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -27,7 +29,8 @@ struct TensorCacheKey {
 };
 
 std::uint64_t material_hash(const Material& material);
-/// Hash of the contact nodes, row sets (names and nodes), precision, method and CG tolerance / iteration limit.
+/// Hash of the contact nodes, row sets (names and nodes), precision, symmetric storage, method and CG tolerance /
+/// iteration limit (not the threads or block size: the same tensors to rounding).
 std::uint64_t precompute_settings_hash(const std::vector<int>& contact_nodes, const std::vector<RowSet>& rows,
                                        const PrecomputeOptions& options);
 TensorCacheKey tensor_cache_key(const TetMesh& mesh, const Material& material, const FixedSet& fixed,
