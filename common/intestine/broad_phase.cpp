@@ -1,11 +1,22 @@
 #include "intestine/broad_phase.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
-#include <numeric>
+#include <cmath>
 
 #include "core/error.h"
 
 namespace surgsim::intestine {
+
+namespace {
+
+inline bool overlap(const double* alo, const double* ahi, const double* blo, const double* bhi) noexcept {
+  // Non-short-circuit: six comparisons, no branch.
+  return (alo[0] <= bhi[0]) & (blo[0] <= ahi[0]) & (alo[1] <= bhi[1]) & (blo[1] <= ahi[1]) & (alo[2] <= bhi[2]) &
+         (blo[2] <= ahi[2]);
+}
+
+}  // namespace
 
 BroadPhaseDetector::BroadPhaseDetector(CollisionTopology topology) : topo_(std::move(topology)) {
   if (topo_.rows < 2 || topo_.cols < 2 || topo_.grid.size() != static_cast<std::size_t>(topo_.rows * topo_.cols)) {
@@ -14,86 +25,105 @@ BroadPhaseDetector::BroadPhaseDetector(CollisionTopology topology) : topo_(std::
   if (!(topo_.intestine_radius > 0) || !(topo_.mesentery_half_thickness >= 0)) {
     throw_error("broad phase: radii must be positive");
   }
-  const int nseg = topo_.segments(), ntri = 2 * topo_.cells();
-  seg_node_.resize(2 * static_cast<std::size_t>(nseg));
-  for (int a = 0; a < nseg; ++a) {
+  nseg_ = topo_.segments();
+  ncell_ = topo_.cells();
+  cw_ = topo_.cols - 1;
+  seg_node_.resize(2 * static_cast<std::size_t>(nseg_));
+  for (int a = 0; a < nseg_; ++a) {
     seg_node_[2 * static_cast<std::size_t>(a)] = topo_.node(0, a);
     seg_node_[2 * static_cast<std::size_t>(a) + 1] = topo_.node(0, a + 1);
   }
-  tri_node_.resize(3 * static_cast<std::size_t>(ntri));
-  for (int t = 0; t < ntri; ++t) topo_.triangle(t, &tri_node_[3 * static_cast<std::size_t>(t)]);
-  cell_ok_.resize(static_cast<std::size_t>(nseg) * static_cast<std::size_t>(topo_.cells()));
-  for (int a = 0; a < nseg; ++a) {
-    for (int c = 0; c < topo_.cells(); ++c) {
-      cell_ok_[static_cast<std::size_t>(a) * static_cast<std::size_t>(topo_.cells()) + static_cast<std::size_t>(c)] =
+  cell_node_.resize(4 * static_cast<std::size_t>(ncell_));
+  for (int c = 0; c < ncell_; ++c) {
+    const int r = c / cw_, k = c % cw_;
+    int* n = &cell_node_[4 * static_cast<std::size_t>(c)];
+    n[0] = topo_.node(r, k);
+    n[1] = topo_.node(r, k + 1);
+    n[2] = topo_.node(r + 1, k + 1);
+    n[3] = topo_.node(r + 1, k);
+  }
+  cell_ok_.resize(static_cast<std::size_t>(nseg_) * static_cast<std::size_t>(ncell_));
+  for (int a = 0; a < nseg_; ++a) {
+    for (int c = 0; c < ncell_; ++c) {
+      cell_ok_[static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_) + static_cast<std::size_t>(c)] =
           topo_.cell_tested(a, c);
     }
   }
-  const std::size_t n = static_cast<std::size_t>(nseg + ntri);
-  lo_.resize(n);
-  hi_.resize(n);
-  seg_order_.resize(static_cast<std::size_t>(nseg));
-  std::iota(seg_order_.begin(), seg_order_.end(), 0);
-  tri_order_.resize(static_cast<std::size_t>(ntri));
-  std::iota(tri_order_.begin(), tri_order_.end(), nseg);
-  (void)n;
+  seg_box_.resize(static_cast<std::size_t>(nseg_));
+  cell_box_.resize(static_cast<std::size_t>(ncell_));
+  seg_block_.resize(static_cast<std::size_t>((nseg_ + kBlock - 1) / kBlock));
+  // Cell blocks: kBlock consecutive cells of one row (a block never spans two rows).
+  for (int r = 0; r < topo_.rows - 1; ++r) {
+    for (int k = 0; k < cw_; k += kBlock) {
+      cell_block_first_.push_back(r * cw_ + k);
+      cell_block_end_.push_back(r * cw_ + std::min(cw_, k + kBlock));
+    }
+  }
+  cell_block_.resize(cell_block_first_.size());
+  seg_sphere_.resize(static_cast<std::size_t>(nseg_));
+  cell_sphere_.resize(static_cast<std::size_t>(ncell_));
+  tri_plane_.resize(2 * static_cast<std::size_t>(ncell_));
+  tri_stamp_.assign(2 * static_cast<std::size_t>(ncell_), 0u);
 }
 
 BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactList& out, double margin) noexcept {
   BroadPhaseStats st;
-  const int nseg = topo_.segments(), ntri = 2 * topo_.cells(), n = nseg + ntri, ncell = topo_.cells();
-  // Grown boxes: a pair of boxes overlaps exactly when the reference's box cull keeps it (segment r_i + margin / 2,
-  // triangle r_m + margin / 2, so the sums are 2 r_i + margin and r_i + r_m + margin), plus a hair for rounding.
+  // Grown boxes: a pair of boxes overlaps whenever the reference's box cull keeps the pair (segment r_i + margin / 2,
+  // cell r_m + margin / 2, so the sums are 2 r_i + margin and r_i + r_m + margin; a cell's box holds both triangles'),
+  // plus a hair for rounding.
   const double hair = 1e-9;
   const double gs = topo_.intestine_radius + 0.5 * margin + hair;
   const double gt = topo_.mesentery_half_thickness + 0.5 * margin + hair;
-  Eigen::Vector3d gmin = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-  Eigen::Vector3d gmax = -gmin;
-  for (int a = 0; a < nseg; ++a) {
-    const auto p0 = x.col(seg_node_[2 * static_cast<std::size_t>(a)]);
-    const auto p1 = x.col(seg_node_[2 * static_cast<std::size_t>(a) + 1]);
-    lo_[static_cast<std::size_t>(a)] = p0.cwiseMin(p1).array() - gs;
-    hi_[static_cast<std::size_t>(a)] = p0.cwiseMax(p1).array() + gs;
-  }
-  for (int t = 0; t < ntri; ++t) {
-    const int* m = &tri_node_[3 * static_cast<std::size_t>(t)];
-    const auto A = x.col(m[0]), B = x.col(m[1]), C = x.col(m[2]);
-    lo_[static_cast<std::size_t>(nseg + t)] = A.cwiseMin(B).cwiseMin(C).array() - gt;
-    hi_[static_cast<std::size_t>(nseg + t)] = A.cwiseMax(B).cwiseMax(C).array() + gt;
-  }
-  for (int e = 0; e < n; ++e) {
-    gmin = gmin.cwiseMin(lo_[static_cast<std::size_t>(e)]);
-    gmax = gmax.cwiseMax(hi_[static_cast<std::size_t>(e)]);
-  }
-  // The sweep axis: the widest spread (fewest overlaps along it). Keep the last axis unless another is 20 % wider,
-  // so that the order stays nearly sorted from step to step.
-  int axis = 0;
-  (gmax - gmin).maxCoeff(&axis);
-  if (axis_ >= 0 && (gmax - gmin)[axis] < 1.2 * (gmax - gmin)[axis_]) axis = axis_;
-  auto key = [&](int e) { return lo_[static_cast<std::size_t>(e)][axis]; };
-  auto before = [&](int u, int v) { return key(u) < key(v) || (key(u) == key(v) && u < v); };
-  for (auto* order : {&seg_order_, &tri_order_}) {
-    if (axis != axis_) {
-      std::sort(order->begin(), order->end(), before);
-      continue;
+  const double* px = x.data();
+  for (int a = 0; a < nseg_; ++a) {
+    const double* p = px + 3 * seg_node_[2 * static_cast<std::size_t>(a)];
+    const double* q = px + 3 * seg_node_[2 * static_cast<std::size_t>(a) + 1];
+    Box& b = seg_box_[static_cast<std::size_t>(a)];
+    for (int k = 0; k < 3; ++k) {
+      b.lo[k] = std::min(p[k], q[k]) - gs;
+      b.hi[k] = std::max(p[k], q[k]) + gs;
     }
-    for (std::size_t i = 1; i < order->size(); ++i) {  // insertion sort: linear when nearly sorted
-      const int e = (*order)[i];
-      std::size_t j = i;
-      while (j > 0 && before(e, (*order)[j - 1])) {
-        (*order)[j] = (*order)[j - 1];
-        --j;
+    const Eigen::Map<const Eigen::Vector3d> p0(p), p1(q);
+    auto& sp = seg_sphere_[static_cast<std::size_t>(a)];
+    sp.head<3>() = 0.5 * (p0 + p1);
+    sp[3] = 0.5 * (p1 - p0).norm();
+  }
+  for (int c = 0; c < ncell_; ++c) {
+    const int* n = &cell_node_[4 * static_cast<std::size_t>(c)];
+    const double *p0 = px + 3 * n[0], *p1 = px + 3 * n[1], *p2 = px + 3 * n[2], *p3 = px + 3 * n[3];
+    Box& b = cell_box_[static_cast<std::size_t>(c)];
+    for (int k = 0; k < 3; ++k) {
+      b.lo[k] = std::min(std::min(p0[k], p1[k]), std::min(p2[k], p3[k])) - gt;
+      b.hi[k] = std::max(std::max(p0[k], p1[k]), std::max(p2[k], p3[k])) + gt;
+    }
+    const Eigen::Map<const Eigen::Vector3d> v0(p0), v1(p1), v2(p2), v3(p3);
+    const Eigen::Vector3d g = 0.25 * (v0 + v1 + v2 + v3);
+    auto& sp = cell_sphere_[static_cast<std::size_t>(c)];
+    sp.head<3>() = g;
+    sp[3] = std::sqrt(std::max(std::max((v0 - g).squaredNorm(), (v1 - g).squaredNorm()),
+                               std::max((v2 - g).squaredNorm(), (v3 - g).squaredNorm())));
+  }
+  // Refit the blocks.
+  auto fit = [](Box& into, const Box* from, int count) {
+    into = from[0];
+    for (int i = 1; i < count; ++i) {
+      for (int k = 0; k < 3; ++k) {
+        into.lo[k] = std::min(into.lo[k], from[i].lo[k]);
+        into.hi[k] = std::max(into.hi[k], from[i].hi[k]);
       }
-      (*order)[j] = e;
     }
-  }
-  axis_ = axis;
-  const int o1 = (axis + 1) % 3, o2 = (axis + 2) % 3;
-  auto overlap = [&](int u, int v) {
-    const auto &lu = lo_[static_cast<std::size_t>(u)], &hu = hi_[static_cast<std::size_t>(u)];
-    const auto &lv = lo_[static_cast<std::size_t>(v)], &hv = hi_[static_cast<std::size_t>(v)];
-    return lu[o1] <= hv[o1] && lv[o1] <= hu[o1] && lu[o2] <= hv[o2] && lv[o2] <= hu[o2];
   };
+  const int nsb = static_cast<int>(seg_block_.size()), ncb = static_cast<int>(cell_block_.size());
+  for (int k = 0; k < nsb; ++k) {
+    fit(seg_block_[static_cast<std::size_t>(k)], &seg_box_[static_cast<std::size_t>(k * kBlock)],
+        std::min(kBlock, nseg_ - k * kBlock));
+  }
+  for (int k = 0; k < ncb; ++k) {
+    const int first = cell_block_first_[static_cast<std::size_t>(k)];
+    fit(cell_block_[static_cast<std::size_t>(k)], &cell_box_[static_cast<std::size_t>(first)],
+        cell_block_end_[static_cast<std::size_t>(k)] - first);
+  }
+
   CollisionContact c;
   auto push = [&](bool found) {
     if (!found) return;
@@ -103,37 +133,94 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
       ++st.overflow;
     }
   };
-  auto tested_cell = [&](int seg, int tri) {
-    const std::size_t key =
-        static_cast<std::size_t>(seg) * static_cast<std::size_t>(ncell) + static_cast<std::size_t>(tri / 2);
-    return cell_ok_[key] != 0;
-  };
-  auto seg_tri = [&](int seg, int e) {
-    if (!tested_cell(seg, e - nseg) || !overlap(seg, e)) return;
-    ++st.overlaps;
-    push(triangle_contact(topo_, x, seg, e - nseg, margin, c));
-  };
-  // Segments: against the segments and the triangles that start inside their extent (a triangle starting at the same
-  // place as the segment counts here, one starting before it below).
-  std::size_t t0 = 0;
-  for (std::size_t i = 0; i < seg_order_.size(); ++i) {
-    const int e = seg_order_[i];
-    const double end = hi_[static_cast<std::size_t>(e)][axis];
-    for (std::size_t j = i + 1; j < seg_order_.size() && key(seg_order_[j]) <= end; ++j) {
-      const int u = seg_order_[j];
-      if (!topo_.segments_tested(u, e) || !overlap(u, e)) continue;
-      ++st.overlaps;
-      push(segment_contact(topo_, x, std::min(u, e), std::max(u, e), margin, c));
-    }
-    while (t0 < tri_order_.size() && key(tri_order_[t0]) < key(e)) ++t0;
-    for (std::size_t j = t0; j < tri_order_.size() && key(tri_order_[j]) <= end; ++j) seg_tri(e, tri_order_[j]);
+  // Cheap lower bounds before the exact tests (conservative: a pair they reject is not closer than the bound, so
+  // the reference's exact test would not report it either).
+  const double seg_bound = 2 * topo_.intestine_radius + margin;
+  const double tri_bound = topo_.intestine_radius + topo_.mesentery_half_thickness + margin;
+  if (++stamp_ == 0) {  // wrapped: no stale stamp may match
+    std::fill(tri_stamp_.begin(), tri_stamp_.end(), 0u);
+    stamp_ = 1;
   }
-  // Triangles: against the segments that start strictly inside their extent.
-  std::size_t s0 = 0;
-  for (const int e : tri_order_) {
-    const double end = hi_[static_cast<std::size_t>(e)][axis];
-    while (s0 < seg_order_.size() && key(seg_order_[s0]) <= key(e)) ++s0;
-    for (std::size_t j = s0; j < seg_order_.size() && key(seg_order_[j]) <= end; ++j) seg_tri(seg_order_[j], e);
+  auto cell_beyond = [&](int a, int cell) {
+    const auto& ss = seg_sphere_[static_cast<std::size_t>(a)];
+    const auto& cs = cell_sphere_[static_cast<std::size_t>(cell)];
+    const double reach = tri_bound + ss[3] + cs[3];
+    return (ss.head<3>() - cs.head<3>()).squaredNorm() >= reach * reach;
+  };
+  // The triangle's plane: both segment ends on the same side and farther than the bound.
+  auto plane_beyond = [&](int a, int t) {
+    auto& pl = tri_plane_[static_cast<std::size_t>(t)];
+    const int* n = &cell_node_[4 * static_cast<std::size_t>(t / 2)];
+    if (tri_stamp_[static_cast<std::size_t>(t)] != stamp_) {
+      tri_stamp_[static_cast<std::size_t>(t)] = stamp_;
+      // As CollisionTopology::triangle: (0, 1, 2) and (0, 2, 3) of the cell's corners.
+      const Eigen::Map<const Eigen::Vector3d> A(px + 3 * n[0]), B(px + 3 * n[t % 2 == 0 ? 1 : 2]),
+          C(px + 3 * n[t % 2 == 0 ? 2 : 3]);
+      const Eigen::Vector3d nrm = (B - A).cross(C - A);
+      const double nn = nrm.norm();
+      if (nn > 1e-12) {
+        pl.head<3>() = nrm / nn;
+        pl[3] = pl.head<3>().dot(A);
+      } else {
+        pl.setZero();
+      }
+    }
+    const double* p = px + 3 * seg_node_[2 * static_cast<std::size_t>(a)];
+    const double* q = px + 3 * seg_node_[2 * static_cast<std::size_t>(a) + 1];
+    const double d0 = pl[0] * p[0] + pl[1] * p[1] + pl[2] * p[2] - pl[3];
+    const double d1 = pl[0] * q[0] + pl[1] * q[1] + pl[2] * q[2] - pl[3];
+    return d0 * d1 > 0 && std::min(std::abs(d0), std::abs(d1)) >= tri_bound;
+  };
+  // Intestine-intestine: block pairs (i <= j), then segment pairs a < b that are tested.
+  const int excl = topo_.segment_exclusion;
+  for (int i = 0; i < nsb; ++i) {
+    const Box& bi = seg_block_[static_cast<std::size_t>(i)];
+    const int a0 = i * kBlock, a1 = std::min(nseg_, a0 + kBlock);
+    for (int j = i; j < nsb; ++j) {
+      const int b0 = j * kBlock, b1 = std::min(nseg_, b0 + kBlock);
+      if (b1 - 1 - a0 <= excl) continue;  // every pair of the two blocks is a pair of neighbours
+      const Box& bj = seg_block_[static_cast<std::size_t>(j)];
+      if (!overlap(bi.lo, bi.hi, bj.lo, bj.hi)) continue;
+      for (int a = a0; a < a1; ++a) {
+        const Box& ba = seg_box_[static_cast<std::size_t>(a)];
+        if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) continue;
+        for (int b = std::max(b0, a + excl + 1); b < b1; ++b) {
+          const Box& bb = seg_box_[static_cast<std::size_t>(b)];
+          if (!overlap(ba.lo, ba.hi, bb.lo, bb.hi)) continue;
+          ++st.overlaps;
+          // Bounding spheres: not closer than the contact distance (squared, no root).
+          const auto &sa = seg_sphere_[static_cast<std::size_t>(a)], &sb = seg_sphere_[static_cast<std::size_t>(b)];
+          const double reach = seg_bound + sa[3] + sb[3];
+          if ((sa.head<3>() - sb.head<3>()).squaredNorm() >= reach * reach) continue;
+          push(segment_contact(topo_, x, a, b, margin, c));
+        }
+      }
+    }
+  }
+  // Intestine-mesentery: segment block x cell block, then segment x cell, then both triangles of the cell.
+  for (int i = 0; i < nsb; ++i) {
+    const Box& bi = seg_block_[static_cast<std::size_t>(i)];
+    const int a0 = i * kBlock, a1 = std::min(nseg_, a0 + kBlock);
+    for (int j = 0; j < ncb; ++j) {
+      const Box& bj = cell_block_[static_cast<std::size_t>(j)];
+      if (!overlap(bi.lo, bi.hi, bj.lo, bj.hi)) continue;
+      const int c0 = cell_block_first_[static_cast<std::size_t>(j)], c1 = cell_block_end_[static_cast<std::size_t>(j)];
+      for (int a = a0; a < a1; ++a) {
+        const Box& ba = seg_box_[static_cast<std::size_t>(a)];
+        if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) continue;
+        const char* ok = &cell_ok_[static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_)];
+        for (int cell = c0; cell < c1; ++cell) {
+          const Box& bc = cell_box_[static_cast<std::size_t>(cell)];
+          if (!ok[cell] || !overlap(ba.lo, ba.hi, bc.lo, bc.hi)) continue;
+          ++st.overlaps;
+          if (cell_beyond(a, cell)) continue;
+          for (int t = 2 * cell; t < 2 * cell + 2; ++t) {
+            if (plane_beyond(a, t)) continue;
+            push(triangle_contact(topo_, x, a, t, margin, c, false));
+          }
+        }
+      }
+    }
   }
   return st;
 }

@@ -47,6 +47,10 @@ struct FoldedSine {
 
 }  // namespace
 
+const char* to_string(CollisionDetector detector) {
+  return detector == CollisionDetector::kBroadPhase ? "broad_phase" : "stochastic";
+}
+
 const char* to_string(StepStatus status) {
   switch (status) {
     case StepStatus::kOk: return "ok";
@@ -217,6 +221,7 @@ IntestineState::IntestineState(const IntestineModel& model, std::uint64_t seed)
       v(Eigen::Matrix3Xd::Zero(3, model.node_count())),
       work_(model.mass_spring()),
       detector_(model.topology(), model.params().detection),
+      broad_(model.topology()),
       contacts_(model.params().contact_capacity),
       probe_contacts_(static_cast<std::size_t>(kMaxProbes) * static_cast<std::size_t>(model.params().probe_capacity)),
       x_entry_(model.rest()),
@@ -371,7 +376,15 @@ void step_dynamics(const IntestineModel& model, IntestineState& state, const Pro
 void step_detection(const IntestineModel& model, IntestineState& state, StepReport& report) noexcept {
   state.contacts_.clear();
   if (report.status != StepStatus::kOk || !model.params().self_collisions) return;
-  report.detection = state.detector_.detect(state.x, state.contacts_);
+  if (model.params().detector == CollisionDetector::kBroadPhase) {
+    const BroadPhaseStats b = state.broad_.detect(state.x, state.contacts_);
+    report.detection = DetectStats{};
+    report.detection.contacts = b.contacts;
+    report.detection.overflow = b.overflow;
+    report.detection.distance_tests = b.overlaps;
+  } else {
+    report.detection = state.detector_.detect(state.x, state.contacts_);
+  }
   report.contacts = state.contacts_.size();
   report.contacts_overflow = state.contacts_.dropped();
 }

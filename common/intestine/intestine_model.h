@@ -36,11 +36,19 @@
 #include <cstdint>
 #include <vector>
 
+#include "intestine/broad_phase.h"
 #include "intestine/collision_response.h"
 #include "intestine/mass_spring.h"
 #include "intestine/stochastic_collision.h"
 
 namespace surgsim::intestine {
+
+/// Which self-collision detector a step runs (intestine.detector in a scene).
+enum class CollisionDetector : std::uint8_t {
+  kStochastic = 0,  // the paper's active pairs and random pairs (stochastic_collision.h): finds most contacts
+  kBroadPhase = 1,  // the exact box hierarchy (broad_phase.h): the brute-force reference's contacts, every one
+};
+const char* to_string(CollisionDetector detector);
 
 /// Most nodes a model may have: the bound of a BodyState's positions.
 constexpr int kMaxIntestineNodes = 2048;
@@ -89,6 +97,7 @@ struct IntestineParams {
 
   // Collisions.
   bool self_collisions = true;
+  CollisionDetector detector = CollisionDetector::kStochastic;  // which one step() runs (the other is not stepped)
   int segment_exclusion = 2;         // neighbouring segments, never tested (|a - b| <= this)
   int cell_exclusion = 2;            // mesentery cells of the first row within this many columns of a segment
   StochasticParams detection;        // random pairs per step, drop factor, moves, zone budget, capacity, seed
@@ -195,6 +204,7 @@ class IntestineState {
   const double* positions() const { return x.data(); }
   int point_count() const { return static_cast<int>(x.cols()); }
 
+  BroadPhaseDetector& broad_phase() { return broad_; }
   StochasticDetector& detector() { return detector_; }
   const StochasticDetector& detector() const { return detector_; }
   const ContactList& contacts() const { return contacts_; }
@@ -208,6 +218,7 @@ class IntestineState {
   friend void step(const IntestineModel&, IntestineState&, const Probe*, int, double, StepReport&) noexcept;
   MassSpringWorkspace work_;
   StochasticDetector detector_;
+  BroadPhaseDetector broad_;
   ContactList contacts_;
   std::vector<PenaltyContact> probe_contacts_;  // kMaxProbes x probe_capacity, each step's probes' contacts in order
   Eigen::Matrix3Xd x_entry_, v_entry_;  // the state at step entry (guard)

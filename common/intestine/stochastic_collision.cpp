@@ -842,7 +842,7 @@ bool segment_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, i
 }
 
 bool triangle_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, int a, int tri, double margin,
-                      CollisionContact& c) noexcept {
+                      CollisionContact& c, bool cull) noexcept {
   const double rm = topo.intestine_radius + topo.mesentery_half_thickness;
   const Eigen::Vector3d p0 = x.col(topo.node(0, a)), p1 = x.col(topo.node(0, a + 1));
   int n[3];
@@ -851,7 +851,8 @@ bool triangle_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, 
   double s = 0;
   Eigen::Vector3d bary;
   // The bounded test: bounding spheres and the triangle's plane reject most pairs before the exact distance.
-  const double d = segment_triangle(p0, p1, A, B, C, s, bary, rm + margin);
+  const double d = segment_triangle(p0, p1, A, B, C, s, bary,
+                                   cull ? rm + margin : std::numeric_limits<double>::infinity());
   if (!(d < rm + margin)) return false;
   c = CollisionContact{};
   c.kind = ContactKind::kSegmentTriangle;

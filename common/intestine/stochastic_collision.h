@@ -237,8 +237,10 @@ RecallStats compare_with_reference(const CollisionTopology& topology, const Cont
 /// check that the pair is tested (CollisionTopology::segments_tested / cell_tested).
 bool segment_contact(const CollisionTopology& topology, const Eigen::Matrix3Xd& x, int a, int b, double margin,
                      CollisionContact& c) noexcept;
+/// triangle_contact culls with the bounds of segment_triangle first; with cull = false it goes straight to the exact
+/// distance (for a caller that culled already: the same contact whenever the pair is closer than the bound).
 bool triangle_contact(const CollisionTopology& topology, const Eigen::Matrix3Xd& x, int a, int tri, double margin,
-                      CollisionContact& c) noexcept;
+                      CollisionContact& c, bool cull = true) noexcept;
 
 /// Reference: every tested element pair closer than the sum of the radii + margin (m), appended to `out`.
 /// No allocation; O(segments^2 + segments x cells) with a bounding-box cull.

@@ -40,37 +40,45 @@ using surgsim::intestine::bench::RunResult;
 using surgsim::intestine::bench::scripted_run;
 
 void step_table(int steps) {
-  std::printf("\n1. Step time at dt = 1 ms, default model (4 x 100 masses, implicit Euler, n = 10), scripted run of "
-              "%.1f s\n", steps * 1e-3);
-  const RunResult r = scripted_run(IntestineParams{}, steps, 0);
-  std::printf("%-34s %9s %9s %9s\n", "phase", "p50 us", "p99 us", "max us");
+  std::printf("\n1. Step time at dt = 1 ms, default model (4 x 100 masses, implicit Euler), scripted run of %.1f s, once "
+              "per detector (intestine.detector)\n", steps * 1e-3);
   auto row = [](const char* name, const std::vector<double>& v) {
     std::printf("%-34s %9.1f %9.1f %9.1f\n", name, percentile(v, 0.5), percentile(v, 0.99), percentile(v, 1.0));
   };
-  row("mass-spring (probe, implicit)", r.dynamics);
-  row("stochastic detection", r.detection);
-  row("response", r.response);
-  row("step (model + detection + resp.)", r.total);
-  row("step, thread CPU time", r.cpu);
-  std::printf("contacts per step: mean %.1f, max %d; faults %d; capable of %.0f Hz at the CPU-time p99 (%.0f Hz at the "
-              "wall-clock p99, which includes preemption on this shared machine)\n", r.contacts_mean, r.contacts_max,
-              r.faults, 1e6 / percentile(r.cpu, 0.99), 1e6 / percentile(r.total, 0.99));
-  // The same run again, the phases outside detection in thread CPU time (the budget of everything but detection).
-  const IntestineModel model(IntestineParams{});
-  IntestineState state(model, 1);
-  StepReport report;
-  std::vector<double> dynamics, response;
-  for (int s = 0; s < steps; ++s) {
-    const double c0 = thread_cpu_us();
-    step_dynamics(model, state, test::scripted_probe(s * 1e-3), 1e-3, report);
-    dynamics.push_back(thread_cpu_us() - c0);
-    step_detection(model, state, report);
-    const double c1 = thread_cpu_us();
-    step_response(model, state, report);
-    response.push_back(thread_cpu_us() - c1);
+  for (const CollisionDetector detector : {CollisionDetector::kStochastic, CollisionDetector::kBroadPhase}) {
+    IntestineParams params;
+    params.detector = detector;
+    std::printf("%-34s %9s %9s %9s   detector: %s%s\n", "phase", "p50 us", "p99 us", "max us", to_string(detector),
+                detector == CollisionDetector::kStochastic ? " (n = 10)" : " (exact)");
+    const RunResult r = scripted_run(params, steps, 0);
+    row("mass-spring (probe, implicit)", r.dynamics);
+    row("detection", r.detection);
+    row("response", r.response);
+    row("step (model + detection + resp.)", r.total);
+    row("step, thread CPU time", r.cpu);
+    std::printf("contacts per step: mean %.1f, max %d; faults %d; capable of %.0f Hz at the CPU-time p99 (%.0f Hz at "
+                "the wall-clock p99, which includes preemption on this shared machine)\n", r.contacts_mean,
+                r.contacts_max, r.faults, 1e6 / percentile(r.cpu, 0.99), 1e6 / percentile(r.total, 0.99));
+    // The same run again, each phase in thread CPU time (detection's budget, and that of everything else).
+    const IntestineModel model(params);
+    IntestineState state(model, 1);
+    StepReport report;
+    std::vector<double> dynamics, detection, response;
+    for (int s = 0; s < steps; ++s) {
+      const double c0 = thread_cpu_us();
+      step_dynamics(model, state, test::scripted_probe(s * 1e-3), 1e-3, report);
+      const double c1 = thread_cpu_us();
+      step_detection(model, state, report);
+      const double c2 = thread_cpu_us();
+      step_response(model, state, report);
+      response.push_back(thread_cpu_us() - c2);
+      detection.push_back(c2 - c1);
+      dynamics.push_back(c1 - c0);
+    }
+    row("mass-spring, thread CPU time", dynamics);
+    row("detection, thread CPU time", detection);
+    row("response, thread CPU time", response);
   }
-  row("mass-spring, thread CPU time", dynamics);
-  row("response, thread CPU time", response);
 }
 
 void stability_table() {
@@ -128,10 +136,12 @@ void recall_table(int steps) {
   };
   for (int n : {0, 5, 10, 20, 50, 100}) {
     IntestineParams p;
+    p.detector = CollisionDetector::kStochastic;
     p.detection.random_pairs = p.detection.random_mesentery_pairs = n;
     row(std::to_string(n).c_str(), p);
   }
   IntestineParams paper;
+  paper.detector = CollisionDetector::kStochastic;
   paper.detection.zone_budget = 0;
   row("10, minima only", paper);
   std::printf("pairs: reference contacts reported; zones: contact zones with at least one reported; depth: weighted by "
@@ -149,7 +159,8 @@ void of_kind(const ContactList& in, ContactKind kind, ContactList& out) {
 void detector_table(int steps) {
   std::printf("\n3b. Detectors side by side at n = 10 on the same positions (the scripted run, %.1f s, every step; recall "
               "every 10 steps), thread CPU time\n", steps * 1e-3);
-  const IntestineParams params;
+  IntestineParams params;
+  params.detector = CollisionDetector::kStochastic;  // the run's own contacts (and response) are the stochastic ones
   const IntestineModel model(params);
   IntestineState state(model, 1);
   BroadPhaseDetector broad(model.topology());
@@ -158,18 +169,20 @@ void detector_table(int steps) {
   std::vector<double> t[3];
   RecallStats recall[2][2];  // [stochastic, broad phase][intestine-intestine, intestine-mesentery]
   long contacts[2] = {0, 0};
+  double tests[3] = {0, 0, 0};  // per step: stochastic distance tests, -, broad phase box overlaps
   for (int s = 0; s < steps; ++s) {
     step_dynamics(model, state, test::scripted_probe(s * 1e-3), 1e-3, report);
     double c0 = thread_cpu_us();
     step_detection(model, state, report);
     t[0].push_back(thread_cpu_us() - c0);
+    tests[0] += static_cast<double>(report.detection.distance_tests) / steps;
     truth.clear();
     c0 = thread_cpu_us();
     detect_brute_force(model.topology(), state.x, truth);
     t[1].push_back(thread_cpu_us() - c0);
     exact.clear();
     c0 = thread_cpu_us();
-    broad.detect(state.x, exact);
+    tests[2] += static_cast<double>(broad.detect(state.x, exact).overlaps) / steps;
     t[2].push_back(thread_cpu_us() - c0);
     if (s % 10 == 0) {
       for (int k = 0; k < 2; ++k) {
@@ -186,11 +199,11 @@ void detector_table(int steps) {
     }
     step_response(model, state, report);
   }
-  std::printf("%-26s %9s %9s %9s | %-27s | %-27s\n", "detector", "p50 us", "p99 us", "max us",
-              "intestine-intestine recall", "intestine-mesentery recall");
-  std::printf("%-26s %9s %9s %9s | %8s %8s %9s | %8s %8s %9s\n", "", "", "", "", "pairs", "depth", "missed mm",
-              "pairs", "depth", "missed mm");
-  const char* names[3] = {"stochastic (n = 10)", "brute force (reference)", "broad phase (sweep/prune)"};
+  std::printf("%-26s %9s %9s %9s | %-27s | %-27s | %s\n", "detector", "p50 us", "p99 us", "max us",
+              "intestine-intestine recall", "intestine-mesentery recall", "tests");
+  std::printf("%-26s %9s %9s %9s | %8s %8s %9s | %8s %8s %9s | %s\n", "", "", "", "", "pairs", "depth", "missed mm",
+              "pairs", "depth", "missed mm", "per step");
+  const char* names[3] = {"stochastic (n = 10)", "brute force (reference)", "broad phase (box hierarchy)"};
   for (int d = 0; d < 3; ++d) {
     std::printf("%-26s %9.1f %9.1f %9.1f |", names[d], percentile(t[d], 0.5), percentile(t[d], 0.99),
                 percentile(t[d], 1.0));
@@ -202,11 +215,17 @@ void detector_table(int steps) {
         std::printf(" %8.3f %8.3f %9.2f |", r.pair_recall(), r.depth_recall(), 1e3 * r.max_missed);
       }
     }
-    std::printf("\n");
+    if (d == 1) {
+      std::printf(" all\n");
+    } else {
+      std::printf(" %.0f\n", tests[d]);
+    }
   }
   std::printf("reference contacts compared: %ld intestine-intestine, %ld intestine-mesentery (segment-triangle: point-, "
               "edge-triangle and crossing); pairs: share of reference contacts reported, depth: weighted by "
-              "penetration\n", contacts[0], contacts[1]);
+              "penetration;\ntests per step: the stochastic detector's element distance evaluations (exact tests and bounding-sphere "
+              "rejections), the broad phase's element pairs whose grown boxes overlap (each gets the exact test)\n",
+              contacts[0], contacts[1]);
 }
 
 void tube_table() {
@@ -314,15 +333,19 @@ void controller_table() {
 int main(int argc, char** argv) {
   CLI::App app{"intestine_bench: step time, integrator stability, detection recall, tube LODs, frame-rate control"};
   bool quick = false;
+  std::vector<std::string> only;
   app.add_flag("--quick", quick, "shorter runs (1.7 s scripted run instead of 3.4 s)");
+  app.add_option("--only", only, "run only these tables (1 2 3 3b 4 5; default: all), e.g. for profiling")
+      ->check(CLI::IsMember({"1", "2", "3", "3b", "4", "5"}));
   CLI11_PARSE(app, argc, argv);
   const int steps = quick ? 1700 : 3400;
+  auto run = [&](const char* table) { return only.empty() || std::find(only.begin(), only.end(), table) != only.end(); };
   std::printf("intestine_bench (times are wall-clock on this machine, single thread)\n");
-  step_table(steps);
-  stability_table();
-  recall_table(steps);
-  detector_table(steps);
-  tube_table();
-  controller_table();
+  if (run("1")) step_table(steps);
+  if (run("2")) stability_table();
+  if (run("3")) recall_table(steps);
+  if (run("3b")) detector_table(steps);
+  if (run("4")) tube_table();
+  if (run("5")) controller_table();
   return 0;
 }
