@@ -19,3 +19,8 @@ if(SURGSIM_BUILD_VISUAL)
   endforeach()
   add_custom_target(web_test_programs DEPENDS haptic_node visual_node surgsim_web_app)
 endif()
+
+# frame_bench: JPEG encode time and size per resolution and quality, the render loop's share (issue 18).
+if(SURGSIM_BUILD_VISUAL AND SURGSIM_BUILD_BENCHMARKS)
+  surgsim_bench(frame_bench SOURCES bench/frame_bench.cpp LIBS surgsim_visual)
+endif()

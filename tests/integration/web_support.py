@@ -47,6 +47,7 @@ class Run:
         self.stream_fps = stream_fps
         self.start_haptic_now = start_haptic
         self.procs = {}
+        self.haptic_args = []            # extra haptic_node flags (e.g. --rate 1000)
         self.url = None
         self.port = None
 
@@ -78,7 +79,7 @@ class Run:
             args += ['--replay', self.trajectory]
         else:
             args += ['--input', 'device', '--duration', str(self.haptic_duration), '--input-timeout', '0.1']
-        self._start('haptic', args)
+        self._start('haptic', args + self.haptic_args)
 
     def stop(self, name, timeout=15):
         p = self.procs.get(name)
