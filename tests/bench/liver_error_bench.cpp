@@ -76,6 +76,7 @@
 #include <vector>
 
 #include "bench_util.h"
+#include "liver_bench_organ.h"
 #include "mesh/box_mesh.h"
 #include "csv_out.h"
 #include "core/error.h"
@@ -93,10 +94,9 @@ namespace {
 
 using namespace surgsim;
 using bench::CsvOut;
+using namespace surgsim::bench_liver;
 
 constexpr double kMiB = 1024.0 * 1024.0;
-const Eigen::Vector2d kPunchCentre(0.03, 0.0);  // m, x-y: the scene's tool comes down here
-constexpr double kPunchRadius = 0.02;           // m
 constexpr double kMeshPunchDepth = 0.005;       // m
 constexpr double kSampleDepth = 0.003;          // m, sample points under the finest mesh's surface
 
@@ -123,64 +123,6 @@ void progress(const std::string& what) { std::cerr << "liver_error_bench: " << w
 using Clock = bench::WallClock;
 using bench::us_since;
 
-// ---- organs ------------------------------------------------------------------------------------------------------
-
-// An organ ready to solve: the scene's material and clamp on a generated liver (or a liver-sized box).
-struct Organ {
-  std::string kind;               // "liver" | "box"
-  TetMesh mesh;
-  FixedSet fixed;
-  std::unique_ptr<ElasticModel> model;
-  std::vector<int> contacts;      // contactable (free boundary) nodes
-  std::vector<RowSet> rows;       // "haptic", "visual"
-  std::vector<int> visible;       // boundary nodes = the visual rows, in row order
-  Eigen::MatrixX3d normals;       // #V x 3, unit outward normals on boundary nodes (0 inside)
-  double height = 0;              // m, z extent
-};
-
-std::unique_ptr<Organ> make_organ(const Scene& scene, int target_nodes, const Settings& s) {
-  auto o = std::make_unique<Organ>();
-  if (!s.smoke) {
-    Scene sized = scene;
-    sized.mesh.target_nodes = target_nodes;
-    o->kind = "liver";
-    o->mesh = load_scene_mesh(sized, s.cache, nullptr);
-  }
-  if (o->mesh.nodes.rows() == 0) {
-    // The liver's bounding box (x [-0.13, 0.13], y [-0.08, 0.08], z [-0.04, 0.04] m), structured.
-    o->kind = "box";
-    o->mesh = make_box_mesh_with_nodes(target_nodes, Eigen::Vector3d(0.26, 0.16, 0.08));
-    o->mesh.nodes.rowwise() -= Eigen::RowVector3d(0.13, 0.08, 0.04);
-  }
-  o->fixed = fixed_set_from_region(o->mesh, scene.fixed);
-  o->model = std::make_unique<ElasticModel>(build_elastic_model(o->mesh, scene.material, o->fixed, scene.file));
-  o->contacts = contactable_nodes(o->mesh, o->fixed);
-  o->rows = standard_row_sets(o->mesh, o->contacts);
-  for (const auto& r : o->rows)
-    if (r.name == "visual") o->visible = r.nodes;
-  const SurfaceMesh surface = boundary_surface(o->mesh);
-  o->normals.setZero(o->mesh.nodes.rows(), 3);
-  for (Eigen::Index f = 0; f < surface.tris.rows(); ++f) {
-    const Eigen::RowVector3d a = o->mesh.nodes.row(surface.tris(f, 0)), b = o->mesh.nodes.row(surface.tris(f, 1)),
-                             c = o->mesh.nodes.row(surface.tris(f, 2));
-    const Eigen::RowVector3d n = (b - a).cross(c - a);
-    for (int k = 0; k < 3; ++k) o->normals.row(surface.tris(f, k)) += n;
-  }
-  o->normals.rowwise().normalize();
-  o->normals = o->normals.unaryExpr([](double v) { return std::isfinite(v) ? v : 0.0; });
-  o->height = o->mesh.nodes.col(2).maxCoeff() - o->mesh.nodes.col(2).minCoeff();
-  return o;
-}
-
-// The flat punch: free top-surface nodes (normal z > 0.5) within kPunchRadius of kPunchCentre in x-y.
-std::vector<int> punch_nodes(const Organ& o) {
-  std::vector<int> out;
-  for (int k : o.contacts)
-    if (o.normals(k, 2) > 0.5 && (o.mesh.nodes.row(k).head<2>().transpose() - kPunchCentre).norm() <= kPunchRadius)
-      out.push_back(k);
-  return out;
-}
-
 PrecomputeOptions precompute_options(Precision precision) {
   PrecomputeOptions opts;
   opts.precision = precision;
@@ -189,15 +131,6 @@ PrecomputeOptions precompute_options(Precision precision) {
 }
 
 // ---- measurements ------------------------------------------------------------------------------------------------
-
-// The displacements of the visible nodes (3R, row order of Organ::visible) from a whole-mesh solution.
-Eigen::VectorXd visible_part(const Organ& o, const Eigen::MatrixX3d& u) {
-  Eigen::VectorXd out(3 * static_cast<Eigen::Index>(o.visible.size()));
-  for (std::size_t r = 0; r < o.visible.size(); ++r) out.segment<3>(3 * static_cast<Eigen::Index>(r)) = u.row(o.visible[r]).transpose();
-  return out;
-}
-
-double rel(double err, double scale) { return err / std::max(scale, 1e-300); }
 
 // One method's samples, by contact count.
 struct Measure {
@@ -518,7 +451,7 @@ std::vector<MeshRow> run_meshes(const Scene& scene, const Settings& s) {
   for (int i = static_cast<int>(sizes.size()) - 1; i >= 0; --i) {
     const int target = sizes[static_cast<std::size_t>(i)];
     progress("mesh: ~" + std::to_string(target) + " nodes: meshing (cache " + s.cache + ")");
-    const auto o = make_organ(scene, target, s);
+    const auto o = make_organ(scene, target, s.cache, s.smoke);
     MeshRow& row = rows[static_cast<std::size_t>(i)];
     row.nodes = o->model->node_count();
     row.tets = static_cast<int>(o->mesh.tets.rows());
@@ -651,14 +584,7 @@ std::vector<NonlinearRow> run_nonlinear(const Organ& o, const Tensors& td, const
       t_lin.push_back(us_since(tt));
       tt = Clock::now();
       eval(contacts.data(), static_cast<int>(contacts.size()), u_quasi, f_quasi);
-      // Haptic node: Q on the force along the mean imposed displacement.
-      Eigen::Vector3d dir;
-      if (constraint_direction(eval.sol.displacement.data(), eval.sol.count, dir)) law.apply_force(f_quasi, dir, f_quasi);
-      // Visual node: P on every visible row along the direction of the summed contact rows.
-      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-      for (int l = 0; l < eval.sol.count; ++l)
-        sum += u_quasi.segment<3>(3 * visual.row_of_node[static_cast<std::size_t>(eval.sol.nodes[static_cast<std::size_t>(l)])]);
-      if (constraint_direction(&sum, 1, dir)) law.apply_displacements(u_quasi, dir);
+      apply_quasi(law, eval.sol.displacement.data(), eval.sol.count, eval.sol.nodes.data(), visual, f_quasi, u_quasi);
       t_quasi.push_back(us_since(tt));
     }
     row.linear_force = f_lin.norm();
@@ -738,7 +664,7 @@ int main(int argc, char** argv) {
     const NonlinearLaw law = load_nonlinear_law(scene.nonlinear, scene.material);
 
     progress("main organ: ~" + std::to_string(s.nodes) + " nodes");
-    const auto organ = make_organ(scene, s.nodes, s);
+    const auto organ = make_organ(scene, s.nodes, s.cache, s.smoke);
     progress("main organ: " + std::to_string(organ->model->node_count()) + " nodes; precompute (double, float)");
     PrecomputeReport rep_d, rep_f;
     const Tensors td = precompute_tensors(*organ->model, organ->contacts, organ->rows, precompute_options(Precision::kDouble), &rep_d);

@@ -1,0 +1,466 @@
+// large_deformation_bench: the liver at large deformation (issue 16), every method against the neo-Hookean Newton
+// reference (common/liver/hyperelastic.h) on the shipped liver, in one run. A plain program run by hand
+// (build/bench/large_deformation_bench --out DIR [--quick]); tables on stdout, progress on stderr.
+//
+// Cases (constraints: every component of the constrained nodes imposed, as liver_error_bench's non-linear study):
+//   indent_5 .. indent_30   the flat punch of liver_error_bench (free top nodes within 2 cm of (0.03, 0)) pushed down
+//                           by 5 .. 30 % of the organ's height;
+//   lift_45, lift_90        the free left lobe (x < -0.075 hangs below the clamp's reach) grasped on its top within
+//                           1.2 cm of (-0.100, 0.010) and turned rigidly about the y axis through (-0.070, 0.010,
+//                           -0.010) by 45 and 90 degrees (the grasp lifts and turns; the rest of the lobe follows);
+//   rigid_90                the whole organ with its fixed set turned 90 degrees about (1, 1, 1) and moved by
+//                           (2, -3, 5) cm, the punch nodes held where that carries them: the reference force is 0,
+//                           so force_rel_error is |F| / |F_Newton(indent_10)| (the issue's "1 % of a 10 %
+//                           indentation"), disp_rel_error against the rigid displacement.
+// Methods: linear (lambda = G_CC^-1 u*, the tensors as precomputed), quasi_cylinder (the law with the scene's
+// cylinder curves, as the nodes apply it), quasi_organ (the law with curves fitted on the organ's own Newton
+// indentations, liver/organ_curves.h, cached in --cache), corotational (W = R_i G R_j^T, liver/corotation.h, the
+// rotations iterated to a fixed point from the rest-frame response; the free configuration is the rest shape carried
+// by the fixed set's rigid frame), corotational_organ (corotational, then the organ law).
+// Errors: force = |F - F_ref| / |F_ref| of the total tool force (vectors); disp = |u - u_ref| / |u_ref| over the
+// visible (boundary) nodes. tick_us_p99: the haptic side of one tick for that case (linear: the G_CC solve; quasi: +
+// Q; corotational: the contact nodes' rotations from the rest-frame field, the warped prepare, factor and solve),
+// wall clock, 99th percentile of --repeats.
+// Diagnostic rows on stdout only (corot_true_rot): the corotational force with the rotations of the Newton
+// reference's own displacement field, which tells an error of the rotation estimate from one of the formulation.
+// Then, without a reference: the haptic tick of LiverContacts (patch model, one instrument pressing 8 mm on the
+// shipped liver; and a solve of exactly 10 contact nodes), linear against corotational, and the visual node's
+// SurfaceDeformer::apply for 10 contacts, linear against corotational (the rotations recomputed there).
+//
+// CSV (with --out DIR): liver_large_deformation.csv  case,method,force_rel_error,disp_rel_error,tick_us_p99
+// Plot: scripts/report_large_deformation.py.
+#include <CLI/CLI.hpp>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "bench_util.h"
+#include "core/error.h"
+#include "csv_out.h"
+#include "liver/corotation.h"
+#include "liver/hyperelastic.h"
+#include "liver/liver_setup.h"
+#include "liver/nonlinear_law.h"
+#include "liver/organ_curves.h"
+#include "liver/patch_solve.h"
+#include "liver_bench_organ.h"
+#include "organs/liver_contacts.h"
+#include "views/surface_deformer.h"
+
+namespace {
+
+using namespace surgsim;
+using namespace surgsim::bench_liver;
+using Clock = bench::WallClock;
+using bench::us_since;
+
+constexpr double kPi = 3.14159265358979323846;
+
+void progress(const std::string& what) { std::cerr << "large_deformation_bench: " << what << std::endl; }
+
+// One case: the constrained nodes, their imposed world displacements, the fixed set's rigid frame and the reference.
+struct Case {
+  std::string name;
+  double angle = 0;                  // degrees (lift, rigid), for the plot
+  double depth_percent = 0;          // indentation % (indent)
+  std::vector<int> nodes;
+  std::vector<Eigen::Vector3d> u_star;  // m
+  RigidFrame base;                   // identity unless the fixed set moves
+  bool rigid = false;                // reference is the rigid motion itself
+  Eigen::Vector3d f_ref = Eigen::Vector3d::Zero();
+  Eigen::VectorXd u_ref;             // visible, m
+  Eigen::MatrixX3d newton_u;         // #V x 3, m (not for rigid)
+  bool converged = true;
+};
+
+struct Outcome {
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();
+  Eigen::VectorXd u;  // visible
+  std::vector<double> tick_us;
+};
+
+// The corotational solve of a case: rows x, y, z per node (weight 1 each), rotations iterated to a fixed point.
+class Corotational {
+ public:
+  Corotational(const Organ& o, const Tensors& t)
+      : organ_(o), tensors_(t), solver_(t, "haptic"), visual_(t, "visual"), rot_(o.mesh, boundary_surface(o.mesh)) {}
+
+  /// `given`: rotations from this whole-mesh displacement field (#V x 3, world) instead of the fixed point (a
+  /// diagnostic: the Newton reference's own rotations).
+  Outcome solve(const Case& c, int repeats, const Eigen::MatrixX3d* given = nullptr) {
+    const int n = static_cast<int>(c.nodes.size());
+    PatchConstraints k;
+    k.clear();
+    for (int u = 0; u < n; ++u) {
+      k.nodes[static_cast<std::size_t>(u)] = c.nodes[static_cast<std::size_t>(u)];
+      k.entry_node[static_cast<std::size_t>(u)] = u;
+      k.entry_weight[static_cast<std::size_t>(u)] = 1;
+      k.patch_start[static_cast<std::size_t>(u + 1)] = u + 1;
+      for (int r = 0; r < 3; ++r) {
+        k.row_patch[static_cast<std::size_t>(3 * u + r)] = u;
+        k.row_direction[static_cast<std::size_t>(3 * u + r)] = Eigen::Matrix3d::Identity().col(r);
+      }
+    }
+    k.node_count = k.patch_count = n;
+    k.row_count = 3 * n;
+    // b: the imposed displacement beyond the free configuration (the rest shape carried by the fixed set's frame).
+    std::vector<double> b(static_cast<std::size_t>(3 * n)), mu(static_cast<std::size_t>(3 * n));
+    for (int u = 0; u < n; ++u) {
+      const Eigen::Vector3d x0 = organ_.mesh.nodes.row(c.nodes[static_cast<std::size_t>(u)]).transpose();
+      const Eigen::Vector3d d = c.u_star[static_cast<std::size_t>(u)] - (c.base.apply(x0) - x0);
+      for (int r = 0; r < 3; ++r) b[static_cast<std::size_t>(3 * u + r)] = d[r];
+    }
+    const TensorBlock& vis = visual_.block();
+    rot_.reset();
+    ut_ = Eigen::MatrixX3d::Zero(organ_.mesh.nodes.rows(), 3);
+    std::array<Eigen::Matrix3d, kMaxContacts> r;
+    std::array<Eigen::Vector3d, kMaxContacts> lambda, rest_lambda;
+    Eigen::VectorXd uv(3 * vis.row_count());
+    const auto rotation = [&](int node) -> Eigen::Matrix3d { return c.base.r * rot_.rotation(node); };
+    const auto disp = [&](int node) -> Eigen::Vector3d { return ut_.row(node).transpose(); };
+    const auto one_pass = [&]() {
+      for (int u = 0; u < n; ++u) r[static_cast<std::size_t>(u)] = rotation(c.nodes[static_cast<std::size_t>(u)]);
+      solver_.prepare(k, r.data());
+      const ContactStatus st = solver_.factor(k);
+      if (st != ContactStatus::kOk) return st;
+      solver_.solve(b.data(), mu.data());
+      solver_.node_forces(k, mu.data(), lambda.data());
+      return ContactStatus::kOk;
+    };
+    // Fixed point: rotations from the rest-frame response u~ = G R^T lambda of every visible node.
+    double change = 1;
+    if (given != nullptr) {
+      rot_.update_all(*given, 60);
+      change = 0;
+    }
+    for (int it = 0; it < 30 && change > 1e-7; ++it) {
+      if (one_pass() != ContactStatus::kOk) throw surgsim::Error(c.name + ": corotational factorization failed");
+      for (int u = 0; u < n; ++u) rest_lambda[static_cast<std::size_t>(u)] = rotation(c.nodes[static_cast<std::size_t>(u)]).transpose() * lambda[static_cast<std::size_t>(u)];
+      visual_.displacements(c.nodes.data(), rest_lambda.data(), n, uv);
+      for (int row = 0; row < vis.row_count(); ++row) ut_.row(vis.row_nodes[static_cast<std::size_t>(row)]) = uv.segment<3>(3 * row).transpose();
+      change = 0;
+      for (int node : organ_.visible) {
+        const Eigen::Quaterniond before = rot_.quaternion(node);
+        rot_.update(node, disp, 30);
+        change = std::max(change, before.angularDistance(rot_.quaternion(node)));
+      }
+    }
+    Outcome out;
+    one_pass();
+    for (int u = 0; u < n; ++u) out.force -= lambda[static_cast<std::size_t>(u)];
+    out.u.resize(3 * vis.row_count());
+    for (int row = 0; row < vis.row_count(); ++row) {
+      const int node = vis.row_nodes[static_cast<std::size_t>(row)];
+      const Eigen::Vector3d x0 = organ_.mesh.nodes.row(node).transpose();
+      out.u.segment<3>(3 * row) = c.base.apply(x0) - x0 + rotation(node) * ut_.row(node).transpose();
+    }
+    // The tick: the contact nodes' rotations (warm, from the field), the warped prepare, factor, solve.
+    for (int rep = 0; rep < repeats; ++rep) {
+      const auto t0 = Clock::now();
+      for (int u = 0; u < n; ++u) rot_.update(c.nodes[static_cast<std::size_t>(u)], disp);
+      one_pass();
+      out.tick_us.push_back(us_since(t0));
+    }
+    return out;
+  }
+
+ private:
+  const Organ& organ_;
+  const Tensors& tensors_;
+  PatchSolver solver_;
+  Superposition visual_;
+  NodeRotations rot_;
+  Eigen::MatrixX3d ut_;
+};
+
+std::string sci(double v) {
+  if (!std::isfinite(v)) return "nan";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scene_name = "liver", out_dir, cache;
+  int nodes = 1500, repeats = 300;
+  bool quick = false;
+  CLI::App app{"large_deformation_bench: the liver at large deformation (issue 16): linear, quasi non-linear "
+               "(cylinder and organ curves), corotational and corotational with organ curves against a neo-Hookean "
+               "Newton reference, indentation 5-30 %, a lobe lifted 45 and 90 degrees, a rigid 90-degree turn; "
+               "tick and visual timings. Tables on stdout, DIR/liver_large_deformation.csv with --out."};
+  app.add_option("--out", out_dir, "Write liver_large_deformation.csv to this folder (created if missing)");
+  app.add_option("--cache", cache, "Mesh and organ-curve cache folder (default: $SURGSIM_CACHE_DIR, else ~/.cache/surgsim)");
+  app.add_option("--scene", scene_name, "Scene (name or YAML): material, clamp, cylinder curves")->capture_default_str();
+  app.add_option("--nodes", nodes, "Target node count of the liver")->capture_default_str();
+  app.add_option("--repeats", repeats, "Timed repeats per case and method")->capture_default_str();
+  app.add_flag("--quick", quick, "Short run: fewer timing repeats, organ curves from 3 depths");
+  CLI11_PARSE(app, argc, argv);
+  if (quick) repeats = std::min(repeats, 60);
+
+  try {
+    const auto start = Clock::now();
+    const Scene scene = load_scene(resolve_scene_path(scene_name));
+    if (cache.empty()) cache = default_cache_dir();
+    if (!out_dir.empty()) bench::make_dirs(out_dir);
+    const auto organ = make_organ(scene, nodes, cache, false);
+    const Organ& o = *organ;
+    progress("liver of " + std::to_string(o.mesh.nodes.rows()) + " nodes: precompute");
+    PrecomputeOptions popts;
+    popts.memory_limit_mb = 0;
+    const Tensors tensors = precompute_tensors(*o.model, o.contacts, o.rows, popts);
+
+    // The laws: the scene's cylinder curves, and the organ's own (cached next to the tensors).
+    const NonlinearLaw cylinder = load_nonlinear_law(scene.nonlinear, scene.material);
+    OrganCurveSettings ocs;
+    if (quick) ocs.depths = {0.1, 0.2, 0.3};
+    const std::uint64_t tensor_key = liver_tensor_setup(scene.material, scene.fixed, o.mesh, cache, scene.file).key.combined();
+    OrganCurvesOutcome oc_outcome;
+    const auto tc0 = Clock::now();
+    const OrganCurves curves = load_or_compute_organ_curves(*o.model, ocs, tensor_key, cache, &std::cerr, &oc_outcome);
+    const double curves_s = us_since(tc0) * 1e-6;
+    FitReport q_rep, p_rep;
+    const NonlinearLaw organ_law = fit_organ_law(curves, ocs.degree, &q_rep, &p_rep);
+    std::printf("Liver %d nodes, %d visible; organ curves %s in %.1f s (%zu Newton indentations at %zu sites), Q fit "
+                "max residual %.2e, P %s\n",
+                static_cast<int>(o.mesh.nodes.rows()), static_cast<int>(o.visible.size()),
+                oc_outcome == OrganCurvesOutcome::kLoaded ? "loaded" : "computed", curves_s, curves.samples.size(),
+                ocs.sites.size(), q_rep.max_residual,
+                p_rep.degree > 0 ? ("max residual " + sci(p_rep.max_residual)).c_str() : "left out (not increasing)");
+
+    // ---- the cases and their references ----
+    std::vector<Case> cases;
+    const std::vector<int> punch = punch_nodes(o);
+    for (int p = 5; p <= 30; p += 5) {
+      Case c;
+      c.name = "indent_" + std::to_string(p);
+      c.depth_percent = p;
+      c.nodes = punch;
+      c.u_star.assign(punch.size(), Eigen::Vector3d(0, 0, -p / 100.0 * o.height));
+      cases.push_back(c);
+    }
+    const std::vector<int> grasp = punch_nodes(o, Eigen::Vector2d(-0.100, 0.010), 0.012);
+    const Eigen::Vector3d hinge(-0.070, 0.010, -0.010);
+    for (double deg : {45.0, 90.0}) {
+      Case c;
+      c.name = "lift_" + std::to_string(static_cast<int>(deg));
+      c.angle = deg;
+      c.nodes = grasp;
+      const Eigen::Matrix3d q = Eigen::AngleAxisd(deg * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+      for (int k : grasp) {
+        const Eigen::Vector3d x0 = o.mesh.nodes.row(k).transpose();
+        c.u_star.push_back((q - Eigen::Matrix3d::Identity()) * (x0 - hinge));
+      }
+      cases.push_back(c);
+    }
+    {
+      Case c;
+      c.name = "rigid_90";
+      c.angle = 90;
+      c.rigid = true;
+      c.nodes = punch;
+      c.base.r = Eigen::AngleAxisd(kPi / 2, Eigen::Vector3d(1, 1, 1).normalized()).toRotationMatrix();
+      c.base.t = Eigen::Vector3d(0.02, -0.03, 0.05);
+      for (int k : punch) {
+        const Eigen::Vector3d x0 = o.mesh.nodes.row(k).transpose();
+        c.u_star.push_back(c.base.apply(x0) - x0);
+      }
+      // The fixed set's frame as the nodes would estimate it: shape matching of the fixed nodes' displacements.
+      Eigen::MatrixX3d u_all(o.mesh.nodes.rows(), 3);
+      std::vector<int> fixed_nodes;
+      for (Eigen::Index n = 0; n < o.mesh.nodes.rows(); ++n) {
+        const Eigen::Vector3d x0 = o.mesh.nodes.row(n).transpose();
+        u_all.row(n) = (c.base.apply(x0) - x0).transpose();
+        if (o.fixed.node_touched(static_cast<int>(n))) fixed_nodes.push_back(static_cast<int>(n));
+      }
+      c.base = fit_rigid_frame(o.mesh.nodes, fixed_nodes, u_all);
+      c.u_ref = visible_part(o, u_all);
+      cases.push_back(c);
+    }
+    if (punch.empty() || grasp.empty()) throw surgsim::Error("no punch or grasp nodes on this mesh");
+    if (static_cast<int>(std::max(punch.size(), grasp.size())) > kMaxContacts) throw surgsim::Error("more than kMaxContacts constrained nodes");
+
+    double f_indent10 = 0;
+    for (Case& c : cases) {
+      if (c.rigid) continue;
+      std::vector<ImposedDisplacement> imposed;
+      double largest = 0;
+      for (std::size_t i = 0; i < c.nodes.size(); ++i) {
+        imposed.push_back({c.nodes[i], c.u_star[i], 7});
+        largest = std::max(largest, c.u_star[i].norm());
+      }
+      HyperelasticOptions opts;
+      opts.load_steps = std::max(2, static_cast<int>(std::ceil(largest / 0.002)));
+      progress(c.name + ": Newton, " + std::to_string(opts.load_steps) + " increments");
+      const HyperelasticSolution ref = HyperelasticSolver(*o.model, opts).solve(imposed);
+      c.converged = ref.converged();
+      if (!c.converged) progress(c.name + ": Newton did not converge: " + ref.message);
+      c.f_ref = -ref.total_reaction;
+      c.u_ref = visible_part(o, ref.displacement);
+      c.newton_u = ref.displacement;
+      if (c.name == "indent_10") f_indent10 = c.f_ref.norm();
+    }
+
+    // ---- the methods ----
+    Superposition haptic(tensors, "haptic"), visual(tensors, "visual");
+    const TensorBlock& vis = visual.block();
+    Corotational corot(o, tensors);
+    bench::CsvOut csv(out_dir, "liver_large_deformation", "case,method,force_rel_error,disp_rel_error,tick_us_p99");
+    std::printf("\n%-10s %-18s | %12s %12s | %10s | %9s\n", "case", "method", "force err", "disp err", "tick p99 us",
+                "F N");
+    for (const Case& c : cases) {
+      const int m = static_cast<int>(c.nodes.size());
+      std::vector<Contact> contacts;
+      for (int i = 0; i < m; ++i) contacts.push_back({c.nodes[static_cast<std::size_t>(i)], c.u_star[static_cast<std::size_t>(i)]});
+      std::map<std::string, Outcome> res;
+      // linear and the two quasi laws
+      ContactSolution sol;
+      for (const char* method : {"linear", "quasi_cylinder", "quasi_organ"}) {
+        const NonlinearLaw* law = std::string(method) == "quasi_cylinder" ? &cylinder
+                                  : std::string(method) == "quasi_organ" ? &organ_law : nullptr;
+        Outcome out;
+        for (int rep = 0; rep < repeats; ++rep) {
+          const auto t0 = Clock::now();
+          haptic.solve(contacts.data(), m, sol);
+          Eigen::Vector3d f = sol.tool_force, dir;
+          if (law && constraint_direction(sol.displacement.data(), sol.count, dir)) law->apply_force(f, dir, f);
+          out.tick_us.push_back(us_since(t0));
+        }
+        if (haptic.solve(contacts.data(), m, sol) != ContactStatus::kOk) throw surgsim::Error(c.name + ": G_CC solve failed");
+        out.force = sol.tool_force;
+        out.u.resize(3 * vis.row_count());
+        visual.displacements(sol.nodes.data(), sol.lambda.data(), sol.count, out.u);
+        if (law) apply_quasi(*law, sol.displacement.data(), sol.count, sol.nodes.data(), vis, out.force, out.u);
+        res[method] = std::move(out);
+      }
+      res["corotational"] = corot.solve(c, repeats);
+      {
+        Outcome co = res["corotational"];
+        // The organ law on the corotational result: Q along the mean imposed displacement, P on the visible rows.
+        std::vector<Eigen::Vector3d> imposed = c.u_star;
+        apply_quasi(organ_law, imposed.data(), m, c.nodes.data(), vis, co.force, co.u);
+        res["corotational_organ"] = std::move(co);
+      }
+      for (const char* method : {"linear", "quasi_cylinder", "quasi_organ", "corotational", "corotational_organ"}) {
+        const Outcome& r = res[method];
+        double fe, de;
+        if (c.rigid) {
+          fe = rel(r.force.norm(), f_indent10);
+          de = rel((r.u - c.u_ref).norm(), c.u_ref.norm());
+        } else if (!c.converged) {
+          fe = de = std::nan("");
+        } else {
+          fe = rel((r.force - c.f_ref).norm(), c.f_ref.norm());
+          de = rel((r.u - c.u_ref).norm(), c.u_ref.norm());
+        }
+        const double p99 = bench::percentile(r.tick_us, 0.99);
+        std::printf("%-10s %-18s | %12s %12s | %10.2f | %9.4f%s\n", c.name.c_str(), method, sci(fe).c_str(),
+                    sci(de).c_str(), p99, r.force.norm(), c.rigid ? "  (force err: / F_Newton(indent_10))" : "");
+        csv.row("%s,%s,%s,%s,%.6g", c.name.c_str(), method, sci(fe).c_str(), sci(de).c_str(), p99);
+      }
+      if (!c.rigid) {
+        std::printf("%-10s %-18s | %12s %12s | %10s | %9.4f\n", c.name.c_str(), "newton", "-", "-", "-", c.f_ref.norm());
+        // Diagnostic (stdout only): the corotational solve with the Newton field's own rotations.
+        const Outcome d = corot.solve(c, 1, &c.newton_u);
+        std::printf("%-10s %-18s | %12s %12s | %10s | %9.4f  (diagnostic: rotations of the Newton field)\n",
+                    c.name.c_str(), "corot_true_rot", sci(rel((d.force - c.f_ref).norm(), c.f_ref.norm())).c_str(), "-",
+                    "-", d.force.norm());
+      }
+    }
+
+    // ---- the haptic tick and the visual frame, linear against corotational ----
+    std::printf("\nHaptic tick (LiverContacts, patch model, one instrument pressing 8 mm at (0.03, 0); us, %d ticks "
+                "after 50 warm)\n", 10 * repeats);
+    std::printf("%-14s | %8s %8s %8s | %6s\n", "deformation", "p50", "p99", "max", "nodes");
+    for (LiverDeformation d : {LiverDeformation::kLinear, LiverDeformation::kCorotational}) {
+      const SurfaceMesh surface = boundary_surface(o.mesh);
+      ToolSpec spec = scene.tools[0];
+      spec.shaft_points = 1;
+      LiverContacts lc(o.mesh, surface, tensors, std::vector<ToolSpec>{spec}, nullptr, d);
+      const double top = [&] {
+        double z = -1;
+        for (int k : punch) z = std::max(z, o.mesh.nodes(k, 2));
+        return z;
+      }();
+      std::vector<double> t;
+      for (int k = 0; k < 50 + 10 * repeats; ++k) {
+        const double depth = std::min(0.008, 0.0004 * k) + 0.0005 * std::sin(0.05 * k);
+        ToolGeometry g{};
+        g.direction = {0, 0, -1};
+        g.tip = Eigen::Vector3d(kPunchCentre.x(), kPunchCentre.y(), top + 0.002 - depth);
+        g.trocar = g.tip + Eigen::Vector3d(0, 0, 0.15);
+        g.jaw_normal = {1, 0, 0};
+        g.jaw_tips = {g.tip, g.tip};
+        g.point_count = 1;
+        g.points[0] = g.tip;
+        ContactTick tick;
+        const auto t0 = Clock::now();
+        lc.step(g, 0.5, tick);
+        if (k >= 50) t.push_back(us_since(t0));
+        if (k % 5 == 0) lc.refresh_rotations();  // the 200 Hz thread, here between ticks
+      }
+      std::printf("%-14s | %8.2f %8.2f %8.2f | %6d\n", to_string(d), bench::percentile(t, 0.5),
+                  bench::percentile(t, 0.99), *std::max_element(t.begin(), t.end()), lc.solution().count);
+    }
+    {
+      // Exactly 10 contact nodes (node_bench's count), 3 rows each: the G_CC solve against the warped patch solve
+      // with the contact nodes' rotations.
+      std::vector<int> ten(punch.begin(), punch.begin() + std::min<std::size_t>(10, punch.size()));
+      Case c;
+      c.name = "ten";
+      c.nodes = ten;
+      c.u_star.assign(ten.size(), Eigen::Vector3d(0, 0, -0.005));
+      const Outcome co = corot.solve(c, 10 * repeats);
+      std::vector<Contact> contacts;
+      for (int k : ten) contacts.push_back({k, Eigen::Vector3d(0, 0, -0.005)});
+      ContactSolution sol;
+      std::vector<double> tl;
+      for (int rep = 0; rep < 10 * repeats; ++rep) {
+        const auto t0 = Clock::now();
+        haptic.solve(contacts.data(), static_cast<int>(contacts.size()), sol);
+        tl.push_back(us_since(t0));
+      }
+      std::printf("%zu contact nodes, solve only: linear p50 %.2f p99 %.2f us; corotational p50 %.2f p99 %.2f us\n",
+                  ten.size(), bench::percentile(tl, 0.5), bench::percentile(tl, 0.99), bench::percentile(co.tick_us, 0.5),
+                  bench::percentile(co.tick_us, 0.99));
+    }
+    {
+      const SurfaceMesh surface = boundary_surface(o.mesh);
+      std::vector<int> ten(punch.begin(), punch.begin() + std::min<std::size_t>(10, punch.size()));
+      std::vector<Contact> contacts;
+      for (int k : ten) contacts.push_back({k, Eigen::Vector3d(0, 0, -0.008)});
+      ContactSolution sol;
+      haptic.solve(contacts.data(), static_cast<int>(contacts.size()), sol);
+      std::printf("\nVisual frame (SurfaceDeformer::apply, %d visible nodes, %d contacts; us)\n",
+                  static_cast<int>(o.visible.size()), sol.count);
+      std::printf("%-14s | %8s %8s %8s\n", "deformation", "p50", "p99", "max");
+      for (LiverDeformation d : {LiverDeformation::kLinear, LiverDeformation::kCorotational}) {
+        SurfaceDeformer def(o.mesh, surface, &tensors, nullptr, d);
+        std::vector<double> t;
+        for (int rep = 0; rep < repeats; ++rep) {
+          Eigen::Vector3d lambda[kMaxContacts];
+          for (int l = 0; l < sol.count; ++l) lambda[l] = sol.lambda[static_cast<std::size_t>(l)] * (1 + 0.01 * std::sin(0.1 * rep));
+          const auto t0 = Clock::now();
+          def.apply(sol.nodes.data(), lambda, sol.count);
+          t.push_back(us_since(t0));
+        }
+        std::printf("%-14s | %8.1f %8.1f %8.1f\n", to_string(d), bench::percentile(t, 0.5), bench::percentile(t, 0.99),
+                    *std::max_element(t.begin(), t.end()));
+      }
+    }
+    std::printf("\nTotal %.1f s\n", us_since(start) * 1e-6);
+    if (!out_dir.empty()) progress("CSV in " + out_dir + "/liver_large_deformation.csv");
+  } catch (const std::exception& e) {
+    std::cerr << "large_deformation_bench: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}
