@@ -7,6 +7,7 @@
 //     50 Hz frame.
 // Usage: frame_bench [--frames N] [--out DIR] (DIR/frame_encode.csv, DIR/frame_render_loop.csv).
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <vector>
@@ -53,7 +54,12 @@ int main(int argc, char** argv) {
     for (auto [w, h] : std::vector<std::pair<int, int>>{{320, 240}, {640, 480}, {1280, 720}}) {
       auto renderer = make_renderer("osmesa", w, h);
       organ->attach(*renderer);
+      // Preallocated and touched, as the stream's slot is: the read-back below is the copy alone.
       std::vector<Image> images(static_cast<std::size_t>(frames));
+      for (Image& im : images) {
+        im.resize(w, h);
+        std::fill(im.rgb.begin(), im.rgb.end(), std::uint8_t{0});
+      }
       SampleRecorder render_ms(static_cast<std::size_t>(frames)), readback_us(static_cast<std::size_t>(frames));
       for (int f = 0; f < frames; ++f) {
         const double insertion = 0.15 + 0.02 * f / frames;  // the tool going down: every picture differs
@@ -65,7 +71,6 @@ int main(int argc, char** argv) {
         renderer->draw_tool(tool, static_cast<float>(scene.tools[0].shaft_radius));
         renderer->end_frame();
         const std::uint64_t t1 = monotonic_ns();
-        images[static_cast<std::size_t>(f)].resize(w, h);
         renderer->read_image(images[static_cast<std::size_t>(f)]);
         render_ms.add(static_cast<double>(t1 - t0) * 1e-6);
         readback_us.add(static_cast<double>(monotonic_ns() - t1) * 1e-3);
