@@ -126,6 +126,7 @@ function show(f) {
   });
 }
 
+const seqs = [];                           // [server time s, contact frame seq] of the last second
 function onText(m) {
   if (m.type === 'hello') {
     S.hello = m; S.id = m.id;
@@ -138,10 +139,10 @@ function onText(m) {
     S.forceMax = Math.max(S.forceMax, S.forceNorm);
     S.contacts = m.contacts; S.contactsMax = Math.max(S.contactsMax, m.contacts);
     const t = m.t;
-    if (S.prev && t > S.prev.t) {
-      plots.rate.add(t, (m.contact_seq - S.prev.seq) / (t - S.prev.t));
-    }
-    S.prev = { t, seq: m.contact_seq };
+    // The haptic rate: contact frames (one per tick) over the last second.
+    seqs.push([t, m.contact_seq]);
+    while (seqs.length > 2 && seqs[1][0] <= t - 1) seqs.shift();
+    if (seqs.length > 1 && t - seqs[0][0] >= 0.5) plots.rate.add(t, (m.contact_seq - seqs[0][1]) / (t - seqs[0][0]));
     plots.force.add(t, S.forceNorm);
     plots.contacts.add(t, m.contacts);
     if (m.haptic_visual_latency_us >= 0) plots.latency.add(t, m.haptic_visual_latency_us);
