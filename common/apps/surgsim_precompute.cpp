@@ -88,7 +88,7 @@ int main(int argc, char** argv) {
     const std::vector<RowSet> rows = standard_row_sets(mesh, fixed, contacts);
 
     PrecomputeOptions opts;
-    opts.symmetric = true;  // the haptic block (contacts x contacts) as one half, as the scenes store it
+    opts.symmetric_blocks = {"haptic"};  // the haptic block (contacts x contacts) as one half, as the scenes store it
     if (precision == "auto") {
       PrecomputeOptions as_double = opts;
       const double mib = static_cast<double>(estimate_tensor_bytes(static_cast<int>(contacts.size()), rows, as_double)) /

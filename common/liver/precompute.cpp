@@ -87,17 +87,17 @@ using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-// Whether `set` is stored as a packed symmetric block: its rows are the contact nodes, in column order.
-bool packs_symmetric(const RowSet& set, const std::vector<int>& sorted_contacts, const PrecomputeOptions& options) {
-  return options.symmetric && set.nodes == sorted_contacts;
+// Whether `set` is stored as a packed symmetric block (named in options.symmetric_blocks).
+bool packs_symmetric(const RowSet& set, const PrecomputeOptions& options) {
+  const auto& names = options.symmetric_blocks;
+  return std::find(names.begin(), names.end(), set.name) != names.end();
 }
 
 std::size_t tensor_bytes(int contact_count, const std::vector<RowSet>& rows, const PrecomputeOptions& options) {
   const auto s = static_cast<std::size_t>(contact_count);
   std::size_t entries = 0;
   for (const auto& set : rows) {
-    // Without the sorted contact list here, a row set packs when it has S sorted nodes (checked exactly later).
-    const bool sym = options.symmetric && set.nodes.size() == s && std::is_sorted(set.nodes.begin(), set.nodes.end());
+    const bool sym = packs_symmetric(set, options);
     entries += sym ? 9 * s * (s + 1) / 2 : 9 * set.nodes.size() * s;
   }
   return entries * static_cast<std::size_t>(options.precision);
@@ -247,7 +247,10 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
     for (std::size_t r = 0; r < set.nodes.size(); ++r) b.row_of_node[static_cast<std::size_t>(set.nodes[r])] = static_cast<int>(r);
     const Eigen::Index rr = 3 * static_cast<Eigen::Index>(set.nodes.size());
     // Every entry is written by store() below (zeros for fixed rows): no need to clear.
-    b.symmetric = packs_symmetric(set, t.contact_nodes, options);
+    b.symmetric = packs_symmetric(set, options);
+    if (b.symmetric && set.nodes != t.contact_nodes)
+      throw_error("precompute: row set '", set.name, "' is to be stored as one symmetric half, but its nodes are not the ",
+                  "contact nodes in ascending order");
     const std::size_t packed = 9 * set.nodes.size() * (set.nodes.size() + 1) / 2;
     if (b.symmetric && options.precision == Precision::kDouble)
       b.packed.resize(packed);

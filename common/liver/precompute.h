@@ -30,8 +30,8 @@ struct RowSet {
 /// G restricted to the rows of one RowSet and to every contactable column: the 3x3 block G(r, c) is the
 /// displacement (m) of node row_nodes[r] for a unit force (N) on contact node c, so G is in m/N.
 /// Dense (the default): exactly one of g / g_float holds data, by the owning Tensors' precision.
-/// Symmetric (issue 17; PrecomputeOptions::symmetric, for a block whose rows are the contact nodes in column order,
-/// i.e. "haptic"): G is symmetric, so only the node blocks on and below the diagonal are stored, packed node column
+/// Symmetric (issue 17; PrecomputeOptions::symmetric_blocks, for a block whose rows are the contact nodes in column
+/// order, i.e. "haptic"): G is symmetric, so only the node blocks on and below the diagonal are stored, packed node column
 /// by node column (column c holds rows c..R-1, each 3x3 block column-major) in packed / packed_float; g and g_float
 /// are empty. Read either layout through at() and block3().
 struct TensorBlock {
@@ -125,7 +125,9 @@ struct PrecomputeOptions {
   int cg_max_iterations = 0;              // CG: 0 = 10 x the free dofs
   int block_columns = 96;                 // direct: unit right-hand sides per blocked supernodal solve
   int threads = 0;                        // direct: solving threads (0: every core); same result for any count
-  bool symmetric = false;                 // store a row set equal to the contact nodes as one packed half
+  /// Row sets stored as one packed half (TensorBlock::symmetric; each must be the contact nodes, ascending), e.g.
+  /// {"haptic"}. The visual block stays dense even when its rows are the contacts: the visual node reads columns.
+  std::vector<std::string> symmetric_blocks;
   double memory_limit_mb = 4096;          // refuse when the estimate exceeds this (MiB); <= 0: no limit
   /// Called after each block (direct: from the solving threads, one call at a time, columns_done increasing) or
   /// column (CG).

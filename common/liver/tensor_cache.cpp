@@ -227,7 +227,7 @@ std::uint64_t precompute_settings_hash(const std::vector<int>& contact_nodes, co
   }
   h.value(static_cast<std::uint8_t>(options.precision));
   h.value(static_cast<std::uint8_t>(options.method));
-  if (options.symmetric) h.str("symmetric");
+  for (const auto& name : options.symmetric_blocks) h.str("symmetric").str(name);
   if (options.method == SolveMethod::kCg) h.value(options.cg_tolerance).value(options.cg_max_iterations);
   return h.digest();
 }

@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstring>
+
 #include "liver/cholmod_solver.h"
 #include "core/error.h"
 #include "support/liver_test_util.h"
@@ -160,6 +163,110 @@ TEST(Precompute, IsDeterministic) {
   const auto& ga = a.find("visual")->g;
   const auto& gb = b.find("visual")->g;
   EXPECT_EQ(0, std::memcmp(ga.data(), gb.data(), sizeof(double) * static_cast<std::size_t>(ga.size())));
+}
+
+// Issue 17: G on every contact column at every node (0 on fixed components), from CHOLMOD's own blocked solve.
+Eigen::MatrixXd full_g(const test::Organ& organ, const std::vector<int>& contacts) {
+  std::vector<int> sorted = contacts;
+  std::sort(sorted.begin(), sorted.end());
+  const auto& fixed = organ.fixed;
+  Eigen::MatrixXd e = Eigen::MatrixXd::Zero(fixed.free_dof_count(), 3 * static_cast<Eigen::Index>(sorted.size()));
+  for (std::size_t c = 0; c < sorted.size(); ++c)
+    for (int a = 0; a < 3; ++a)
+      e(fixed.free_index()[static_cast<std::size_t>(3 * sorted[c] + a)], 3 * static_cast<Eigen::Index>(c) + a) = 1;
+  CholmodSolver solver(organ.model.k_ff);
+  const Eigen::MatrixXd x = solver.solve(e);
+  Eigen::MatrixXd g = Eigen::MatrixXd::Zero(fixed.dof_count(), e.cols());
+  for (int f = 0; f < fixed.free_dof_count(); ++f) g.row(fixed.free_dofs()[static_cast<std::size_t>(f)]) = x.row(f);
+  return g;
+}
+
+// Largest |stored - full| over the block's rows, relative to the largest |full| entry.
+double block_error(const TensorBlock& b, const Eigen::MatrixXd& full) {
+  double err = 0, scale = 0;
+  for (int r = 0; r < b.row_count(); ++r)
+    for (int a = 0; a < 3; ++a)
+      for (Eigen::Index j = 0; j < full.cols(); ++j) {
+        const double want = full(3 * b.row_nodes[static_cast<std::size_t>(r)] + a, j);
+        err = std::max(err, std::abs(b.at(3 * r + a, j) - want));
+        scale = std::max(scale, std::abs(want));
+      }
+  return err / scale;
+}
+
+TEST(Precompute, StoredBlocksEqualTheFullComputation) {
+  auto organ = test::box_organ(5, 4, 3);
+  const auto contacts = contactable_nodes(organ->mesh, organ->fixed);
+  const auto rows = standard_row_sets(organ->mesh, organ->fixed, contacts);
+  const Eigen::MatrixXd full = full_g(*organ, contacts);
+  // The visual rows are the boundary nodes that can move: no fully fixed node, every contact node.
+  const auto boundary = boundary_surface(organ->mesh).nodes;
+  std::size_t movable = 0;
+  for (int n : boundary) movable += organ->fixed.mask(n) == 7 ? 0 : 1;
+  EXPECT_EQ(rows[1].nodes.size(), movable);
+  EXPECT_LT(movable, boundary.size());  // the clamped bottom face is gone
+  PrecomputeOptions bad;
+  bad.symmetric_blocks = {"visual", "haptic"};
+  const std::vector<RowSet> wider = standard_row_sets(organ->mesh, contacts);  // visual: every boundary node
+  EXPECT_THROW(precompute_tensors(organ->model, contacts, wider, bad), Error);
+  for (Precision precision : {Precision::kDouble, Precision::kFloat}) {
+    PrecomputeOptions opts;
+    opts.symmetric_blocks = {"haptic"};
+    opts.precision = precision;
+    opts.block_columns = 7;  // many blocks, the last one partial
+    opts.threads = 2;
+    PrecomputeReport report;
+    const Tensors t = precompute_tensors(organ->model, contacts, rows, opts, &report);
+    const TensorBlock& h = *t.find("haptic");
+    const TensorBlock& v = *t.find("visual");
+    const auto s = static_cast<std::size_t>(t.column_count());
+    EXPECT_TRUE(h.symmetric);
+    EXPECT_FALSE(v.symmetric);
+    EXPECT_EQ(h.stored_entries(), 9 * s * (s + 1) / 2);
+    EXPECT_EQ(h.g.size() + h.g_float.size(), 0);
+    EXPECT_EQ(report.memory.tensors, t.bytes());
+    EXPECT_EQ(estimate_tensor_bytes(t.column_count(), rows, opts), t.bytes());
+    const double bound = precision == Precision::kDouble ? 1e-12 : 1e-6;
+    EXPECT_LT(block_error(h, full), bound) << to_string(precision);
+    EXPECT_LT(block_error(v, full), bound) << to_string(precision);
+    if (precision == Precision::kFloat) {
+      EXPECT_GT(block_error(v, full), 1e-12);  // float is not double
+    }
+    // The packed half reads back symmetric, block by block.
+    for (int i = 0; i < h.row_count(); i += 3)
+      for (int j = 0; j < h.row_count(); j += 4)
+        if (i != j) {
+          EXPECT_EQ(h.block3(i, j), h.block3(j, i).transpose());
+        }
+  }
+}
+
+TEST(Precompute, ThreadCountDoesNotChangeABit) {
+  auto organ = test::box_organ(5, 4, 3);
+  const auto contacts = contactable_nodes(organ->mesh, organ->fixed);
+  const auto rows = standard_row_sets(organ->mesh, organ->fixed, contacts);
+  PrecomputeOptions opts;
+  opts.symmetric_blocks = {"haptic"};
+  opts.block_columns = 11;
+  opts.threads = 1;
+  const Tensors one = precompute_tensors(organ->model, contacts, rows, opts);
+  for (int threads : {2, 3, 2}) {
+    opts.threads = threads;
+    PrecomputeReport report;
+    const Tensors many = precompute_tensors(organ->model, contacts, rows, opts, &report);
+    EXPECT_EQ(report.threads, threads);
+    const auto& ph = one.find("haptic")->packed;
+    const auto& qh = many.find("haptic")->packed;
+    ASSERT_EQ(ph.size(), qh.size());
+    EXPECT_EQ(0, std::memcmp(ph.data(), qh.data(), ph.size() * sizeof(double))) << threads << " threads";
+    const auto& gv = one.find("visual")->g;
+    const auto& hv = many.find("visual")->g;
+    EXPECT_EQ(0, std::memcmp(gv.data(), hv.data(), sizeof(double) * static_cast<std::size_t>(gv.size())));
+  }
+  // Another block size changes only the rounding.
+  opts.block_columns = 64;
+  const Tensors other = precompute_tensors(organ->model, contacts, rows, opts);
+  EXPECT_LT(test::rel_error(other.find("visual")->g, one.find("visual")->g), 1e-12);
 }
 
 }  // namespace

@@ -3,9 +3,13 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
+
+#include "liver/liver_setup.h"
 
 #include "support/liver_test_util.h"
 
@@ -166,6 +170,75 @@ TEST_F(TensorCacheTest, LoadOrBuildRebuildsStaleAndCorruptFiles) {
   EXPECT_TRUE(t.find("haptic")->g == tensors_.find("haptic")->g);
   Tensors back;
   EXPECT_EQ(load_tensor_cache(path_, key_, back).status, CacheStatus::kOk);
+}
+
+// Issue 17: the packed symmetric haptic half in float, written and read back bit for bit.
+TEST_F(TensorCacheTest, SymmetricFloatRoundTrip) {
+  PrecomputeOptions opts;
+  opts.precision = Precision::kFloat;
+  opts.symmetric_blocks = {"haptic"};
+  const auto rows = standard_row_sets(organ_->mesh, organ_->fixed, contacts_);
+  const Tensors t = precompute_tensors(organ_->model, contacts_, rows, opts);
+  const TensorCacheKey key = tensor_cache_key(organ_->mesh, organ_->material, organ_->fixed, contacts_, rows, opts);
+  PrecomputeOptions dense = opts;
+  dense.symmetric_blocks.clear();
+  EXPECT_NE(key.settings, tensor_cache_key(organ_->mesh, organ_->material, organ_->fixed, contacts_, rows, dense).settings);
+  save_tensor_cache(path_, t, key);
+  Tensors back;
+  ASSERT_EQ(load_tensor_cache(path_, key, back, {"haptic"}).status, CacheStatus::kOk);
+  ASSERT_EQ(back.blocks.size(), 1u);
+  EXPECT_TRUE(back.blocks[0].symmetric);
+  EXPECT_EQ(back.blocks[0].packed_float, t.find("haptic")->packed_float);
+  EXPECT_EQ(back.blocks[0].block3(2, 5), t.find("haptic")->block3(2, 5));
+  ASSERT_EQ(load_tensor_cache(path_, key, back, {"visual"}).status, CacheStatus::kOk);
+  EXPECT_FALSE(back.blocks[0].symmetric);
+  EXPECT_TRUE(back.blocks[0].g_float == t.find("visual")->g_float);
+}
+
+// A file of format version 1 (dense blocks, no layout field) is stale with a message saying what to do, never parsed
+// as version 2; load_or_build_tensors rewrites it.
+TEST_F(TensorCacheTest, OlderFormatVersionIsRefusedAndRebuilt) {
+  save_tensor_cache(path_, tensors_, key_);
+  auto bytes = read_bytes();
+  const std::uint32_t v1 = 1;
+  std::memcpy(bytes.data() + 8, &v1, sizeof v1);  // the version follows the 8-byte magic
+  write_bytes(bytes);
+  Tensors back;
+  const CacheLoad r = load_tensor_cache(path_, key_, back);
+  EXPECT_EQ(r.status, CacheStatus::kStale);
+  EXPECT_NE(r.detail.find("format version 1"), std::string::npos) << r.detail;
+  EXPECT_NE(r.detail.find("reads version 2"), std::string::npos) << r.detail;
+  EXPECT_NE(r.detail.find("recompute"), std::string::npos) << r.detail;
+  EXPECT_TRUE(back.blocks.empty());
+  CacheOutcome o;
+  const Tensors t = load_or_build_tensors(path_, organ_->model, contacts_, rows_, options_, &o);
+  EXPECT_EQ(o.load.status, CacheStatus::kStale);
+  EXPECT_TRUE(o.rebuilt);
+  EXPECT_TRUE(o.saved) << o.save_error;
+  EXPECT_EQ(load_tensor_cache(path_, key_, back).status, CacheStatus::kOk);
+}
+
+// A scene's corrupt cache: the log names the file, what is wrong and what happens (rebuilt in place).
+TEST_F(TensorCacheTest, CorruptSceneCacheIsNamedAndRebuilt) {
+  FixedRegion bottom;
+  bottom.has_plane = true;
+  bottom.plane_point = Eigen::Vector3d(0, 0, 1e-9);
+  bottom.plane_normal = -Eigen::Vector3d::UnitZ();
+  const LiverTensorSetup setup = liver_tensor_setup(organ_->material, bottom, organ_->mesh, dir_.string(), "box.yaml");
+  EXPECT_EQ(setup.options.symmetric_blocks, std::vector<std::string>{"haptic"});
+  EXPECT_EQ(setup.options.precision, Precision::kDouble);  // a few MiB: double
+  Tensors first = load_liver_tensors(setup, organ_->mesh, organ_->material, {"haptic"}, nullptr);
+  EXPECT_TRUE(first.find("haptic")->symmetric);
+  std::ofstream(setup.cache_path, std::ios::binary | std::ios::trunc) << "not a cache";
+  std::ostringstream log;
+  CacheOutcome o;
+  const Tensors t = load_liver_tensors(setup, organ_->mesh, organ_->material, {"haptic"}, &log, &o, "box.yaml");
+  EXPECT_EQ(o.load.status, CacheStatus::kCorrupt);
+  EXPECT_TRUE(o.rebuilt);
+  EXPECT_NE(log.str().find(setup.cache_path), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("corrupt"), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("rebuilding it"), std::string::npos) << log.str();
+  EXPECT_EQ(t.find("haptic")->packed, first.find("haptic")->packed);
 }
 
 }  // namespace
