@@ -50,6 +50,9 @@ def run_condition(name, args, out):
             raise SystemExit(f'web_figures: haptic_node failed in condition {name} (see {cond_out}/haptic.log)')
     h = run.json('haptic.json')
     v = run.json('visual.json')
+    if not (v.get('scene_confirmed') and v.get('tensor_hash_ok')):
+        raise SystemExit(f'web_figures: the visual node did not draw the haptic node\'s frames in condition {name} '
+                         f'(scene or tensors differ: rebuild haptic_node and visual_node together; {cond_out}/visual.log)')
     s = v.get('stream', {})
     w = run.json('web.json') if web else {}
     row = {

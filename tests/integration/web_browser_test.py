@@ -62,6 +62,15 @@ def watch(bin_dir, config_dir, cache_dir, out):
         finally:
             d.quit()
         assert run.procs['haptic'].wait(30) == 0
+    check_visual(run)
+
+
+def check_visual(run):
+    """The visual node drew the haptic node's contact frames (same scene and tensors), so the view showed them."""
+    v = run.json('visual.json')
+    assert v['scene_confirmed'] and v['tensor_hash_ok'] and v['frames_shown'] > 0, \
+        {k: v.get(k) for k in ('scene_confirmed', 'scene_hash_ok', 'tensor_hash_ok', 'frames_shown')}
+    assert v['stream']['sent'] > 0 and v['stream']['dropped_oversize'] == 0, v['stream']
 
 
 def drive(bin_dir, config_dir, cache_dir, out, screenshot):
@@ -133,6 +142,7 @@ def drive(bin_dir, config_dir, cache_dir, out, screenshot):
     assert h['contacts_max'] > 0, h['contacts_max']
     tool = h['tools'][0]
     assert tool['input_lost_ticks'] > 0, tool
+    check_visual(run)
     w = run.json('web.json')
     assert w['ws_opened'] == 2 and w['refused']['drive_refused'] >= 2, w
 
