@@ -62,7 +62,7 @@ BroadPhaseDetector::BroadPhaseDetector(CollisionTopology topology) : topo_(std::
   cell_block_.resize(cell_block_first_.size());
   seg_sphere_.resize(static_cast<std::size_t>(nseg_));
   cell_sphere_.resize(static_cast<std::size_t>(ncell_));
-  tri_plane_.resize(2 * static_cast<std::size_t>(ncell_));
+  tri_axes_.resize(2 * static_cast<std::size_t>(ncell_));
   tri_stamp_.assign(2 * static_cast<std::size_t>(ncell_), 0u);
 }
 
@@ -147,29 +147,42 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     const double reach = tri_bound + ss[3] + cs[3];
     return (ss.head<3>() - cs.head<3>()).squaredNorm() >= reach * reach;
   };
-  // The triangle's plane: both segment ends on the same side and farther than the bound.
-  auto plane_beyond = [&](int a, int t) {
-    auto& pl = tri_plane_[static_cast<std::size_t>(t)];
-    const int* n = &cell_node_[4 * static_cast<std::size_t>(t / 2)];
+  // Separating axes of the segment and triangle t: its plane (both ends on the same side) and its three side planes
+  // (both ends outside the same edge), each farther than the bound. Squared, no root: a gap g along an axis of
+  // length L is at least the bound b when g >= 0 and g^2 >= b^2 L^2.
+  const double tri_bound2 = tri_bound * tri_bound;
+  auto triangle_beyond = [&](int a, int t) {
+    TriangleAxes& ax = tri_axes_[static_cast<std::size_t>(t)];
     if (tri_stamp_[static_cast<std::size_t>(t)] != stamp_) {
       tri_stamp_[static_cast<std::size_t>(t)] = stamp_;
-      // As CollisionTopology::triangle: (0, 1, 2) and (0, 2, 3) of the cell's corners.
-      const Eigen::Map<const Eigen::Vector3d> A(px + 3 * n[0]), B(px + 3 * n[t % 2 == 0 ? 1 : 2]),
-          C(px + 3 * n[t % 2 == 0 ? 2 : 3]);
-      const Eigen::Vector3d nrm = (B - A).cross(C - A);
-      const double nn = nrm.norm();
-      if (nn > 1e-12) {
-        pl.head<3>() = nrm / nn;
-        pl[3] = pl.head<3>().dot(A);
-      } else {
-        pl.setZero();
+      const int* n = &cell_node_[4 * static_cast<std::size_t>(t / 2)];
+      // As CollisionTopology::triangle: corners (0, 1, 2) and (0, 2, 3) of the cell.
+      const Eigen::Map<const Eigen::Vector3d> v[3] = {Eigen::Map<const Eigen::Vector3d>(px + 3 * n[0]),
+                                                      Eigen::Map<const Eigen::Vector3d>(px + 3 * n[t % 2 == 0 ? 1 : 2]),
+                                                      Eigen::Map<const Eigen::Vector3d>(px + 3 * n[t % 2 == 0 ? 2 : 3])};
+      const Eigen::Vector3d nrm = (v[1] - v[0]).cross(v[2] - v[0]);
+      for (int k = 0; k < 4; ++k) {
+        const Eigen::Vector3d u = k == 0 ? nrm : Eigen::Vector3d((v[k % 3] - v[k - 1]).cross(nrm));
+        const Eigen::Vector3d& on = k == 0 ? Eigen::Vector3d(v[0]) : Eigen::Vector3d(v[k - 1]);
+        for (int i = 0; i < 3; ++i) ax.axis[k][i] = u[i];
+        ax.offset[k] = u.dot(on);
+        ax.length2[k] = u.squaredNorm();
       }
     }
     const double* p = px + 3 * seg_node_[2 * static_cast<std::size_t>(a)];
     const double* q = px + 3 * seg_node_[2 * static_cast<std::size_t>(a) + 1];
-    const double d0 = pl[0] * p[0] + pl[1] * p[1] + pl[2] * p[2] - pl[3];
-    const double d1 = pl[0] * q[0] + pl[1] * q[1] + pl[2] * q[2] - pl[3];
-    return d0 * d1 > 0 && std::min(std::abs(d0), std::abs(d1)) >= tri_bound;
+    for (int k = 0; k < 4; ++k) {
+      const double* u = ax.axis[k];
+      double g0 = u[0] * p[0] + u[1] * p[1] + u[2] * p[2] - ax.offset[k];
+      double g1 = u[0] * q[0] + u[1] * q[1] + u[2] * q[2] - ax.offset[k];
+      if (k == 0 && g0 < 0 && g1 < 0) {  // the plane: either side
+        g0 = -g0;
+        g1 = -g1;
+      }
+      const double g = std::min(g0, g1);
+      if (g >= 0 && g * g >= tri_bound2 * ax.length2[k] && ax.length2[k] > 0) return true;
+    }
+    return false;
   };
   // Intestine-intestine: block pairs (i <= j), then segment pairs a < b that are tested.
   const int excl = topo_.segment_exclusion;
@@ -215,7 +228,7 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
           ++st.overlaps;
           if (cell_beyond(a, cell)) continue;
           for (int t = 2 * cell; t < 2 * cell + 2; ++t) {
-            if (plane_beyond(a, t)) continue;
+            if (triangle_beyond(a, t)) continue;
             push(triangle_contact(topo_, x, a, t, margin, c, false));
           }
         }

@@ -53,9 +53,16 @@ class BroadPhaseDetector {
   std::vector<char> cell_ok_;                 // segments x cells: topology().cell_tested
   std::vector<Box> seg_box_, cell_box_;       // grown element boxes
   // Per step, for the cheap rejections before the exact test: segment middle and half length; cell centroid and
-  // farthest-corner radius; a triangle's unit normal and offset (n . corner 0; zero when degenerate), computed when
-  // first needed in the step (tri_stamp_ == stamp_).
-  std::vector<Eigen::Vector4d> seg_sphere_, cell_sphere_, tri_plane_;
+  // farthest-corner radius; a triangle's separating axes (its normal and the outward normals of its three side
+  // planes, unnormalized, with their offsets and squared lengths), computed when first needed in the step
+  // (tri_stamp_ == stamp_).
+  struct TriangleAxes {
+    double axis[4][3];   // normal, then edge k's outward side normal (edge k from corner k to corner k + 1)
+    double offset[4];    // axis . a corner on it
+    double length2[4];   // |axis|^2
+  };
+  std::vector<Eigen::Vector4d> seg_sphere_, cell_sphere_;
+  std::vector<TriangleAxes> tri_axes_;
   std::vector<unsigned> tri_stamp_;
   unsigned stamp_ = 0;
   std::vector<Box> seg_block_, cell_block_;   // block boxes; cell blocks row by row
