@@ -87,16 +87,9 @@ int main(int argc, char** argv) {
     if (contacts.empty()) throw_error(where, ": no free surface node to precompute (everything is fixed?)");
     const std::vector<RowSet> rows = standard_row_sets(mesh, fixed, contacts);
 
-    PrecomputeOptions opts;
-    opts.symmetric_blocks = {"haptic"};  // the haptic block (contacts x contacts) as one half, as the scenes store it
-    if (precision == "auto") {
-      PrecomputeOptions as_double = opts;
-      const double mib = static_cast<double>(estimate_tensor_bytes(static_cast<int>(contacts.size()), rows, as_double)) /
-                         (1024.0 * 1024.0);
-      opts.precision = mib > kFloatAboveMiB ? Precision::kFloat : Precision::kDouble;
-    } else {
-      opts.precision = parse_precision(precision);
-    }
+    // As the scenes store them: the haptic block (contacts x contacts) as one half, float only when large.
+    PrecomputeOptions opts = scene_precompute_options(static_cast<int>(contacts.size()), rows);
+    if (precision != "auto") opts.precision = parse_precision(precision);
     opts.threads = threads;
     opts.method = parse_solve_method(method);
     opts.cg_tolerance = tol;

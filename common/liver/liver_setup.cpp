@@ -49,6 +49,17 @@ void keep_blocks(Tensors& t, const std::vector<std::string>& blocks) {
 
 }  // namespace
 
+PrecomputeOptions scene_precompute_options(int contact_count, const std::vector<RowSet>& rows) {
+  // The haptic block (contacts x contacts) is stored as one half; float once double would pass kFloatAboveMiB (a
+  // 21k-node liver: 2.2 GiB in double, 1.1 GiB in float, relative error ~1e-7).
+  PrecomputeOptions o;
+  o.symmetric_blocks = {"haptic"};
+  o.precision = Precision::kDouble;
+  const double double_mib = static_cast<double>(estimate_tensor_bytes(contact_count, rows, o)) / (1024.0 * 1024.0);
+  if (double_mib > kFloatAboveMiB) o.precision = Precision::kFloat;
+  return o;
+}
+
 LiverTensorSetup liver_tensor_setup(const Material& material, const FixedRegion& fixed, const TetMesh& mesh,
                                     const std::string& cache_dir, const std::string& where) {
   LiverTensorSetup s;
@@ -56,14 +67,7 @@ LiverTensorSetup liver_tensor_setup(const Material& material, const FixedRegion&
   s.contacts = contactable_nodes(mesh, s.fixed);
   if (s.contacts.empty()) throw_error(where, ": key 'fixed': every surface node is fixed; nothing can be touched");
   s.rows = standard_row_sets(mesh, s.fixed, s.contacts);
-  // Issue 17: the haptic block (contacts x contacts) is stored as one half; float once double would pass
-  // kFloatAboveMiB (a 20k-node liver: 2.5 GiB in double, 1.2 GiB in float, relative error ~1e-7).
-  s.options.symmetric_blocks = {"haptic"};
-  PrecomputeOptions as_double = s.options;
-  as_double.precision = Precision::kDouble;
-  const double double_mib =
-      static_cast<double>(estimate_tensor_bytes(static_cast<int>(s.contacts.size()), s.rows, as_double)) / (1024.0 * 1024.0);
-  s.options.precision = double_mib > kFloatAboveMiB ? Precision::kFloat : Precision::kDouble;
+  s.options = scene_precompute_options(static_cast<int>(s.contacts.size()), s.rows);
   s.key = tensor_cache_key(mesh, material, s.fixed, s.contacts, s.rows, s.options);
   char name[64];
   std::snprintf(name, sizeof name, "/tensors-%016llx.bin", static_cast<unsigned long long>(s.key.combined()));

@@ -17,6 +17,10 @@ namespace surgsim {
 /// Scenes store their tensors in float once double would take more than this (MiB; issue 17).
 constexpr double kFloatAboveMiB = 1024;
 
+/// The precompute options of a scene (issue 17): direct, the "haptic" block as one packed half, double unless the
+/// double tensors would pass kFloatAboveMiB, then float.
+PrecomputeOptions scene_precompute_options(int contact_count, const std::vector<RowSet>& rows);
+
 struct LiverTensorSetup {
   FixedSet fixed;
   std::vector<int> contacts;     // contactable (free surface) nodes
