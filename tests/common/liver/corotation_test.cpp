@@ -11,6 +11,7 @@
 #include <Eigen/LU>
 #include <iostream>
 #include <random>
+#include <thread>
 
 #include "core/error.h"
 #include "liver/patch_solve.h"
@@ -294,6 +295,35 @@ TEST(Corotation, TickUpdateAndWarpedPrepareAllocateNothing) {
   EXPECT_EQ(solver.prepare(c, r.data()), ContactStatus::kOk);
   EXPECT_EQ(solver.factor(c), ContactStatus::kOk);
   EXPECT_EQ(counter.count(), 0);
+}
+
+// The loop/refresh hand-over: the reader never sees a half-written value and never goes back in time, the writer
+// never waits (a value is a block of 64 equal numbers, written one by one).
+TEST(Corotation, TripleBufferHandsOverWholeValuesInOrder) {
+  TripleBuffer<std::array<long, 64>> buffer;
+  for (int i = 0; i < 3; ++i) buffer.slot(i).fill(0);
+  constexpr long kValues = 200000;
+  std::thread writer([&] {
+    for (long v = 1; v <= kValues; ++v) {
+      auto& slot = buffer.back();
+      for (auto& x : slot) x = v;
+      buffer.publish();
+    }
+  });
+  long last = 0, taken = 0, torn = 0, backwards = 0;
+  while (last < kValues) {
+    if (!buffer.take()) continue;
+    ++taken;
+    const auto& value = buffer.front();
+    for (long x : value) torn += x != value[0] ? 1 : 0;
+    backwards += value[0] < last ? 1 : 0;
+    last = value[0];
+  }
+  writer.join();
+  EXPECT_EQ(torn, 0);
+  EXPECT_EQ(backwards, 0);
+  EXPECT_GT(taken, 0);
+  EXPECT_EQ(last, kValues);  // the newest value is always delivered
 }
 
 TEST(Corotation, SceneKeyIsValidated) {
