@@ -29,6 +29,11 @@
 // kMaxContacts (64) nodes. A node shared by two instruments' patches is reported (ContactEntry::instrument) as the
 // first one's. An instrument whose input is lost (or whose pose is not finite) drops only its own contacts.
 //
+// Corotational (issue 16, scene key liver.deformation, patch model only): the patch solve's compliance is warped by
+// the union nodes' rotations, W = R_i G R_j^T (liver/corotation.h), the rotations recomputed every tick from the
+// previous solution's rest-frame response and a background field of every surface node that refresh_rotations()
+// (LiverOrgan's 200 Hz thread) hands over lock-free. The onset gap and deformed() stay linear.
+//
 // step() allocates nothing and never returns a non-finite force.
 #pragma once
 #include <Eigen/Core>

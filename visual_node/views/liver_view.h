@@ -4,6 +4,8 @@
 // surface embedded in the boundary (visual.surface), and the contact nodes drawn as markers. With several instruments
 // (issue 19) the contacts of all of them deform the organ together (one solve on the haptic side); the non-linear law
 // bends each instrument's share about that instrument's own direction (SurfaceDeformer::apply with instruments).
+// liver.deformation corotational (issue 16): the deformer recomputes the rotations from the received forces (no
+// more data on the wire); liver.curves organ: the law from the organ's own curves (liver/organ_curves.h).
 #pragma once
 #include <Eigen/Core>
 #include <array>
