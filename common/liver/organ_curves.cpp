@@ -133,7 +133,8 @@ OrganCurves compute_organ_curves(const ElasticModel& model, const OrganCurveSett
   return out;
 }
 
-NonlinearLaw fit_organ_law(const OrganCurves& curves, int degree, FitReport* q_report, FitReport* p_report) {
+NonlinearLaw fit_organ_law(const OrganCurves& curves, int degree, FitReport* q_report, FitReport* p_report,
+                           bool fit_p) {
   std::vector<const OrganCurveSample*> ok;
   for (const auto& s : curves.samples)
     if (s.converged) ok.push_back(&s);
@@ -161,10 +162,12 @@ NonlinearLaw fit_organ_law(const OrganCurves& curves, int degree, FitReport* q_r
   std::optional<CurveFit> q = make(CurveQuantity::kForce, lf, nf, q_report);
   if (!q->report.increasing) throw_error("organ curves: the fitted Q is not increasing (degree ", degree, "): lower the degree");
   std::optional<CurveFit> p;
-  try {
-    CurveFit pf = make(CurveQuantity::kRadialDisplacement, lr, nr, p_report);
-    if (pf.report.increasing) p = std::move(pf);
-  } catch (const Error&) {
+  if (fit_p) {
+    try {
+      CurveFit pf = make(CurveQuantity::kRadialDisplacement, lr, nr, p_report);
+      if (pf.report.increasing) p = std::move(pf);
+    } catch (const Error&) {  // too few distinct bulges: Q alone
+    }
   }
   if (!p && p_report) *p_report = FitReport{};
   return NonlinearLaw(std::move(p), std::move(q));

@@ -29,7 +29,8 @@ TEST(OrganCurves, TheFittedLawReproducesTheNewtonResponsesItWasFittedOn) {
   const OrganCurves curves = compute_organ_curves(organ->model, settings, nullptr);
   ASSERT_EQ(curves.samples.size(), settings.sites.size() * settings.depths.size());
   FitReport q, p;
-  const NonlinearLaw law = fit_organ_law(curves, settings.degree, &q, &p);
+  const NonlinearLaw law = fit_organ_law(curves, settings.degree, &q, &p, true);
+  EXPECT_FALSE(fit_organ_law(curves, settings.degree).displacement_fit());  // the scenes' law: Q alone
   std::cout << "Q: rms residual " << q.rms_residual << ", max " << q.max_residual << "; P: "
             << (p.degree > 0 ? "max residual " + std::to_string(p.max_residual) : std::string("left out")) << "\n";
   double worst_linear = 0, worst_law = 0;
