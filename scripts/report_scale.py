@@ -16,6 +16,9 @@ import csv
 import os
 import sys
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from report_web import _table, _verdict  # noqa: E402  (the same Markdown helpers)
+
 MIB_PER_GB = 1e9 / (1024.0 * 1024.0)   # the budget's 2 GB in MiB (1907.3)
 PRECOMPUTE_BUDGET_S = [(2000, 0.5), (8000, 5.0), (10 ** 9, 60.0)]  # (up to this many nodes, seconds)
 
@@ -26,16 +29,6 @@ def _rows(out_dir, name):
         return None
     with open(path, newline='') as f:
         return list(csv.DictReader(f))
-
-
-def _verdict(ok):
-    return 'within' if ok else '**over**'
-
-
-def _table(headers, rows):
-    out = ['| ' + ' | '.join(headers) + ' |', '|' + '---|' * len(headers)]
-    out += ['| ' + ' | '.join(str(c) for c in r) + ' |' for r in rows]
-    return out + ['']
 
 
 def _precompute_budget(nodes):
