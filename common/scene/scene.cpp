@@ -554,8 +554,8 @@ IntestineSpec read_intestine(const Reader& r, const Field& f) {
               {"length", "cylinder_radius", "folds", "angular_span", "fold_shape", "mesentery_taper", "axis_origin",
                "axis_direction", "columns", "rows", "intestine_radius", "mesentery_thickness", "intestine_node_mass",
                "mesentery_node_mass", "structural_stiffness", "shear_stiffness", "bending_stiffness", "spring_damping",
-               "drag", "gravity", "integrator", "probe_radius", "probe_stiffness", "self_collisions", "random_pairs",
-               "random_mesentery_pairs", "seed", "response_iterations", "contact_capacity"});
+               "drag", "gravity", "integrator", "probe_radius", "probe_stiffness", "self_collisions", "detector",
+               "random_pairs", "random_mesentery_pairs", "seed", "response_iterations", "contact_capacity"});
   IntestineSpec spec;
   intestine::IntestineParams& p = spec.params;
   const Range non_negative{0, kInf, false, true};
@@ -614,6 +614,13 @@ IntestineSpec read_intestine(const Reader& r, const Field& f) {
   read_number("probe_radius", spec.probe_radius, positive(), "radius in m of the sphere at the tool tip, e.g. 0.01");
   read_number("probe_stiffness", p.probe_stiffness, non_negative, "penalty stiffness of the probe contact in N/m");
   if (m.has("self_collisions")) p.self_collisions = r.boolean(m.at("self_collisions"));
+  // The self-collision detector (issue 15): stochastic (the paper's, the default) or broad_phase (the exact box
+  // hierarchy: every contact, and faster on the shipped scene; intestine_bench tables 1 and 3b).
+  if (m.has("detector")) {
+    p.detector = r.one_of(m.at("detector"), {"broad_phase", "stochastic"}) == "stochastic"
+                     ? intestine::CollisionDetector::kStochastic
+                     : intestine::CollisionDetector::kBroadPhase;
+  }
   if (m.has("random_pairs")) {
     p.detection.random_pairs = r.integer(m.at("random_pairs"), 0, 100000, "new pairs drawn per step (n), e.g. 10");
   }
@@ -724,6 +731,7 @@ std::uint64_t Scene::hash() const {
                   p.detection.random_pairs, p.detection.random_mesentery_pairs, p.detection.max_moves,
                   p.detection.new_pair_moves, p.detection.zone_budget, p.detection.capacity, p.response.iterations,
                   p.contact_capacity, static_cast<int>(p.integrator), static_cast<int>(p.self_collisions),
+                  static_cast<int>(p.detector),
                   static_cast<int>(p.response.correct_velocity), static_cast<int>(p.response.correct_position)}) {
       h.value<std::int32_t>(v);
     }
