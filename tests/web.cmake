@@ -24,3 +24,11 @@ endif()
 if(SURGSIM_BUILD_VISUAL AND SURGSIM_BUILD_BENCHMARKS)
   surgsim_bench(frame_bench SOURCES bench/frame_bench.cpp LIBS surgsim_visual)
 endif()
+
+# scripts/run_local.sh liver --web: three processes, the URL printed, frames and contact frames through surgsim-web.
+if(SURGSIM_BUILD_VISUAL)
+  add_test(NAME web_run_local_test
+    COMMAND ${CMAKE_CURRENT_SOURCE_DIR}/integration/web_run_local_test.sh ${SURGSIM_SOURCE_DIR} ${CMAKE_BINARY_DIR}
+            ${CMAKE_BINARY_DIR}/web_test/run_local)
+  set_tests_properties(web_run_local_test PROPERTIES TIMEOUT 90)
+endif()
