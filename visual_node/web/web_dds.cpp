@@ -50,6 +50,7 @@ struct WebDds::State : DataReaderListener {
         t.frame_number = frame_in.frame_number();
         t.frame_render_stamp_ns = frame_in.render_stamp_ns();
         stamps[frame_in.frame_number() % stamps.size()] = {frame_in.frame_number(), frame_in.render_stamp_ns()};
+        if (on_frame) on_frame();
       }
     } else if (topic == dds::kForceFeedbackTopic) {
       msg::ForceFeedback f;
@@ -107,6 +108,7 @@ struct WebDds::State : DataReaderListener {
   std::mutex mutex;
   Telemetry t;
   std::shared_ptr<const std::string> frame;
+  std::function<void()> on_frame;  // guarded by mutex
   SampleRecorder arrival_us{1 << 18};
   std::array<std::pair<std::uint64_t, std::uint64_t>, 64> stamps{};  // (frame number, render stamp), ring
   msg::Frame frame_in;
@@ -135,6 +137,11 @@ WebDds::~WebDds() = default;
 Telemetry WebDds::telemetry() {
   std::lock_guard<std::mutex> lock(s_->mutex);
   return s_->t;
+}
+
+void WebDds::set_frame_callback(std::function<void()> callback) {
+  std::lock_guard<std::mutex> lock(s_->mutex);
+  s_->on_frame = std::move(callback);
 }
 
 std::shared_ptr<const std::string> WebDds::frame_since(std::uint64_t last_number) {

@@ -5,6 +5,7 @@
 #pragma once
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -58,6 +59,9 @@ class WebDds {
   WebDds& operator=(const WebDds&) = delete;
 
   Telemetry telemetry();
+  /// Called on the DDS thread after each new frame is stored (set before frames can arrive matters not: it is read
+  /// under the mutex). The server posts the broadcast to its own thread from it.
+  void set_frame_callback(std::function<void()> callback);
   /// The newest frame message (header + JPEG) when one arrived since `last_number`, else null.
   std::shared_ptr<const std::string> frame_since(std::uint64_t last_number);
   /// Publishes the driven instrument's ToolCommand (stamped now).

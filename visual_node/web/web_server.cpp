@@ -1,6 +1,7 @@
 #include "web_server.h"
 
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/post.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <boost/beast/core.hpp>
@@ -59,9 +60,10 @@ class WsSession;
 
 struct WebServer::Impl {
   Impl(const ServerOptions& o, WebDds& d) : options(o), dds(d), acceptor(io), signals(io, SIGINT, SIGTERM),
-                                            frame_timer(io), telemetry_timer(io), end_timer(io) {}
+                                            telemetry_timer(io), end_timer(io) {}
   void accept();
-  void on_frame_timer();
+  /// The newest frame to every page (I/O thread; posted by the DDS frame listener).
+  void broadcast_frame();
   void on_telemetry_timer();
   void command_loop();
   bool add_session(const std::shared_ptr<WsSession>& s);
@@ -79,7 +81,7 @@ struct WebServer::Impl {
   net::io_context io;
   tcp::acceptor acceptor;
   net::signal_set signals;
-  net::steady_timer frame_timer, telemetry_timer, end_timer;
+  net::steady_timer telemetry_timer, end_timer;
   std::map<std::uint64_t, std::weak_ptr<WsSession>> sessions;  // I/O thread only
   std::uint64_t next_id = 1;
   std::uint64_t last_frame = ~0ull;
@@ -424,7 +426,7 @@ std::string WebServer::Impl::stats_text() {
   return j.dump();
 }
 
-void WebServer::Impl::on_frame_timer() {
+void WebServer::Impl::broadcast_frame() {
   if (auto f = dds.frame_since(last_frame)) {
     std::uint64_t number = 0;
     std::memcpy(&number, f->data() + 16, sizeof number);
@@ -433,10 +435,6 @@ void WebServer::Impl::on_frame_timer() {
       if (auto s = w.lock()) s->send_frame(f);
     }
   }
-  frame_timer.expires_after(std::chrono::milliseconds(5));
-  frame_timer.async_wait([this](beast::error_code ec) {
-    if (!ec) on_frame_timer();
-  });
 }
 
 void WebServer::Impl::on_telemetry_timer() {
@@ -519,9 +517,11 @@ void WebServer::run(double duration) {
   }
   m.command_thread = std::thread([&m] { m.command_loop(); });
   m.accept();
-  m.on_frame_timer();
+  // Each new frame is broadcast as soon as it arrives: the DDS thread posts the work to the I/O thread.
+  m.dds.set_frame_callback([&m] { net::post(m.io, [&m] { m.broadcast_frame(); }); });
   m.on_telemetry_timer();
   m.io.run();
+  m.dds.set_frame_callback(nullptr);
   m.stopping = true;
   m.command_thread.join();
 }

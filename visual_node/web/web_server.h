@@ -1,7 +1,8 @@
 // surgsim-web's HTTP + WebSocket server (issue 18), on Boost.Beast with one I/O thread. It serves the page (three
 // files of the www folder, read once at start-up), a JSON /stats, and one WebSocket per page at /ws that carries the
-// newest JPEG frame (binary, a frame a client is still receiving is replaced by the newest, never queued), the
-// telemetry (JSON, 20 Hz) and the page's messages (take / release the tool, the pose it asks for, the frame shown).
+// newest JPEG frame (binary, sent as soon as it arrives; while a page still receives one, a newer replaces the one
+// waiting, never queued), the telemetry (JSON, 20 Hz) and the page's messages (take / release the tool, the pose it
+// asks for, the frame shown).
 // ToolCommand is published by a thread of its own at a fixed rate while a page drives: the pose moves towards the
 // page's, slew-limited; when the driving page closes or goes silent, publishing stops and the haptic node's input
 // timeout zeroes the force as for a lost device.
