@@ -93,7 +93,10 @@ Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, c
          << "); rebuilding it (nothing to do by hand; a file that keeps failing can be deleted)\n";
   }
 
-  const ElasticModel model = build_elastic_model(mesh, material, setup.fixed, where);
+  // Errors name the scene and its mesh file (the rigid-mode diagnosis before factoring, and CHOLMOD's failures).
+  const std::string mesh_file = mesh.source.empty() || mesh.source == where ? "" : " (mesh " + mesh.source + ")";
+  const std::string named = where.empty() ? (mesh.source.empty() ? "" : "mesh " + mesh.source) : where + mesh_file;
+  const ElasticModel model = build_elastic_model(mesh, material, setup.fixed, named);
   PrecomputeOptions options = setup.options;
   double last_print = -1;
   if (log != nullptr) {
@@ -107,10 +110,9 @@ Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, c
   PrecomputeReport report;
   try {
     t = precompute_tensors(model, setup.contacts, setup.rows, options, &report);
-  } catch (const Error& e) {  // e.g. CHOLMOD: name the scene and its mesh file
-    const std::string mesh_file = mesh.source.empty() || mesh.source == where ? "" : " (mesh " + mesh.source + ")";
-    if (where.empty() && mesh_file.empty()) throw;
-    throw Error((where.empty() ? "mesh " + mesh.source : where + mesh_file) + ": " + e.what());
+  } catch (const Error& e) {  // e.g. CHOLMOD
+    if (named.empty()) throw;
+    throw Error(named + ": " + e.what());
   }
   out.rebuilt = true;
   try {

@@ -5,6 +5,7 @@
 #include "mesh/box_mesh.h"
 #include "core/error.h"
 #include "liver/fem.h"
+#include "liver/liver_setup.h"
 #include "support/liver_test_util.h"
 
 namespace surgsim {
@@ -186,6 +187,26 @@ TEST(FixedSet, FloatingBodyIsRefused) {
   EXPECT_NE(e.find("part 2 of 2 of the mesh (8 of 16 nodes: 8, 9"), std::string::npos) << e;
   EXPECT_NE(e.find("is not attached to anything"), std::string::npos) << e;
   EXPECT_NE(e.find("remove the part"), std::string::npos) << e;
+}
+
+// Through a scene (load_liver_tensors, the nodes' path): the refusal comes before any factorization and names the
+// scene and its mesh file.
+TEST(FixedSet, SceneRefusalNamesTheSceneAndTheMeshFile) {
+  TetMesh m = two_boxes(Eigen::Vector3d(1, 1, 1), {{0, 7}});
+  m.source = "hinged.msh";
+  FixedRegion region;
+  region.nodes = kBottomOfA;
+  const std::string dir = ::testing::TempDir();
+  const LiverTensorSetup setup = liver_tensor_setup(test::liver_material(), region, m, dir, "scene.yaml");
+  try {
+    load_liver_tensors(setup, m, test::liver_material(), {"haptic"}, nullptr, nullptr, "scene.yaml");
+    FAIL() << "expected a refusal";
+  } catch (const Error& e) {
+    const std::string w = e.what();
+    EXPECT_EQ(w.rfind("scene.yaml (mesh hinged.msh): ", 0), 0u) << w;
+    EXPECT_NE(w.find("(a vertex hinge)"), std::string::npos) << w;
+    EXPECT_EQ(w.find("CHOLMOD"), std::string::npos) << w;  // refused before factoring
+  }
 }
 
 }  // namespace
