@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/error.h"
 
@@ -64,6 +65,11 @@ BroadPhaseDetector::BroadPhaseDetector(CollisionTopology topology) : topo_(std::
   cell_sphere_.resize(static_cast<std::size_t>(ncell_));
   tri_axes_.resize(2 * static_cast<std::size_t>(ncell_));
   tri_stamp_.assign(2 * static_cast<std::size_t>(ncell_), 0u);
+  const int nodes = *std::max_element(topo_.grid.begin(), topo_.grid.end()) + 1;
+  if (*std::min_element(topo_.grid.begin(), topo_.grid.end()) < 0) throw_error("broad phase: negative node index");
+  x_prev_.resize(3, nodes);
+  travel_.assign(static_cast<std::size_t>(nseg_ + ncell_), 0.0);
+  wake_.assign(static_cast<std::size_t>(nseg_) * static_cast<std::size_t>(nseg_ + ncell_), 0.0);
 }
 
 BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactList& out, double margin) noexcept {
@@ -103,6 +109,46 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     sp[3] = std::sqrt(std::max(std::max((v0 - g).squaredNorm(), (v1 - g).squaredNorm()),
                                std::max((v2 - g).squaredNorm(), (v3 - g).squaredNorm())));
   }
+  // Travel since the last call (nothing sleeps on the first call, after reset() or with another margin).
+  const int nodes = static_cast<int>(x_prev_.cols());
+  if (!have_prev_ || margin != last_margin_ || x.cols() < nodes) {
+    std::fill(travel_.begin(), travel_.end(), 0.0);
+    std::fill(wake_.begin(), wake_.end(), 0.0);
+  } else {
+    auto move = [&](int n) { return (x.col(n) - x_prev_.col(n)).squaredNorm(); };
+    for (int a = 0; a < nseg_; ++a) {
+      const int* n = &seg_node_[2 * static_cast<std::size_t>(a)];
+      travel_[static_cast<std::size_t>(a)] += std::sqrt(std::max(move(n[0]), move(n[1])));
+    }
+    for (int k = 0; k < ncell_; ++k) {
+      const int* n = &cell_node_[4 * static_cast<std::size_t>(k)];
+      travel_[static_cast<std::size_t>(nseg_ + k)] +=
+          std::sqrt(std::max(std::max(move(n[0]), move(n[1])), std::max(move(n[2]), move(n[3]))));
+    }
+  }
+  if (x.cols() >= nodes) {
+    x_prev_ = x.leftCols(nodes);
+    have_prev_ = true;
+  }
+  last_margin_ = margin;
+  const std::size_t wide = static_cast<std::size_t>(nseg_ + ncell_);
+  // A pair asleep; and the wake of a pair found beyond the bound by `gap` (a hair less, for rounding).
+  auto asleep = [&](int a, int e) {
+    return travel_[static_cast<std::size_t>(a)] + travel_[static_cast<std::size_t>(e)] <
+           wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)];
+  };
+  auto sleep = [&](int a, int e, double gap) {
+    wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)] =
+        gap > hair ? travel_[static_cast<std::size_t>(a)] + travel_[static_cast<std::size_t>(e)] + gap - hair : 0.0;
+  };
+  // How far apart two grown boxes are (the largest gap along an axis; <= 0 when they overlap): the elements are at
+  // least this much farther apart than the sum of their radii and the margin.
+  auto box_gap = [](const Box& u, const Box& v) {
+    double g = -std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 3; ++k) g = std::max(g, std::max(u.lo[k] - v.hi[k], v.lo[k] - u.hi[k]));
+    return g;
+  };
+
   // Refit the blocks.
   auto fit = [](Box& into, const Box* from, int count) {
     into = from[0];
@@ -141,17 +187,19 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     std::fill(tri_stamp_.begin(), tri_stamp_.end(), 0u);
     stamp_ = 1;
   }
-  auto cell_beyond = [&](int a, int cell) {
+  // Bounding spheres of a segment and a cell: how much farther than the bound they are, or -1 when not.
+  auto cell_gap = [&](int a, int cell) {
     const auto& ss = seg_sphere_[static_cast<std::size_t>(a)];
     const auto& cs = cell_sphere_[static_cast<std::size_t>(cell)];
     const double reach = tri_bound + ss[3] + cs[3];
-    return (ss.head<3>() - cs.head<3>()).squaredNorm() >= reach * reach;
+    const double d2 = (ss.head<3>() - cs.head<3>()).squaredNorm();
+    return d2 >= reach * reach ? std::sqrt(d2) - reach : -1.0;
   };
   // Separating axes of the segment and triangle t: its plane (both ends on the same side) and its three side planes
   // (both ends outside the same edge), each farther than the bound. Squared, no root: a gap g along an axis of
   // length L is at least the bound b when g >= 0 and g^2 >= b^2 L^2.
   const double tri_bound2 = tri_bound * tri_bound;
-  auto triangle_beyond = [&](int a, int t) {
+  auto triangle_gap = [&](int a, int t) {
     TriangleAxes& ax = tri_axes_[static_cast<std::size_t>(t)];
     if (tri_stamp_[static_cast<std::size_t>(t)] != stamp_) {
       tri_stamp_[static_cast<std::size_t>(t)] = stamp_;
@@ -171,6 +219,7 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     }
     const double* p = px + 3 * seg_node_[2 * static_cast<std::size_t>(a)];
     const double* q = px + 3 * seg_node_[2 * static_cast<std::size_t>(a) + 1];
+    double best = -1;
     for (int k = 0; k < 4; ++k) {
       const double* u = ax.axis[k];
       double g0 = u[0] * p[0] + u[1] * p[1] + u[2] * p[2] - ax.offset[k];
@@ -180,9 +229,11 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
         g1 = -g1;
       }
       const double g = std::min(g0, g1);
-      if (g >= 0 && g * g >= tri_bound2 * ax.length2[k] && ax.length2[k] > 0) return true;
+      if (g >= 0 && g * g >= tri_bound2 * ax.length2[k] && ax.length2[k] > 0) {
+        best = std::max(best, g / std::sqrt(ax.length2[k]) - tri_bound);
+      }
     }
-    return false;
+    return best;
   };
   // Intestine-intestine: block pairs (i <= j), then segment pairs a < b that are tested.
   const int excl = topo_.segment_exclusion;
@@ -198,14 +249,34 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
         const Box& ba = seg_box_[static_cast<std::size_t>(a)];
         if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) continue;
         for (int b = std::max(b0, a + excl + 1); b < b1; ++b) {
+          if (asleep(a, b)) {
+            ++st.asleep;
+            continue;
+          }
           const Box& bb = seg_box_[static_cast<std::size_t>(b)];
-          if (!overlap(ba.lo, ba.hi, bb.lo, bb.hi)) continue;
+          if (!overlap(ba.lo, ba.hi, bb.lo, bb.hi)) {
+            sleep(a, b, box_gap(ba, bb));
+            continue;
+          }
           ++st.overlaps;
-          // Bounding spheres: not closer than the contact distance (squared, no root).
+          // Bounding spheres: not closer than the contact distance (squared, no root unless rejected).
           const auto &sa = seg_sphere_[static_cast<std::size_t>(a)], &sb = seg_sphere_[static_cast<std::size_t>(b)];
           const double reach = seg_bound + sa[3] + sb[3];
-          if ((sa.head<3>() - sb.head<3>()).squaredNorm() >= reach * reach) continue;
-          push(segment_contact(topo_, x, a, b, margin, c));
+          const double d2 = (sa.head<3>() - sb.head<3>()).squaredNorm();
+          if (d2 >= reach * reach) {
+            sleep(a, b, std::sqrt(d2) - reach);
+            continue;
+          }
+          // The reference's distance; its contact only when closer than the bound.
+          const double* p = px + 3 * seg_node_[2 * static_cast<std::size_t>(a)];
+          const double* q = px + 3 * seg_node_[2 * static_cast<std::size_t>(b)];
+          double s_ = 0, t_ = 0;
+          const double d = segment_segment(Eigen::Map<const Eigen::Vector3d>(p),
+                                           Eigen::Map<const Eigen::Vector3d>(px + 3 * seg_node_[2 * a + 1]),
+                                           Eigen::Map<const Eigen::Vector3d>(q),
+                                           Eigen::Map<const Eigen::Vector3d>(px + 3 * seg_node_[2 * b + 1]), s_, t_);
+          sleep(a, b, d - seg_bound);
+          if (d < seg_bound) push(segment_contact(topo_, x, a, b, margin, c));
         }
       }
     }
@@ -223,14 +294,44 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
         if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) continue;
         const char* ok = &cell_ok_[static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_)];
         for (int cell = c0; cell < c1; ++cell) {
-          const Box& bc = cell_box_[static_cast<std::size_t>(cell)];
-          if (!ok[cell] || !overlap(ba.lo, ba.hi, bc.lo, bc.hi)) continue;
-          ++st.overlaps;
-          if (cell_beyond(a, cell)) continue;
-          for (int t = 2 * cell; t < 2 * cell + 2; ++t) {
-            if (triangle_beyond(a, t)) continue;
-            push(triangle_contact(topo_, x, a, t, margin, c, false));
+          if (!ok[cell]) continue;
+          if (asleep(a, nseg_ + cell)) {
+            ++st.asleep;
+            continue;
           }
+          const Box& bc = cell_box_[static_cast<std::size_t>(cell)];
+          if (!overlap(ba.lo, ba.hi, bc.lo, bc.hi)) {
+            sleep(a, nseg_ + cell, box_gap(ba, bc));
+            continue;
+          }
+          ++st.overlaps;
+          const double cg = cell_gap(a, cell);
+          if (cg >= 0) {
+            sleep(a, nseg_ + cell, cg);
+            continue;
+          }
+          double gap = std::numeric_limits<double>::infinity();
+          for (int t = 2 * cell; t < 2 * cell + 2; ++t) {
+            const double tg = triangle_gap(a, t);
+            if (tg >= 0) {
+              gap = std::min(gap, tg);
+              continue;
+            }
+            // The reference's exact distance; its contact only when closer than the bound.
+            const int* n = &cell_node_[4 * static_cast<std::size_t>(cell)];
+            const int* sn = &seg_node_[2 * static_cast<std::size_t>(a)];
+            double s_ = 0;
+            Eigen::Vector3d bary;
+            const double d = segment_triangle(Eigen::Map<const Eigen::Vector3d>(px + 3 * sn[0]),
+                                              Eigen::Map<const Eigen::Vector3d>(px + 3 * sn[1]),
+                                              Eigen::Map<const Eigen::Vector3d>(px + 3 * n[0]),
+                                              Eigen::Map<const Eigen::Vector3d>(px + 3 * n[t % 2 == 0 ? 1 : 2]),
+                                              Eigen::Map<const Eigen::Vector3d>(px + 3 * n[t % 2 == 0 ? 2 : 3]), s_,
+                                              bary);
+            gap = std::min(gap, d - tri_bound);
+            if (d < tri_bound) push(triangle_contact(topo_, x, a, t, margin, c, false));
+          }
+          sleep(a, nseg_ + cell, gap);
         }
       }
     }

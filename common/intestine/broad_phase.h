@@ -25,6 +25,7 @@ namespace surgsim::intestine {
 
 struct BroadPhaseStats {
   long overlaps = 0;   // element pairs (segment-segment, segment-cell) whose grown boxes overlap (tested pairs only)
+  long asleep = 0;     // element pairs not looked at: provably still out of contact since their last test
   int contacts = 0;    // contacts written
   int overflow = 0;    // contacts refused by the list
 };
@@ -39,8 +40,11 @@ class BroadPhaseDetector {
   const CollisionTopology& topology() const { return topo_; }
 
   /// Every tested element pair closer than the sum of the radii + margin (m), appended to `out` (not cleared): the
-  /// contacts of detect_brute_force(topology(), x, out, margin). No allocation.
+  /// contacts of detect_brute_force(topology(), x, out, margin). Successive calls are taken as successive positions
+  /// of one body (pairs far apart sleep while its nodes move less than their gap). No allocation.
   BroadPhaseStats detect(const Eigen::Matrix3Xd& x, ContactList& out, double margin = 0) noexcept;
+  /// Forgets the previous positions (every pair is tested on the next call). No allocation.
+  void reset() noexcept { have_prev_ = false; }
 
  private:
   struct Box {
@@ -64,6 +68,16 @@ class BroadPhaseDetector {
   std::vector<Eigen::Vector4d> seg_sphere_, cell_sphere_;
   std::vector<TriangleAxes> tri_axes_;
   std::vector<unsigned> tri_stamp_;
+  // Temporal coherence: travel_ of an element is the sum over the steps of its largest node displacement; an element
+  // pair found farther than the contact distance by a gap g sleeps (is not looked at) until the travel of its two
+  // elements since then exceeds g (a distance between them changes by at most their nodes' displacements). wake_ holds
+  // travel(a) + travel(b) + g at the pair's last test, per segment pair (segments x segments) and segment-cell pair
+  // (segments x cells, after them). Reset on the first step and whenever the margin changes.
+  Eigen::Matrix3Xd x_prev_;
+  bool have_prev_ = false;
+  double last_margin_ = 0;
+  std::vector<double> travel_;   // segments, then cells
+  std::vector<double> wake_;
   unsigned stamp_ = 0;
   std::vector<Box> seg_block_, cell_block_;   // block boxes; cell blocks row by row
   std::vector<int> cell_block_first_, cell_block_end_;  // cells of each cell block

@@ -54,6 +54,32 @@ TEST(BroadPhaseTest, SameContactsAsBruteForceOverTheScriptedRun) {
   EXPECT_GT(membrane, 500);
 }
 
+// Called every step at one margin, pairs far apart sleep until their nodes could have closed the gap: still every
+// contact of the reference, value for value, at every step (and most pairs do sleep).
+TEST(BroadPhaseTest, SameContactsAsBruteForceWhilePairsSleep) {
+  const IntestineModel model(IntestineParams{});
+  IntestineState state(model, 1);
+  BroadPhaseDetector broad(model.topology());
+  StepReport report;
+  ContactList truth(100000), found(100000);
+  long asleep = 0, overlaps = 0;
+  for (int s = 0; s < 1700; ++s) {
+    step(model, state, test::scripted_probe(s * 1e-3), 1e-3, report);
+    truth.clear();
+    found.clear();
+    detect_brute_force(model.topology(), state.x, truth);
+    const BroadPhaseStats st = broad.detect(state.x, found);
+    ASSERT_EQ(keys(found), keys(truth)) << "step " << s;
+    asleep += st.asleep;
+    overlaps += st.overlaps;
+  }
+  EXPECT_GT(asleep, overlaps);  // the feature is at work: more pairs asleep than boxes overlapping
+  // After reset() nothing sleeps.
+  broad.reset();
+  found.clear();
+  EXPECT_EQ(broad.detect(state.x, found).asleep, 0);
+}
+
 TEST(BroadPhaseTest, DetectAllocatesNothing) {
   const IntestineModel model(IntestineParams{});
   IntestineState state(model, 1);
