@@ -2,7 +2,7 @@
 # The web view's figures (issue 18), into OUT (default out/web_figures): frame_bench (JPEG encode time and size per
 # resolution and quality, the render loop's share), rt_bench's 1 kHz floor just before the live runs, then
 # web_figures.py (the haptic node's missed deadlines without the web view, with it, and with a browser showing the
-# page, side by side; the delay render -> page). About 2 minutes. Run it alone on the machine, under the build lock:
+# page, side by side; the delay render -> page). About 4 minutes at 20 s. Run it alone on the machine, under the build lock:
 #   flock /tmp/surgsim_build.lock scripts/web_figures.sh [OUT] [SECONDS]
 # scripts/report_web.py OUT turns the CSV files into the report's section.
 set -euo pipefail
