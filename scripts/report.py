@@ -1155,8 +1155,45 @@ def intestine_live_plot(rep, traces):
              "synthetic load step (shaded); from the visual node's frames/frame_trace.csv.")
 
 
+def large_deformation_section(rep):
+    """Issue 16: every method against the Newton reference (large_deformation_bench), table and plot."""
+    import report_large_deformation
+    rows = rep.csv_section(
+        "liver_large_deformation", "9. Large deformation: error and tick per method (issue 16)",
+        "Force and visible-surface displacement error against the neo-Hookean Newton reference on the shipped liver, "
+        "and the contact tick p99, per case and method (`large_deformation_bench`). Budgets: force error <= 5 % at "
+        "every indentation depth, <= 5 % / 10 % for the lobe lifted 45 / 90 degrees, a rigid 90-degree turn <= 1 % of "
+        "a 10 % indentation's force, tick p99 <= 100 us.")
+    if rows is None:
+        return
+    path = report_large_deformation.plot(os.path.join(rep.root, "csv"), os.path.join(rep.root, "plots"))
+    if path:
+        rep.md("![error against depth and angle](plots/%s)" % os.path.basename(path))
+        rep.md()
+
+
+def scale_section(rep):
+    """Issue 17: precompute, memory, tick and render at 1.5k-20k nodes (report_scale.py over raw/scale)."""
+    import report_scale
+    lines = report_scale.scale_section(os.path.join(rep.root, "raw", "scale"))
+    rep.md("## 10. " + lines[0][3:])  # its own heading, numbered here
+    for line in lines[1:]:
+        rep.md(line)
+    rep.md()
+
+
+def web_section(rep):
+    """Issue 18: the web view's encode cost, missed deadlines with and without it, delay (report_web.py)."""
+    import report_web
+    lines = report_web.web_section(os.path.join(rep.root, "raw", "web")).split("\n")
+    rep.md("## 11. " + lines[0][3:])  # its own heading, numbered here
+    for line in lines[1:]:
+        rep.md(line)
+    rep.md()
+
+
 def steps_section(rep):
-    rep.md("## 9. How this report was made")
+    rep.md("## 12. How this report was made")
     rep.md()
     path = os.path.join(rep.root, "raw", "steps.csv")
     if os.path.exists(path):
@@ -1179,7 +1216,8 @@ def main():
     rep = Report(root)
     rep.stamp_csv_files()
     for section in (liver_section, intestine_section, stability_section, bench_section, haptic_signal_section,
-                    two_hands_section, intestine_live_section, steps_section):
+                    two_hands_section, intestine_live_section, large_deformation_section, scale_section,
+                    web_section, steps_section):
         try:
             section(rep)
         except Exception as e:  # a broken input must not lose the rest of the report

@@ -39,7 +39,7 @@ fi
   echo "report: /usr/bin/python3 lacks numpy/matplotlib: run SURGSIM_WITH_REPORT=1 scripts/setup.sh" >&2; exit 1; }
 for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench \
          bench/liver_error_bench bench/intestine_error_bench bench/tube_skinning_bench bench/stability_report \
-         bench/rt_bench bench/two_hands_bench; do
+         bench/rt_bench bench/two_hands_bench bench/large_deformation_bench bench/frame_bench bin/surgsim-web; do
   [ -x "$build/$p" ] || { echo "report: $build/$p not found: run scripts/build.sh first" >&2; exit 1; }
 done
 build_s=$(( $(date +%s) - start_all ))
@@ -192,6 +192,21 @@ for traj in push lift; do
   step rt_floor_intestine_$traj "$bench/rt_bench" --seconds "$traj_s" --label before_live_intestine_$traj --out "$csv"
   step live_intestine_$traj live_intestine_1khz "$traj" "$traj_s"
 done
+# Issue 16: large deformation. Every method (linear, quasi non-linear with cylinder and organ curves, corotational, both)
+# against the neo-Hookean Newton reference at 5-30 % indentation, a lobe lifted 45 and 90 degrees and a rigid turn,
+# with the tick p99 of each (csv/liver_large_deformation.csv; the organ curves are computed, not cached, in this run).
+step large_deformation "$bench/large_deformation_bench" "${quick_flag[@]}" --out "$csv"
+# Issue 17: patient-size livers. Precompute time and peak memory, haptic tick, visual deformation and render at 1.5k,
+# 5k and (not with --quick) 20k nodes, the tensors stored as the scenes store them (raw/scale/*.csv).
+scale_sizes=1500,5000,20000
+[ $quick = 1 ] && scale_sizes=1500,5000
+step scale_precompute "$bench/liver_bench" --sizes "$scale_sizes" --no-cg --skip-table --out "$out/raw/scale"
+step scale_nodes "$bench/node_bench" --sizes "$scale_sizes" --out "$out/raw/scale"
+# Issue 18: the web view. JPEG encode per resolution and quality, the machine's floor, then the haptic node's missed
+# deadlines without the web view, with it and with a browser showing the page, side by side, and render -> page delay.
+web_s=20
+[ $quick = 1 ] && web_s=6
+step web_figures "$root/scripts/web_figures.sh" "$out/raw/web" "$web_s"
 # Issue 7's round trips: one host (shared memory, UDP), two hosts over veth and through the user-space impairment.
 if [ $quick = 1 ]; then step network "$root/scripts/network_figures.sh" 2 1000
 else step network "$root/scripts/network_figures.sh" 5 1000; fi
