@@ -70,6 +70,10 @@ BroadPhaseDetector::BroadPhaseDetector(CollisionTopology topology) : topo_(std::
   x_prev_.resize(3, nodes);
   travel_.assign(static_cast<std::size_t>(nseg_ + ncell_), 0.0);
   wake_.assign(static_cast<std::size_t>(nseg_) * static_cast<std::size_t>(nseg_ + ncell_), 0.0);
+  step_move_.assign(static_cast<std::size_t>(nseg_ + ncell_), 0.0);
+  const std::size_t blocks = seg_block_.size() + cell_block_.size();
+  block_travel_.assign(blocks, 0.0);
+  block_wake_.assign(seg_block_.size() * blocks, 0.0);
 }
 
 BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactList& out, double margin) noexcept {
@@ -112,18 +116,29 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
   // Travel since the last call (nothing sleeps on the first call, after reset() or with another margin).
   const int nodes = static_cast<int>(x_prev_.cols());
   if (!have_prev_ || margin != last_margin_ || x.cols() < nodes) {
-    std::fill(travel_.begin(), travel_.end(), 0.0);
-    std::fill(wake_.begin(), wake_.end(), 0.0);
+    for (auto* v : {&travel_, &wake_, &block_travel_, &block_wake_}) std::fill(v->begin(), v->end(), 0.0);
   } else {
     auto move = [&](int n) { return (x.col(n) - x_prev_.col(n)).squaredNorm(); };
     for (int a = 0; a < nseg_; ++a) {
       const int* n = &seg_node_[2 * static_cast<std::size_t>(a)];
-      travel_[static_cast<std::size_t>(a)] += std::sqrt(std::max(move(n[0]), move(n[1])));
+      step_move_[static_cast<std::size_t>(a)] = std::sqrt(std::max(move(n[0]), move(n[1])));
     }
     for (int k = 0; k < ncell_; ++k) {
       const int* n = &cell_node_[4 * static_cast<std::size_t>(k)];
-      travel_[static_cast<std::size_t>(nseg_ + k)] +=
+      step_move_[static_cast<std::size_t>(nseg_ + k)] =
           std::sqrt(std::max(std::max(move(n[0]), move(n[1])), std::max(move(n[2]), move(n[3]))));
+    }
+    for (std::size_t e = 0; e < travel_.size(); ++e) travel_[e] += step_move_[e];
+    const std::size_t nsb = seg_block_.size();
+    for (std::size_t k = 0; k < nsb; ++k) {
+      const int a0 = static_cast<int>(k) * kBlock, a1 = std::min(nseg_, a0 + kBlock);
+      block_travel_[k] += *std::max_element(&step_move_[static_cast<std::size_t>(a0)],
+                                            &step_move_[static_cast<std::size_t>(a1)]);
+    }
+    for (std::size_t k = 0; k < cell_block_.size(); ++k) {
+      block_travel_[nsb + k] +=
+          *std::max_element(&step_move_[static_cast<std::size_t>(nseg_ + cell_block_first_[k])],
+                            &step_move_[static_cast<std::size_t>(nseg_ + cell_block_end_[k])]);
     }
   }
   if (x.cols() >= nodes) {
@@ -147,6 +162,17 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     double g = -std::numeric_limits<double>::infinity();
     for (int k = 0; k < 3; ++k) g = std::max(g, std::max(u.lo[k] - v.hi[k], v.lo[k] - u.hi[k]));
     return g;
+  };
+
+  const std::size_t blocks = block_travel_.size();
+  auto block_asleep = [&](int i, int j) {
+    return block_travel_[static_cast<std::size_t>(i)] + block_travel_[static_cast<std::size_t>(j)] <
+           block_wake_[static_cast<std::size_t>(i) * blocks + static_cast<std::size_t>(j)];
+  };
+  auto block_sleep = [&](int i, int j, double gap) {
+    block_wake_[static_cast<std::size_t>(i) * blocks + static_cast<std::size_t>(j)] =
+        gap > hair ? block_travel_[static_cast<std::size_t>(i)] + block_travel_[static_cast<std::size_t>(j)] + gap - hair
+                   : 0.0;
   };
 
   // Refit the blocks.
@@ -243,8 +269,12 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     for (int j = i; j < nsb; ++j) {
       const int b0 = j * kBlock, b1 = std::min(nseg_, b0 + kBlock);
       if (b1 - 1 - a0 <= excl) continue;  // every pair of the two blocks is a pair of neighbours
+      if (block_asleep(i, j)) continue;
       const Box& bj = seg_block_[static_cast<std::size_t>(j)];
-      if (!overlap(bi.lo, bi.hi, bj.lo, bj.hi)) continue;
+      if (!overlap(bi.lo, bi.hi, bj.lo, bj.hi)) {
+        block_sleep(i, j, box_gap(bi, bj));
+        continue;
+      }
       for (int a = a0; a < a1; ++a) {
         const Box& ba = seg_box_[static_cast<std::size_t>(a)];
         if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) continue;
@@ -286,8 +316,12 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     const Box& bi = seg_block_[static_cast<std::size_t>(i)];
     const int a0 = i * kBlock, a1 = std::min(nseg_, a0 + kBlock);
     for (int j = 0; j < ncb; ++j) {
+      if (block_asleep(i, nsb + j)) continue;
       const Box& bj = cell_block_[static_cast<std::size_t>(j)];
-      if (!overlap(bi.lo, bi.hi, bj.lo, bj.hi)) continue;
+      if (!overlap(bi.lo, bi.hi, bj.lo, bj.hi)) {
+        block_sleep(i, nsb + j, box_gap(bi, bj));
+        continue;
+      }
       const int c0 = cell_block_first_[static_cast<std::size_t>(j)], c1 = cell_block_end_[static_cast<std::size_t>(j)];
       for (int a = a0; a < a1; ++a) {
         const Box& ba = seg_box_[static_cast<std::size_t>(a)];

@@ -78,6 +78,11 @@ class BroadPhaseDetector {
   double last_margin_ = 0;
   std::vector<double> travel_;   // segments, then cells
   std::vector<double> wake_;
+  // The same for blocks (their largest element displacement per step): segment blocks, then cell blocks; block pairs
+  // segment block x (segment blocks, then cell blocks).
+  std::vector<double> step_move_;  // this step's displacement of each element (segments, then cells)
+  std::vector<double> block_travel_;
+  std::vector<double> block_wake_;
   unsigned stamp_ = 0;
   std::vector<Box> seg_block_, cell_block_;   // block boxes; cell blocks row by row
   std::vector<int> cell_block_first_, cell_block_end_;  // cells of each cell block
