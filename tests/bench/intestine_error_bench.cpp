@@ -28,6 +28,7 @@
 
 #include "bench_util.h"
 #include "csv_out.h"
+#include "intestine/frame_rate_controller.h"
 #include "intestine/intestine_model.h"
 #include "intestine_run.h"
 #include "support/intestine_test_util.h"
@@ -228,13 +229,15 @@ void pairs_table(const Config& cfg) {
              "random_pairs,steps,compared_steps,pair_recall,region_recall,depth_recall,max_missed_mm,residual_mm,"
              "onsets,detect_steps_mean,detect_steps_p50,detect_steps_p90,detect_steps_max,undetected_fraction,"
              "contacts_mean,step_us_p50,step_us_p99,detect_us_p50,detect_us_p99");
-  std::printf("%6s %7s %7s %7s %9s %8s %7s %8s %6s %6s %6s %8s %9s %9s\n", "n", "pairs", "zones", "depth",
-              "missed mm", "left mm", "onsets", "det mean", "p50", "p90", "max", "undetect", "cpu p50us", "cpu p99us");
+  std::printf("%6s %7s %7s %7s %7s %7s %9s %8s %7s %8s %6s %6s %6s %8s %9s %9s\n", "n", "pairs", "ii", "im", "zones",
+              "depth", "missed mm", "left mm", "onsets", "det mean", "p50", "p90", "max", "undetect", "cpu p50us",
+              "cpu p99us");
   for (const int n : cfg.pairs) {
     char label[64];
     std::snprintf(label, sizeof label, "random pairs n = %d", n);
     progress(label);
     IntestineParams p;
+    p.detector = CollisionDetector::kStochastic;
     p.detection.random_pairs = p.detection.random_mesentery_pairs = n;
     const RunResult r = scripted_run(p, steps, cfg.compare_every);
     double mean = 0;
@@ -243,8 +246,9 @@ void pairs_table(const Config& cfg) {
     const double undetected = r.onsets > 0 ? static_cast<double>(r.undetected) / static_cast<double>(r.onsets) : 0.0;
     const double p50 = percentile(r.detect_steps, 0.5), p90 = percentile(r.detect_steps, 0.9);
     const double dmax = percentile(r.detect_steps, 1.0);
-    std::printf("%6d %7.3f %7.3f %7.3f %9.2f %8.2f %7ld %8.2f %6.0f %6.0f %6.0f %8.3f %9.1f %9.1f\n", n,
-                r.recall.pair_recall(), r.recall.region_recall(), r.recall.depth_recall(), 1e3 * r.recall.max_missed,
+    std::printf("%6d %7.3f %7.3f %7.3f %7.3f %7.3f %9.2f %8.2f %7ld %8.2f %6.0f %6.0f %6.0f %8.3f %9.1f %9.1f\n", n,
+                r.recall.pair_recall(), r.recall_kind[0].pair_recall(), r.recall_kind[1].pair_recall(),
+                r.recall.region_recall(), r.recall.depth_recall(), 1e3 * r.recall.max_missed,
                 1e3 * r.residual, r.onsets, mean, p50, p90, dmax, undetected, percentile(r.cpu, 0.5),
                 percentile(r.cpu, 0.99));
     csv.row("%d,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%ld,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g", n, steps,
@@ -254,7 +258,8 @@ void pairs_table(const Config& cfg) {
             percentile(r.detection, 0.99));
     std::fflush(stdout);
   }
-  std::printf("pairs: reference contacts the detector reported at the same step; zones: contact zones with one "
+  std::printf("pairs: reference contacts the detector reported at the same step (ii: intestine-intestine, im: "
+              "intestine-mesentery contacts alone); zones: contact zones with one "
               "reported; depth: weighted by penetration;\nmissed: deepest reference contact not reported; left: "
               "deepest penetration after the response; onsets: reference contacts appearing; det: steps until the "
               "detector\nreports an onset (mean, p50, p90, max); undetect: onsets that left the reference unreported; "
@@ -509,10 +514,13 @@ void lod_table(const Config& cfg, const std::vector<std::vector<double>>& states
 // 4. The frame-rate controller on the real renderer.
 
 void frame_rate_table(const Config& cfg, const std::vector<std::vector<double>>& states) {
-  std::printf("\n4. Frame-rate controller (eq. 15, alpha = 1e-4, beta = 5) in the visual node's IntestineView on "
-              "OSMesa at %d x %d: %d frames per target, each a new body state;\n   rate = 1 / mean work time (tube "
-              "build + draw + end of frame, what the controller is fed), statistics over the second half\n",
-              cfg.width, cfg.height, cfg.controller_frames);
+  // The gains IntestineView runs with: FrameRateParams' defaults (the error in octaves, not the paper's Hz).
+  const surgsim::intestine::FrameRateParams gains;
+  std::printf("\n4. Frame-rate controller (eq. 15 with e = %s, alpha = %g, beta = %g) in the visual node's "
+              "IntestineView on OSMesa at %d x %d: %d frames per target, each a new body state;\n   rate = 1 / mean work "
+              "time (tube build + draw + end of frame, what the controller is fed), statistics over the second half\n",
+              gains.error == surgsim::intestine::FrameRateError::kHz ? "f0 - f (Hz)" : "log2(f0 / f)", gains.alpha,
+              gains.beta, cfg.width, cfg.height, cfg.controller_frames);
   CsvOut csv(cfg.out, "intestine_frame_rate",
              "target_fps,frames,fps_mean,work_ms_p50,work_ms_p99,lod_mean,lod_min,lod_max,lod_final,frames_to_settle,"
              "samples,triangles_mean,renderer,skinning");

@@ -18,6 +18,7 @@ struct RunResult {
   std::vector<double> total, dynamics, detection, response;  // wall clock per step, us
   std::vector<double> cpu;                                   // thread CPU time per step, us
   RecallStats recall;    // summed over the compared steps
+  RecallStats recall_kind[2];  // the same, intestine-intestine [0] and intestine-mesentery [1] contacts apart
   int compared = 0;      // steps compared with the reference
   double residual = 0;   // m, largest brute-force penetration after the response (compared steps)
   double contacts_mean = 0;
@@ -102,7 +103,7 @@ RunResult scripted_run(const IntestineParams& params, int steps, int every, doub
   const IntestineModel model(params);
   IntestineState state(model, 1);
   StepReport report;
-  ContactList truth(100000);
+  ContactList truth(100000), kind_found(100000), kind_truth(100000);
   detail::DetectLatency latency;
   RunResult r;
   for (auto* v : {&r.total, &r.dynamics, &r.detection, &r.response, &r.cpu}) {
@@ -124,6 +125,18 @@ RunResult scripted_run(const IntestineParams& params, int steps, int every, doub
       truth.clear();
       detect_brute_force(model.topology(), state.x, truth);
       r.recall += compare_with_reference(model.topology(), state.contacts(), truth);
+      for (int k = 0; k < 2; ++k) {
+        const ContactKind kind = k == 0 ? ContactKind::kSegmentSegment : ContactKind::kSegmentTriangle;
+        kind_found.clear();
+        kind_truth.clear();
+        for (const auto& c : state.contacts()) {
+          if (c.kind == kind) kind_found.push(c);
+        }
+        for (const auto& c : truth) {
+          if (c.kind == kind) kind_truth.push(c);
+        }
+        r.recall_kind[k] += compare_with_reference(model.topology(), kind_found, kind_truth);
+      }
       latency.compare(s, state.contacts(), truth, r);
       ++r.compared;
     }
