@@ -37,7 +37,9 @@
 // farther than the drop distance (it would be dropped). Every pair is evaluated at most once a step (a memo shared
 // by the convergence and the contact zones).
 // Measured (intestine_bench --quick, 2 cores): detection p50 about 110 us, p99 about 170 us of thread CPU at n = 10,
-// from 344 / 426; the exact broad phase (broad_phase.h) about 200 / 280 us, the brute force about 800 / 900 us.
+// from 344 / 426; the exact broad phase (broad_phase.h, every contact) about 55 / 100-170 us live (table 1) and
+// 70 / 210-260 in table 3b (run between the other two, caches cold), the brute force about 800 / 900 us. The
+// scene's intestine.detector chooses which one the haptic step runs.
 //
 // Phases: construction allocates (pair arrays, the merge tables); detect() allocates nothing and is deterministic for
 // a given seed and input. detect_brute_force() tests every element pair (with a bounding-box cull): the reference
