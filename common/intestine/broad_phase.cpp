@@ -69,7 +69,7 @@ BroadPhaseDetector::BroadPhaseDetector(CollisionTopology topology) : topo_(std::
   if (*std::min_element(topo_.grid.begin(), topo_.grid.end()) < 0) throw_error("broad phase: negative node index");
   x_prev_.resize(3, nodes);
   travel_.assign(static_cast<std::size_t>(nseg_ + ncell_), 0.0);
-  wake_.assign(static_cast<std::size_t>(nseg_) * static_cast<std::size_t>(nseg_ + ncell_), 0.0);
+  wake_.assign(static_cast<std::size_t>(nseg_) * static_cast<std::size_t>(nseg_ + ncell_), 0.0f);
   step_move_.assign(static_cast<std::size_t>(nseg_ + ncell_), 0.0);
   const std::size_t blocks = seg_block_.size() + cell_block_.size();
   block_travel_.assign(blocks, 0.0);
@@ -116,7 +116,8 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
   // Travel since the last call (nothing sleeps on the first call, after reset() or with another margin).
   const int nodes = static_cast<int>(x_prev_.cols());
   if (!have_prev_ || margin != last_margin_ || x.cols() < nodes) {
-    for (auto* v : {&travel_, &wake_, &block_travel_, &block_wake_}) std::fill(v->begin(), v->end(), 0.0);
+    for (auto* v : {&travel_, &block_travel_, &block_wake_}) std::fill(v->begin(), v->end(), 0.0);
+    std::fill(wake_.begin(), wake_.end(), 0.0f);
   } else {
     auto move = [&](int n) { return (x.col(n) - x_prev_.col(n)).squaredNorm(); };
     for (int a = 0; a < nseg_; ++a) {
@@ -150,11 +151,16 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
   // A pair asleep; and the wake of a pair found beyond the bound by `gap` (a hair less, for rounding).
   auto asleep = [&](int a, int e) {
     return travel_[static_cast<std::size_t>(a)] + travel_[static_cast<std::size_t>(e)] <
-           wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)];
+           static_cast<double>(wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)]);
   };
   auto sleep = [&](int a, int e, double gap) {
-    wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)] =
-        gap > hair ? travel_[static_cast<std::size_t>(a)] + travel_[static_cast<std::size_t>(e)] + gap - hair : 0.0;
+    float w = 0.0f;
+    if (gap > hair) {
+      const double wake = travel_[static_cast<std::size_t>(a)] + travel_[static_cast<std::size_t>(e)] + gap - hair;
+      w = static_cast<float>(wake);
+      if (static_cast<double>(w) > wake) w = std::nextafter(w, 0.0f);  // rounded down
+    }
+    wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)] = w;
   };
   // How far apart two grown boxes are (the largest gap along an axis; <= 0 when they overlap): the elements are at
   // least this much farther apart than the sum of their radii and the margin.

@@ -77,7 +77,7 @@ class BroadPhaseDetector {
   bool have_prev_ = false;
   double last_margin_ = 0;
   std::vector<double> travel_;   // segments, then cells
-  std::vector<double> wake_;
+  std::vector<float> wake_;       // float (half the cache), rounded down: a pair may wake early, never late
   // The same for blocks (their largest element displacement per step): segment blocks, then cell blocks; block pairs
   // segment block x (segment blocks, then cell blocks).
   std::vector<double> step_move_;  // this step's displacement of each element (segments, then cells)
