@@ -30,7 +30,8 @@ def read(csv_dir):
         return None
     rows = {}
     with open(path, newline="") as f:
-        for r in csv.DictReader(f):
+        # scripts/report.py stamps its CSV files with a '#' line (machine, commit, command): skip comments.
+        for r in csv.DictReader(line for line in f if not line.startswith("#")):
             rows[(r["case"], r["method"])] = {
                 "force": _num(r["force_rel_error"]),
                 "disp": _num(r["disp_rel_error"]),

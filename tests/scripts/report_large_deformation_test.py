@@ -37,6 +37,17 @@ class ReportLargeDeformation(unittest.TestCase):
             out = rld.plot(d, os.path.join(d, "plots"))
             self.assertTrue(os.path.getsize(out) > 10000, out)
 
+    def test_reads_a_csv_stamped_by_report_py(self):
+        # scripts/report.py puts a '# machine, commit, command' line on top of every CSV before its sections read them.
+        with tempfile.TemporaryDirectory() as d:
+            with open(os.path.join(d, "liver_large_deformation.csv"), "w") as f:
+                f.write("# cpu, 2 cores; commit abc; scripts/report.sh; date\n")
+                f.write("case,method,force_rel_error,disp_rel_error,tick_us_p99\n")
+                f.write("indent_5,linear,0.0237,0.0236,14.7\n")
+            rows = rld.read(d)
+            self.assertEqual(list(rows), [("indent_5", "linear")])
+            self.assertAlmostEqual(rows[("indent_5", "linear")]["force"], 0.0237)
+
     def test_missing_csv_gives_none(self):
         with tempfile.TemporaryDirectory() as d:
             self.assertIsNone(rld.plot(d, d))
