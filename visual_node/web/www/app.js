@@ -7,7 +7,7 @@
 const token = new URLSearchParams(location.search).get('token') || '';
 const S = {                      // the page's state (also read by the browser tests through window.surgsim)
   connected: false, id: 0, driver: 0, drives: false, hello: null,
-  frames: 0, lastFrame: 0, frameSize: 0, renderStamp: 0,
+  frames: 0, lastFrame: 0, frameSize: 0,
   force: [0, 0, 0], forceNorm: 0, forceMax: 0, contacts: 0, contactsMax: 0, flags: 0,
   target: { pitch: 0, yaw: 0, insertion: 0, roll: 0, jaw: 0.5 },
   posesSent: 0, telemetry: 0,
