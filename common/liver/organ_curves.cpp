@@ -263,8 +263,13 @@ OrganCurves load_or_compute_organ_curves(const ElasticModel& model, const OrganC
 NonlinearLaw load_organ_law(const TetMesh& mesh, const Material& material, const FixedSet& fixed,
                             std::uint64_t tensor_key, const std::string& cache_dir, std::ostream* log,
                             const OrganCurveSettings& settings) {
-  const ElasticModel model = build_elastic_model(mesh, material, fixed);
-  const OrganCurves curves = load_or_compute_organ_curves(model, settings, tensor_key, cache_dir, log);
+  // The cached curves need no elastic model: build it (a stiffness assembly) only when they must be computed.
+  const std::uint64_t key = organ_curves_key(tensor_key, settings);
+  OrganCurves curves;
+  if (!load_organ_curves(organ_curves_path(cache_dir, key), key, curves, nullptr)) {
+    const ElasticModel model = build_elastic_model(mesh, material, fixed);
+    curves = load_or_compute_organ_curves(model, settings, tensor_key, cache_dir, log);
+  }
   return fit_organ_law(curves, settings.degree);
 }
 
