@@ -43,13 +43,7 @@ BroadPhaseDetector::BroadPhaseDetector(CollisionTopology topology) : topo_(std::
     n[2] = topo_.node(r + 1, k + 1);
     n[3] = topo_.node(r + 1, k);
   }
-  cell_ok_.resize(static_cast<std::size_t>(nseg_) * static_cast<std::size_t>(ncell_));
-  for (int a = 0; a < nseg_; ++a) {
-    for (int c = 0; c < ncell_; ++c) {
-      cell_ok_[static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_) + static_cast<std::size_t>(c)] =
-          topo_.cell_tested(a, c);
-    }
-  }
+  cell_ok_ = topo_.cell_tested_table();
   seg_box_.resize(static_cast<std::size_t>(nseg_));
   cell_box_.resize(static_cast<std::size_t>(ncell_));
   seg_block_.resize(static_cast<std::size_t>((nseg_ + kBlock - 1) / kBlock));

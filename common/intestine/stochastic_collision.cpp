@@ -178,6 +178,18 @@ bool CollisionTopology::segments_tested(int a, int b) const {
   return a >= 0 && b >= 0 && a < segments() && b < segments() && std::abs(a - b) > segment_exclusion;
 }
 
+std::vector<char> CollisionTopology::cell_tested_table() const {
+  const int nseg = segments(), ncell = cells();
+  std::vector<char> ok(static_cast<std::size_t>(nseg) * static_cast<std::size_t>(ncell));
+  for (int a = 0; a < nseg; ++a) {
+    for (int c = 0; c < ncell; ++c) {
+      ok[static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell) + static_cast<std::size_t>(c)] =
+          cell_tested(a, c);
+    }
+  }
+  return ok;
+}
+
 bool CollisionTopology::cell_tested(int segment, int cell) const {
   if (segment < 0 || segment >= segments() || cell < 0 || cell >= cells()) return false;
   const int r = cell / (cols - 1), c = cell % (cols - 1);
@@ -235,13 +247,7 @@ StochasticDetector::StochasticDetector(CollisionTopology topology, const Stochas
   }
   tri_node_.resize(6 * static_cast<std::size_t>(ncell_));
   for (int t = 0; t < 2 * ncell_; ++t) topo_.triangle(t, &tri_node_[3 * static_cast<std::size_t>(t)]);
-  cell_ok_.resize(static_cast<std::size_t>(nseg_) * static_cast<std::size_t>(ncell_));
-  for (int a = 0; a < nseg_; ++a) {
-    for (int c = 0; c < ncell_; ++c) {
-      cell_ok_[static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_) + static_cast<std::size_t>(c)] =
-          topo_.cell_tested(a, c);
-    }
-  }
+  cell_ok_ = topo_.cell_tested_table();
   seg_sphere_.resize(static_cast<std::size_t>(nseg_));
   tri_sphere_.resize(2 * static_cast<std::size_t>(ncell_));
   cell_sphere_.resize(static_cast<std::size_t>(ncell_));

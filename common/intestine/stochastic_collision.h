@@ -73,6 +73,8 @@ struct CollisionTopology {
   void triangle(int t, int out[3]) const;
   bool segments_tested(int a, int b) const;  // non-neighbouring, both valid
   bool cell_tested(int segment, int cell) const;
+  /// cell_tested for every pair, segments x cells, row-major (init phase: allocates).
+  std::vector<char> cell_tested_table() const;
 };
 
 struct StochasticParams {
