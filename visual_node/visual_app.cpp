@@ -150,14 +150,18 @@ void VisualApp::start_stream() {
   }
 }
 
-void VisualApp::offer_stream_frame(const msg::ContactFrame& frame, bool have_frame) {
-  const std::uint64_t now = monotonic_ns();
+void VisualApp::offer_stream_frame(const msg::ContactFrame& frame, bool have_frame, std::uint64_t now,
+                                   const Image* read) {
   if (!stream_ || now < next_stream_ns_) return;
   const auto period = static_cast<std::uint64_t>(1e9 / stream_fps_);
   next_stream_ns_ = next_stream_ns_ + period > now ? next_stream_ns_ + period : now + period;
   Image* slot = stream_->acquire();  // null: the encoder is still busy, this picture is dropped (counted)
   if (slot == nullptr) return;
-  if (!renderer_->read_image(*slot)) slot->resize(0, 0);
+  if (read != nullptr) {
+    *slot = *read;  // same size as the preallocated slot: a copy, no allocation
+  } else if (!renderer_->read_image(*slot)) {
+    slot->resize(0, 0);
+  }
   FrameStamp st;
   st.frame_number = frames_rendered_;
   st.render_stamp_ns = now;
@@ -259,10 +263,10 @@ void VisualApp::render_frame(const msg::ContactFrame& frame, bool have_frame, bo
   last_work_ms_ = static_cast<double>(work_end - work0) * 1e-6;
   organ_->frame_done(static_cast<double>(work_end - work0) * 1e-9);
   ++frames_rendered_;
-  offer_stream_frame(frame, have_frame);
-  if (output_->due(frames_rendered_) && renderer_->read_image(image_)) {
-    output_->write(image_, frames_rendered_, frame.seq(), have_frame ? frame.sim_time() : -1.0, *organ_, drawn);
-  }
+  const std::uint64_t done_ns = monotonic_ns();
+  const bool png = output_->due(frames_rendered_) && renderer_->read_image(image_);
+  offer_stream_frame(frame, have_frame, done_ns, png ? &image_ : nullptr);  // a frame streamed and written: read once
+  if (png) output_->write(image_, frames_rendered_, frame.seq(), have_frame ? frame.sim_time() : -1.0, *organ_, drawn);
   render_ms_.add(static_cast<double>(monotonic_ns() - r0) * 1e-6);
 }
 

@@ -88,8 +88,9 @@ class VisualApp {
   void take_frame_instruments(const msg::ContactFrame& frame);
   /// Init: the frame stream of the web view when asked (visual.stream_fps or --stream-fps), writing surgsim/frame.
   void start_stream();
-  /// When a streamed picture is due and the encoder is idle: the picture read into its slot and handed over.
-  void offer_stream_frame(const msg::ContactFrame& frame, bool have_frame);
+  /// When a streamed picture is due at `now` (the frame's end) and the encoder is idle: the picture read into its
+  /// slot (copied from `read`, this frame's picture when already read back for the PNG) and handed over.
+  void offer_stream_frame(const msg::ContactFrame& frame, bool have_frame, std::uint64_t now, const Image* read);
   /// Deformation, drawing (the organ, every instrument, the markers) and the PNG of one frame: `frame` is the newest
   /// frame taken (shown when `have_frame`), `fresh` when it arrived since the last one.
   void render_frame(const msg::ContactFrame& frame, bool have_frame, bool fresh);
