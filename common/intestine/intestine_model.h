@@ -204,7 +204,6 @@ class IntestineState {
   const double* positions() const { return x.data(); }
   int point_count() const { return static_cast<int>(x.cols()); }
 
-  BroadPhaseDetector& broad_phase() { return broad_; }
   StochasticDetector& detector() { return detector_; }
   const StochasticDetector& detector() const { return detector_; }
   const ContactList& contacts() const { return contacts_; }
