@@ -176,58 +176,78 @@ bool HyperelasticSolver::tangent_stiffness(const Eigen::VectorXd& u, Eigen::Spar
 
 namespace {
 
-// The unknown dofs (free and not imposed) and the parts of K_T a Newton iteration needs, in the model's pattern.
-struct ReducedSystem {
-  std::vector<int> unknown;          // #dofs: index among the unknowns, or -1 (fixed or imposed)
-  std::vector<int> imposed_dofs;     // global dofs with an imposed value, ascending
-  Eigen::VectorXd target;            // #imposed: u* on those dofs, m
-  Eigen::SparseMatrix<double> kii;   // unknowns x unknowns, values refreshed from the full K_T
-  std::vector<int> kii_source;       // #kii nonzeros: value index in the full pattern
-  int count = 0;                     // number of unknowns
+enum class Failure { kNone, kInverted, kNotConverged };
 
-  // Pattern of K_ii from the full pattern (rows of each column stay sorted: the numbering is monotone).
-  void build(const Eigen::SparseMatrix<double>& pattern) {
-    std::vector<Eigen::Index> outer(static_cast<std::size_t>(count) + 1, 0);
-    std::vector<int> inner;
-    kii_source.clear();
-    for (Eigen::Index j = 0; j < pattern.outerSize(); ++j) {
-      const int cj = unknown[static_cast<std::size_t>(j)];
-      if (cj < 0) continue;
-      for (Eigen::SparseMatrix<double>::InnerIterator it(pattern, j); it; ++it) {
-        const int ri = unknown[static_cast<std::size_t>(it.row())];
-        if (ri < 0) continue;
-        inner.push_back(ri);
-        kii_source.push_back(static_cast<int>(&it.value() - pattern.valuePtr()));
-      }
-      outer[static_cast<std::size_t>(cj) + 1] = static_cast<Eigen::Index>(inner.size());
+}  // namespace
+
+ReducedSystem ReducedSystem::make(const ElasticModel& model, const std::vector<int>& imposed_dofs) {
+  const int ndof = 3 * model.node_count();
+  ReducedSystem sys;
+  sys.unknown.assign(static_cast<std::size_t>(ndof), -1);
+  std::vector<char> is_imposed(static_cast<std::size_t>(ndof), 0);
+  for (int d : imposed_dofs) is_imposed[static_cast<std::size_t>(d)] = 1;
+  sys.imposed_dofs = imposed_dofs;
+  sys.target = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(imposed_dofs.size()));
+  for (int d = 0; d < ndof; ++d)
+    if (!model.fixed.dof_fixed(d) && !is_imposed[static_cast<std::size_t>(d)]) sys.unknown[static_cast<std::size_t>(d)] = sys.count++;
+  sys.build(model.k);
+  return sys;
+}
+
+void ReducedSystem::build(const Eigen::SparseMatrix<double>& pattern) {
+  std::vector<Eigen::Index> outer(static_cast<std::size_t>(count) + 1, 0);
+  std::vector<int> inner;
+  kii_source.clear();
+  for (Eigen::Index j = 0; j < pattern.outerSize(); ++j) {
+    const int cj = unknown[static_cast<std::size_t>(j)];
+    if (cj < 0) continue;
+    for (Eigen::SparseMatrix<double>::InnerIterator it(pattern, j); it; ++it) {
+      const int ri = unknown[static_cast<std::size_t>(it.row())];
+      if (ri < 0) continue;
+      inner.push_back(ri);
+      kii_source.push_back(static_cast<int>(&it.value() - pattern.valuePtr()));
     }
-    kii.resize(count, count);
-    kii.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
-    std::copy(outer.begin(), outer.end(), kii.outerIndexPtr());
-    std::copy(inner.begin(), inner.end(), kii.innerIndexPtr());
+    outer[static_cast<std::size_t>(cj) + 1] = static_cast<Eigen::Index>(inner.size());
   }
-  void refresh(const Eigen::SparseMatrix<double>& kt) {
-    for (std::size_t e = 0; e < kii_source.size(); ++e)
-      kii.valuePtr()[e] = kt.valuePtr()[kii_source[e]];
-  }
-  // r_i: the full vector restricted to the unknowns.
-  Eigen::VectorXd restrict(const Eigen::VectorXd& full) const {
-    Eigen::VectorXd r(count);
-    for (std::size_t d = 0; d < unknown.size(); ++d)
-      if (unknown[d] >= 0) r[unknown[d]] = full[static_cast<Eigen::Index>(d)];
-    return r;
-  }
-  double imposed_norm(const Eigen::VectorXd& full) const {
-    double s = 0;
-    for (int d : imposed_dofs) s += full[d] * full[d];
-    return std::sqrt(s);
-  }
-};
+  kii.resize(count, count);
+  kii.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), kii.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), kii.innerIndexPtr());
+}
 
-// Solves K_ii x = b: CHOLMOD, or Eigen's LDL^T when the tangent is not positive definite. False when singular.
-bool solve_tangent(const Eigen::SparseMatrix<double>& kii, const Eigen::VectorXd& b, Eigen::VectorXd& x,
-                   bool& ldlt_used) {
-  x.resize(b.size());
+void ReducedSystem::refresh(const Eigen::SparseMatrix<double>& kt) {
+  for (std::size_t e = 0; e < kii_source.size(); ++e) kii.valuePtr()[e] = kt.valuePtr()[kii_source[e]];
+}
+
+Eigen::VectorXd ReducedSystem::restrict(const Eigen::VectorXd& full) const {
+  Eigen::VectorXd r(count);
+  for (std::size_t d = 0; d < unknown.size(); ++d)
+    if (unknown[d] >= 0) r[unknown[d]] = full[static_cast<Eigen::Index>(d)];
+  return r;
+}
+
+double ReducedSystem::imposed_norm(const Eigen::VectorXd& full) const {
+  double s = 0;
+  for (int d : imposed_dofs) s += full[d] * full[d];
+  return std::sqrt(s);
+}
+
+void ReducedSystem::subtract_coupling(const Eigen::SparseMatrix<double>& kt, int dof, double dc,
+                                      Eigen::VectorXd& rhs) const {
+  for (Eigen::SparseMatrix<double>::InnerIterator it(kt, dof); it; ++it) {
+    const int ri = unknown[static_cast<std::size_t>(it.row())];
+    if (ri >= 0) rhs[ri] -= it.value() * dc;  // K_T symmetric: column d = row d
+  }
+}
+
+void ReducedSystem::add_unknowns(const Eigen::VectorXd& x, double alpha, Eigen::VectorXd& full) const {
+  for (std::size_t d = 0; d < unknown.size(); ++d)
+    if (unknown[d] >= 0) full[static_cast<Eigen::Index>(d)] += alpha * x[unknown[d]];
+}
+
+bool solve_reduced_tangent(const Eigen::SparseMatrix<double>& kii, const Eigen::Ref<const Eigen::MatrixXd>& b,
+                           Eigen::MatrixXd& x, bool& ldlt_used) {
+  x.resize(b.rows(), b.cols());
   try {
     CholmodSolver chol(kii);
     chol.solve(b, x);
@@ -241,27 +261,42 @@ bool solve_tangent(const Eigen::SparseMatrix<double>& kii, const Eigen::VectorXd
   return ldlt.info() == Eigen::Success && x.allFinite();
 }
 
-enum class Failure { kNone, kInverted, kNotConverged };
-
-}  // namespace
+LineSearchOutcome HyperelasticSolver::line_search(const ReducedSystem& sys, const Eigen::VectorXd& du_i, double r,
+                                                  Eigen::VectorXd& v, Eigen::VectorXd& f, Eigen::VectorXd& trial,
+                                                  Eigen::VectorXd& ft) const {
+  LineSearchOutcome out;
+  double alpha = 1;
+  for (int h = 0; h <= options_.max_line_search_halvings; ++h, alpha *= 0.5) {
+    trial = v;
+    sys.add_unknowns(du_i, alpha, trial);
+    double jmin = 0;
+    int worst = -1;
+    if (!internal_force(trial, ft, nullptr, &jmin, &worst)) {
+      out.bad_tet = worst;
+      continue;
+    }
+    out.any_valid = true;
+    if (sys.restrict(ft).norm() <= (1 - 1e-4 * alpha) * r) {
+      out.accepted = true;
+      v.swap(trial);
+      f.swap(ft);
+      out.min_jacobian = jmin;
+      break;
+    }
+    ++out.halvings;
+  }
+  return out;
+}
 
 HyperelasticSolution HyperelasticSolver::solve(const std::vector<ImposedDisplacement>& imposed) const {
   const int n = model_.node_count();
   const int ndof = 3 * n;
   const auto dof_values = imposed_dof_values(model_.fixed, imposed);
 
-  ReducedSystem sys;
-  sys.unknown.assign(static_cast<std::size_t>(ndof), -1);
-  std::vector<char> is_imposed(static_cast<std::size_t>(ndof), 0);
-  sys.target.resize(static_cast<Eigen::Index>(dof_values.size()));
-  for (const auto& [dof, v] : dof_values) {
-    is_imposed[static_cast<std::size_t>(dof)] = 1;
-    sys.target[static_cast<Eigen::Index>(sys.imposed_dofs.size())] = v;
-    sys.imposed_dofs.push_back(dof);
-  }
-  for (int d = 0; d < ndof; ++d)
-    if (!model_.fixed.dof_fixed(d) && !is_imposed[static_cast<std::size_t>(d)]) sys.unknown[static_cast<std::size_t>(d)] = sys.count++;
-  sys.build(model_.k);
+  std::vector<int> imposed_dofs;
+  for (const auto& dv : dof_values) imposed_dofs.push_back(dv.first);
+  ReducedSystem sys = ReducedSystem::make(model_, imposed_dofs);
+  for (std::size_t c = 0; c < dof_values.size(); ++c) sys.target[static_cast<Eigen::Index>(c)] = dof_values[c].second;
 
   HyperelasticSolution out;
   for (const auto& dv : dof_values)
@@ -290,7 +325,8 @@ HyperelasticSolution HyperelasticSolver::solve(const std::vector<ImposedDisplace
   double done = 0, ds = nominal;
   int cuts = 0;
   Eigen::SparseMatrix<double> kt;
-  Eigen::VectorXd v, trial, ft, du_i, rhs;
+  Eigen::VectorXd v, trial, ft, rhs;
+  Eigen::MatrixXd du_i;
   while (done < 1) {
     HyperelasticStep step;
     step.load_factor = (1 - (done + ds) < 1e-12) ? 1.0 : done + ds;
@@ -307,18 +343,14 @@ HyperelasticSolution HyperelasticSolver::solve(const std::vector<ImposedDisplace
       for (std::size_t c = 0; c < sys.imposed_dofs.size(); ++c) {
         const int d = sys.imposed_dofs[c];
         const double dc = step.load_factor * sys.target[static_cast<Eigen::Index>(c)] - v[d];
-        for (Eigen::SparseMatrix<double>::InnerIterator it(kt, d); it; ++it) {
-          const int ri = sys.unknown[static_cast<std::size_t>(it.row())];
-          if (ri >= 0) rhs[ri] -= it.value() * dc;  // K_T symmetric: column d = row d
-        }
+        sys.subtract_coupling(kt, d, dc, rhs);
         v[d] += dc;
       }
-      if (!solve_tangent(sys.kii, rhs, du_i, step.ldlt_fallback)) {
+      if (!solve_reduced_tangent(sys.kii, rhs, du_i, step.ldlt_fallback)) {
         failure = Failure::kNotConverged;
         step.failure = "singular tangent in the predictor";
       } else {
-        for (int d = 0; d < ndof; ++d)
-          if (sys.unknown[static_cast<std::size_t>(d)] >= 0) v[d] += du_i[sys.unknown[static_cast<std::size_t>(d)]];
+        sys.add_unknowns(du_i.col(0), 1.0, v);
         ++step.iterations;
         if (!internal_force(v, f, nullptr, &step.min_jacobian, &bad_tet)) {
           failure = Failure::kInverted;
@@ -343,34 +375,17 @@ HyperelasticSolution HyperelasticSolver::solve(const std::vector<ImposedDisplace
         break;
       }
       sys.refresh(kt);
-      if (!solve_tangent(sys.kii, -sys.restrict(f), du_i, step.ldlt_fallback)) {
+      if (!solve_reduced_tangent(sys.kii, -sys.restrict(f), du_i, step.ldlt_fallback)) {
         failure = Failure::kNotConverged;
         step.failure = "singular tangent";
         break;
       }
       ++step.iterations;
-      double alpha = 1;
-      bool accepted = false, any_valid = false;
-      for (int h = 0; h <= options_.max_line_search_halvings; ++h, alpha *= 0.5) {
-        trial = v;
-        for (int d = 0; d < ndof; ++d)
-          if (sys.unknown[static_cast<std::size_t>(d)] >= 0) trial[d] += alpha * du_i[sys.unknown[static_cast<std::size_t>(d)]];
-        double jmin = 0;
-        int worst = -1;
-        if (!internal_force(trial, ft, nullptr, &jmin, &worst)) {
-          bad_tet = worst;
-          continue;
-        }
-        any_valid = true;
-        if (sys.restrict(ft).norm() <= (1 - 1e-4 * alpha) * r) {
-          accepted = true;
-          v.swap(trial);
-          f.swap(ft);
-          step.min_jacobian = jmin;
-          break;
-        }
-        ++step.line_search_halvings;
-      }
+      const LineSearchOutcome ls = line_search(sys, du_i.col(0), r, v, f, trial, ft);
+      step.line_search_halvings += ls.halvings;
+      if (ls.accepted) step.min_jacobian = ls.min_jacobian;
+      if (ls.bad_tet >= 0) bad_tet = ls.bad_tet;
+      const bool accepted = ls.accepted, any_valid = ls.any_valid;
       if (!accepted) {
         failure = any_valid ? Failure::kNotConverged : Failure::kInverted;
         step.failure = any_valid ? "the line search found no decrease of the residual"

@@ -89,6 +89,47 @@ struct HyperelasticSolution {
   bool converged() const { return status == HyperelasticStatus::kConverged; }
 };
 
+/// The unknown dofs (free and not imposed) of a solve with some imposed dofs and the part K_ii of a tangent that a
+/// Newton iteration factors, in the model's pattern: shared by HyperelasticSolver::solve and the multirate tracker
+/// (liver/multirate.h). Allocates in make() and build() only.
+struct ReducedSystem {
+  std::vector<int> unknown;          // #dofs: index among the unknowns, or -1 (fixed or imposed)
+  std::vector<int> imposed_dofs;     // global dofs with an imposed value, ascending
+  Eigen::VectorXd target;            // #imposed: u* on those dofs, m
+  Eigen::SparseMatrix<double> kii;   // unknowns x unknowns, values refreshed from the full K_T
+  std::vector<int> kii_source;       // #kii nonzeros: value index in the full pattern
+  int count = 0;                     // number of unknowns
+
+  /// The unknowns of `model` when `imposed_dofs` (ascending) are imposed, and the pattern of K_ii (target sized, 0).
+  static ReducedSystem make(const ElasticModel& model, const std::vector<int>& imposed_dofs);
+  /// Pattern of K_ii from the full pattern (rows of each column stay sorted: the numbering is monotone).
+  void build(const Eigen::SparseMatrix<double>& pattern);
+  /// K_ii's values from a full tangent in the model's pattern.
+  void refresh(const Eigen::SparseMatrix<double>& kt);
+  /// r_i: the full vector restricted to the unknowns.
+  Eigen::VectorXd restrict(const Eigen::VectorXd& full) const;
+  /// |full| over the imposed dofs.
+  double imposed_norm(const Eigen::VectorXd& full) const;
+  /// rhs_i -= K_T(i, dof) dc for every unknown i (column `dof` of the symmetric tangent).
+  void subtract_coupling(const Eigen::SparseMatrix<double>& kt, int dof, double dc, Eigen::VectorXd& rhs) const;
+  /// full += alpha x on the unknowns (x indexed by unknown).
+  void add_unknowns(const Eigen::VectorXd& x, double alpha, Eigen::VectorXd& full) const;
+};
+
+/// Solves K_ii x = b for every column of b: CHOLMOD, or Eigen's LDL^T when the tangent is not positive definite
+/// (`ldlt_used` set then). False when singular or not finite.
+bool solve_reduced_tangent(const Eigen::SparseMatrix<double>& kii, const Eigen::Ref<const Eigen::MatrixXd>& b,
+                           Eigen::MatrixXd& x, bool& ldlt_used);
+
+/// What one backtracking line search of a Newton correction did (HyperelasticSolver::line_search).
+struct LineSearchOutcome {
+  bool accepted = false;   // a step with sufficient decrease of |r_i| was taken
+  bool any_valid = false;  // some trial step inverted no tet
+  int halvings = 0;        // trials refused for too little decrease (not for inversion)
+  double min_jacobian = 1; // smallest det F at the accepted state
+  int bad_tet = -1;        // the worst tet of the last inverted trial, else -1
+};
+
 /// The neo-Hookean organ: reads the mesh, material and fixed set of an ElasticModel (which must outlive it) and the
 /// sparsity of its K. Construction throws surgsim::Error on a degenerate or inverted rest tet.
 class HyperelasticSolver {
@@ -109,7 +150,14 @@ class HyperelasticSolver {
   /// False on an inverted tet (k then unspecified).
   bool tangent_stiffness(const Eigen::VectorXd& u, Eigen::SparseMatrix<double>& k) const;
 
+  /// One correction's line search: tries v + alpha du_i (alpha = 1, 1/2, ... down to 2^-max_line_search_halvings)
+  /// until |r_i| <= (1 - 1e-4 alpha) r, refusing any trial that inverts a tet. When accepted, v and f hold the new
+  /// state and its internal force; otherwise they are unchanged. `trial`, `ft`: the caller's scratch.
+  LineSearchOutcome line_search(const ReducedSystem& sys, const Eigen::VectorXd& du_i, double r, Eigen::VectorXd& v,
+                                Eigen::VectorXd& f, Eigen::VectorXd& trial, Eigen::VectorXd& ft) const;
+
   const HyperelasticOptions& options() const { return options_; }
+  const ElasticModel& model() const { return model_; }
   const LameParameters& lame() const { return lame_; }
 
  private:

@@ -2,6 +2,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <algorithm>
+#include <cmath>
 #include <memory>
 #include <random>
 #include <vector>
@@ -50,6 +51,15 @@ inline std::unique_ptr<Organ> box_organ(int nx = 8, int ny = 6, int nz = 4, BoxS
 template <typename A, typename B>
 double rel_error(const A& a, const B& b, double floor = 1e-300) {
   return (a - b).cwiseAbs().maxCoeff() / std::max(b.cwiseAbs().maxCoeff(), floor);
+}
+
+/// Top nodes of box_organ (z = 0.08) within `radius` of (x, y) in the xy plane.
+inline std::vector<int> top_patch(const TetMesh& mesh, double x, double y, double radius) {
+  std::vector<int> out;
+  for (int i = 0; i < mesh.nodes.rows(); ++i)
+    if (std::abs(mesh.nodes(i, 2) - 0.08) < 1e-9 && std::hypot(mesh.nodes(i, 0) - x, mesh.nodes(i, 1) - y) <= radius)
+      out.push_back(i);
+  return out;
 }
 
 /// m distinct random picks from `pool`.

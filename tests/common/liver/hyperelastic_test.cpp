@@ -16,14 +16,7 @@
 namespace surgsim {
 namespace {
 
-// Top nodes of test::box_organ (z = 0.08) within `radius` of (x, y) in the xy plane.
-std::vector<int> top_patch(const TetMesh& mesh, double x, double y, double radius) {
-  std::vector<int> out;
-  for (int i = 0; i < mesh.nodes.rows(); ++i)
-    if (std::abs(mesh.nodes(i, 2) - 0.08) < 1e-9 && std::hypot(mesh.nodes(i, 0) - x, mesh.nodes(i, 1) - y) <= radius)
-      out.push_back(i);
-  return out;
-}
+using test::top_patch;
 
 std::vector<ImposedDisplacement> push(const std::vector<int>& nodes, const Eigen::Vector3d& d) {
   std::vector<ImposedDisplacement> out;

@@ -1,0 +1,138 @@
+// Multirate non-linear contact (issue 16; Cavusoglu & Tendick 2000, Astley & Hayward 1998, SOFA's running FEM with
+// a precomputed correction): a slow thread runs the neo-Hookean organ (liver/hyperelastic.h) under the current
+// contact constraints, a few Newton iterations per cycle from its last state, and publishes a local linear model
+// about that state; the 1 kHz loop evaluates the model at the tool's current position.
+//
+// Slow side, NonlinearTracker::cycle(targets): the contact nodes' three components are imposed (components of the
+// fixed set stay 0). From the current state u, each iteration assembles the tangent K_T(u), factors K_ii once
+// (CHOLMOD, LDL^T when not positive definite: solve_reduced_tangent) and solves for [predictor | K_ic]: the predictor
+// moves the contact dofs to their targets and the unknowns by the linearized response, or, when the contact dofs are
+// already there, a Newton correction with HyperelasticSolver's line search. A predictor that inverts a tet is halved
+// (the contact dofs then reach their targets over several cycles). From the same factorization:
+//   S = K_cc - K_ci K_ii^-1 K_ic   (the contact stiffness of the tangent, the Schur complement, 3m x 3m, N/m)
+//   f_c = f_int,c - (K_ii^-1 K_ic)^T r_i   (the reactions on the contact dofs, linearly corrected for the
+//                                           remaining out-of-balance force r_i of the unknowns)
+// The snapshot (u_c, f_c, S, the surface displacement) goes through a TripleBuffer (liver/corotation.h).
+// Allocates: the slow side only (a new contact set rebuilds the reduced system).
+//
+// Fast side, local_contact_forces(): lambda = f_c + S (u_c(now) - u_c(snapshot)) per node, no allocation, O(m^2).
+// MultirateForce takes the newest snapshot and falls back to the linear precomputed model (Superposition::solve)
+// when no valid snapshot covers the current contact set or the result is not finite.
+#pragma once
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "liver/corotation.h"
+#include "liver/hyperelastic.h"
+#include "liver/superposition.h"
+
+namespace surgsim {
+
+struct MultirateOptions {
+  int iterations_per_cycle = 2;       // factorizations per slow cycle at most (>= 1)
+  double residual_tolerance = 1e-9;   // converged when |r_i| <= tol * max(|f_c|, force_floor), as HyperelasticOptions
+  double force_floor = 1e-12;         // N
+  int max_predictor_halvings = 6;     // a predictor that inverts a tet is halved up to this many times
+  double max_extrapolation = 0.01;    // m: the fast side clamps |u_c(now) - u_c(snapshot)| of each node to this
+};
+
+/// The imposed displacements the fast side asks for (all three components of each node), fixed capacity.
+struct ContactTargets {
+  int count = 0;
+  std::array<int, kMaxContacts> nodes{};
+  std::array<Eigen::Vector3d, kMaxContacts> u{};  // m, from the rest position
+};
+
+/// One published state of the slow side. Preallocated (sized by NonlinearTracker); written in place.
+struct TrackerSnapshot {
+  bool valid = false;                              // a finite state of this contact set
+  std::uint64_t cycle = 0;                         // the tracker's cycle that made it
+  int count = 0;                                   // contact nodes
+  std::array<int, kMaxContacts> nodes{};           // in the order of the targets
+  std::array<Eigen::Vector3d, kMaxContacts> u{};   // m, the contact nodes' displacement in the state
+  std::array<Eigen::Vector3d, kMaxContacts> reaction{};  // N, force on the organ at each node (f_c)
+  Eigen::MatrixXd stiffness;                       // (3 kMaxContacts)^2, N/m: S in the top-left 3 count block
+  double residual = 0;                             // |r_i| / max(|f_c|, floor) of the state
+  bool converged = false;                          // residual within the tolerance and the targets reached
+  Eigen::VectorXd surface;                         // 3 x #surface nodes, m: the state's displacement there
+};
+
+/// What one slow cycle did.
+struct TrackerCycle {
+  int iterations = 0;          // factorizations
+  bool converged = false;      // the published state is converged at the targets
+  bool set_changed = false;    // the contact set differed from the previous cycle's (reduced system rebuilt)
+  double residual = 0;         // relative, of the published state
+  int predictor_halvings = 0;  // inversion cuts of the predictor
+  bool ldlt_fallback = false;  // the tangent was not positive definite
+  double assemble_ms = 0, factor_ms = 0, total_ms = 0;  // wall clock: tangent + internal force, factor + solves
+  std::string failure;         // "" or why nothing was published
+};
+
+class NonlinearTracker {
+ public:
+  /// `solver` (its model) must outlive the tracker. `surface_nodes`: the nodes whose displacement each snapshot
+  /// carries (for drawing; the bench's visible nodes). Throws surgsim::Error on bad options.
+  NonlinearTracker(const HyperelasticSolver& solver, std::vector<int> surface_nodes,
+                   const MultirateOptions& options = MultirateOptions());
+
+  /// One slow cycle towards `targets` (see the file comment), then publishes a snapshot (unless the tangent was
+  /// singular or inverted: the state is left as it was and `failure` says why). Throws surgsim::Error for a node out
+  /// of range, a repeated node or more than kMaxContacts.
+  TrackerCycle cycle(const ContactTargets& targets);
+  /// Back to rest (u = 0), nothing published.
+  void reset();
+
+  TripleBuffer<TrackerSnapshot>& snapshots() { return snapshots_; }
+  const Eigen::VectorXd& state() const { return u_; }  // 3N, m
+  std::uint64_t cycles() const { return cycles_; }
+  const MultirateOptions& options() const { return options_; }
+
+ private:
+  void publish(const ContactTargets& targets, const Eigen::MatrixXd& x, bool converged, double residual);
+
+  const HyperelasticSolver& solver_;
+  const ElasticModel& model_;
+  std::vector<int> surface_nodes_;
+  MultirateOptions options_;
+  TripleBuffer<TrackerSnapshot> snapshots_;
+  std::uint64_t cycles_ = 0;
+  Eigen::VectorXd u_, f_, v_, fv_, trial_, ft_, ri_, rhs_;
+  Eigen::SparseMatrix<double> kt_;
+  ReducedSystem sys_;
+  std::vector<int> dof_contact_;  // per imposed dof: 3 * (index in the targets) + component
+  Eigen::MatrixXd b_, x_, s_;
+};
+
+/// The local model, no allocation: for each contact (node, u now) the snapshot's node, lambda = f_c + S du with du
+/// clamped to `max_extrapolation` per node; out.lambda (force on the organ), out.tool_force = -sum, out.nodes and
+/// out.displacement filled as Superposition::solve does. False (out.count = 0) when the snapshot is not valid, its
+/// node set differs from the contacts', or the result is not finite.
+bool local_contact_forces(const TrackerSnapshot& snapshot, const Contact* contacts, int m, double max_extrapolation,
+                          ContactSolution& out) noexcept;
+
+/// Where a MultirateForce::evaluate result came from.
+enum class MultirateSource : std::uint8_t { kNonlinear = 0, kLinearFallback };
+
+/// The 1 kHz side: the newest snapshot of a tracker's buffer, or the linear model. One per haptic thread.
+class MultirateForce {
+ public:
+  MultirateForce(TripleBuffer<TrackerSnapshot>& snapshots, Superposition& linear, double max_extrapolation)
+      : snapshots_(snapshots), linear_(linear), max_extrapolation_(max_extrapolation) {}
+  /// No allocation. Never returns a non-finite force: the linear model's result when the snapshot cannot be used.
+  MultirateSource evaluate(const Contact* contacts, int m, ContactSolution& out) noexcept;
+  std::uint64_t fallbacks() const { return fallbacks_; }
+
+ private:
+  TripleBuffer<TrackerSnapshot>& snapshots_;
+  Superposition& linear_;
+  double max_extrapolation_;
+  bool have_ = false;
+  std::uint64_t fallbacks_ = 0;
+};
+
+}  // namespace surgsim
