@@ -68,9 +68,12 @@ int write_cap_indices(std::uint32_t* out, std::uint32_t ring, std::uint32_t inte
 }  // namespace
 
 TubeLod tube_lod(int lod) {
+  // Issue 15: the coarsest level is still round (16 sides, 2 rings an interval; see the header).
+  static constexpr int kSides[kTubeMaxLod + 1] = {16, 24, 24, 32, 32, 48, 64};
+  static constexpr int kRings[kTubeMaxLod + 1] = {2, 2, 4, 4, 8, 8, 8};
   lod = std::clamp(lod, 0, kTubeMaxLod);
-  const int sides = 4 << ((lod + 1) / 2);
-  return TubeLod{sides, 1 << (lod / 2), std::max(1, sides / 4)};
+  const int sides = kSides[lod];
+  return TubeLod{sides, kRings[lod], std::max(1, sides / 4)};
 }
 
 int tube_cap_vertices(const TubeLod& lod) { return (lod.cap_rings - 1) * lod.sides + 1; }

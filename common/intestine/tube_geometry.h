@@ -17,8 +17,16 @@
 //      B_k = [r_b N_b, r_b B_b, l T_b, c_b - l T_b] the frames at the interval's ends (l: chord length) and the weight
 //      w(t) = 3 t^2 - 2 t^3. Because w'(0) = w'(1) = 0 the axis leaves each ring along that ring's tangent, so
 //      the skinned tube is C1 across rings and the axis is a Hermite-like cubic between them.
-//   7. levels of detail: LOD i (0..kTubeMaxLod) has sides x rings = 4 2^i quads per interval (8 2^i triangles),
-//      sides = 4 2^ceil(i/2), rings = 2^floor(i/2);
+//   7. levels of detail: LOD i (0..kTubeMaxLod) has sides x rings quads per interval: 16 x 2, 24 x 2, 24 x 4,
+//      32 x 4, 32 x 8, 48 x 8, 64 x 8 (32 to 512 quads; each level 1.3 to 2 times the previous one's triangles).
+//      The paper's ladder doubles from 4 sides x 1 ring (4 2^i quads): its coarsest levels are a square and an
+//      octagon in cross-section with straight pieces between the samples, and a frame-rate controller held below
+//      its target (issue 15: live next to the haptic node on 2 cores) draws them. Here the coarsest level is still
+//      round: 16 sides (on the skinned rest shape adjacent vertex normals at most 26 degrees apart, so the
+//      interpolated shading turns smoothly, and the flat faces within 2.5 % of the radius: under a pixel at the
+//      shipped camera) and 2 rings per interval, so that the axis follows the skinned curve between samples
+//      (tube_geometry_test EveryLevelOfDetailIsRoundWithSmoothNormals). Rings are powers of two up to 8, so every
+//      level's rings are a subset of the finest level's (the ring guard below);
 //   8. rounded end caps: a hemisphere on the first and the last ring (the ring's own radius and frame), cap_rings =
 //      sides / 4 latitude steps from the ring to the pole, sharing the ring's vertices, so the tube is closed
 //      (watertight: every edge in exactly two triangles) with outward normals.
