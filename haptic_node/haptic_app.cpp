@@ -7,6 +7,8 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <sys/resource.h>
+#include <ctime>
 
 #include "surgsim_types.h"
 #include "core/clock.h"
@@ -15,13 +17,39 @@
 #include "liver/tensor_cache.h"
 #include "mesher/scene_mesh.h"
 #include "publisher.h"
+#include "os/cpu_affinity.h"
+#include "os/cpu_latency.h"
 #include "os/thread_priority.h"
 #include "rt_loop.h"
 #include "tool/tool.h"
 
 namespace surgsim {
+namespace {
 
-HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_(1), wake_late_us_(1) {
+/// CPU time of the calling thread, ns (excludes time it was preempted, in interrupts or stolen by the hypervisor).
+std::uint64_t thread_cpu_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
+}
+
+}  // namespace
+
+HapticApp::HapticApp(const HapticOptions& options)
+    : options_(options), tick_us_(1), tick_cpu_us_(1), wake_late_us_(1) {
+  // --- init: CPU placement. With --cpu N the loop thread runs on CPU N (run()) and every thread this node starts
+  // from here on (DDS, publisher, log writers) inherits the other CPUs (os/cpu_affinity.h); the model is built there
+  // too. ---
+  if (options_.cpu >= 0) {
+    const std::vector<int> allowed = allowed_cpus();
+    if (std::find(allowed.begin(), allowed.end(), options_.cpu) == allowed.end()) {
+      throw_error("--cpu ", options_.cpu, ": this process may run on CPUs ", cpu_list(allowed),
+                  ": give one of them, or -1 not to pin the loop");
+    }
+    placement_note_ = keep_off_cpu(options_.cpu);
+  } else {
+    placement_note_ = "not pinned (--cpu -1)";
+  }
   // --- init: scene ---
   scene_ = load_scene(resolve_scene_path(options_.scene));
   rate_hz_ = options_.rate_hz > 0 ? options_.rate_hz : scene_.haptic.rate_hz;
@@ -103,6 +131,12 @@ HapticApp::HapticApp(const HapticOptions& options) : options_(options), tick_us_
     log_writer_ = std::make_unique<AsyncLineWriter>(log_, options_.speed <= 0, std::size_t{1} << 14, 1024);
   }
   tick_us_ = SampleRecorder(total_ticks_ + 16);
+  tick_cpu_us_ = SampleRecorder(total_ticks_ + 16);
+  if (!options_.tick_trace.empty()) {
+    tick_trace_file_ = std::fopen(options_.tick_trace.c_str(), "w");
+    if (tick_trace_file_ == nullptr) throw_error(options_.tick_trace, ": cannot create the --tick-trace file");
+    tick_trace_.resize(static_cast<std::size_t>(total_ticks_));
+  }
   wake_late_us_ = SampleRecorder(total_ticks_ + 16);
 
   // --- init: DDS entities (QoS from the XML profiles) ---
@@ -165,6 +199,7 @@ HapticApp::~HapticApp() {
   record_writer_.reset();
   log_writer_.reset();
   if (log_ != nullptr) std::fclose(log_);
+  if (tick_trace_file_ != nullptr) std::fclose(tick_trace_file_);
 }
 
 bool HapticApp::input_pose(int i, double t, Pose5& pose) {
@@ -320,12 +355,21 @@ int HapticApp::run() {
 
   const RealtimeStatus rt = enter_realtime(options_.speed > 0 ? options_.rt_priority : 0, options_.lock_memory, options_.cpu);
   realtime_note_ = rt.note;
+  // Idle CPUs poll instead of halting while the paced loop runs (os/cpu_latency.h): a halted virtual CPU wakes for
+  // the loop's timer only once the hypervisor runs it again. Withdrawn when run() returns.
+  const CpuLatencyRequest latency(options_.speed > 0 ? options_.cpu_latency_us : -1);
+  cpu_latency_note_ = latency.note();
   // A loop without SCHED_FIFO keeps every frame (the publisher may make it wait when 64 ticks behind); a real-time
   // loop never waits and the publisher skips frames it reaches too late (publisher.h).
   publisher_->set_back_pressure(!rt.fifo);
-  if (!options_.quiet) std::cerr << "haptic_node: " << rt.note << "\n";
+  if (!options_.quiet) {
+    std::cerr << "haptic_node: " << rt.note << "; " << placement_note_ << "; " << cpu_latency_note_ << "\n";
+  }
 
   // --- run: the loop (no allocation from here to the end of the loop) ---
+  rusage usage_before{};
+  getrusage(RUSAGE_THREAD, &usage_before);
+
   const bool paced = options_.speed > 0;
   const auto period_ns = static_cast<std::int64_t>(std::llround(1e9 * dt_ / (paced ? options_.speed : 1.0)));
   PeriodicTimer timer(period_ns);
@@ -335,16 +379,37 @@ int HapticApp::run() {
   period_ns_ = paced ? static_cast<std::uint64_t>(period_ns) : 0;
   for (std::uint64_t k = 0; k < total_ticks_; ++k) {
     if (stop_requested_.load(std::memory_order_relaxed)) break;
+    std::int64_t late_ns = 0;
     if (paced) {
-      wake_late_us_.add(static_cast<double>(timer.wait()) * 1e-3);
+      late_ns = timer.wait();
+      wake_late_us_.add(static_cast<double>(late_ns) * 1e-3);
       tick_due_ns_ = static_cast<std::uint64_t>(timer.next_deadline_ns() - period_ns);  // this tick's deadline
     }
     const std::uint64_t t0 = monotonic_ns();
+    const std::uint64_t c0 = thread_cpu_ns();
     tick(k);
-    tick_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
+    // The tick's wall time and the CPU time the loop thread got during it: the difference is time the thread was
+    // off its CPU (preempted, interrupts) or waiting in the kernel; time the hypervisor took from this virtual CPU
+    // counts as CPU time here.
+    const std::uint64_t c1 = thread_cpu_ns();
+    const std::uint64_t t1 = monotonic_ns();
+    tick_cpu_us_.add(static_cast<double>(c1 - c0) * 1e-3);
+    tick_us_.add(static_cast<double>(t1 - t0) * 1e-3);
+    if (k < tick_trace_.size()) {
+      tick_trace_[k] = TickTrace{tick_due_ns_ - loop_start_ns_, static_cast<std::uint32_t>(late_ns),
+                                 static_cast<std::uint32_t>(std::min<std::uint64_t>(t1 - t0, UINT32_MAX)),
+                                 static_cast<std::uint32_t>(std::min<std::uint64_t>(c1 - c0, UINT32_MAX)),
+                                 static_cast<std::uint32_t>(timer.misses())};
+    }
     ticks_done_ = k + 1;
   }
   wall_seconds_ = static_cast<double>(monotonic_ns() - wall_start) * 1e-9;
+  rusage usage_after{};
+  getrusage(RUSAGE_THREAD, &usage_after);
+  loop_involuntary_switches_ = usage_after.ru_nivcsw - usage_before.ru_nivcsw;
+  loop_voluntary_switches_ = usage_after.ru_nvcsw - usage_before.ru_nvcsw;
+  loop_page_faults_ = (usage_after.ru_minflt - usage_before.ru_minflt) + (usage_after.ru_majflt - usage_before.ru_majflt);
+  if (options_.cpu >= 0) other_threads_on_loop_cpu_ = other_threads_allowed_on(options_.cpu);
   deadline_misses_ = paced ? timer.misses() : 0;
   // The last tick's force and frame are written, then a zero force releases the device.
   finish_publishing();
@@ -358,7 +423,20 @@ int HapticApp::run() {
   log_writer_.reset();
   recorder_.close();
   if (log_ != nullptr) std::fflush(log_);
+  write_tick_trace();
   return 0;
+}
+
+void HapticApp::write_tick_trace() {
+  if (tick_trace_file_ == nullptr) return;
+  std::fprintf(tick_trace_file_, "tick,due_us,wake_late_us,tick_us,tick_cpu_us,misses\n");
+  for (std::uint64_t k = 0; k < ticks_done_ && k < tick_trace_.size(); ++k) {
+    const TickTrace& r = tick_trace_[static_cast<std::size_t>(k)];
+    std::fprintf(tick_trace_file_, "%llu,%.3f,%.3f,%.3f,%.3f,%u\n", static_cast<unsigned long long>(k),
+                 static_cast<double>(r.due_ns) * 1e-3, r.late_ns * 1e-3, r.wall_ns * 1e-3, r.cpu_ns * 1e-3, r.misses);
+  }
+  std::fclose(tick_trace_file_);
+  tick_trace_file_ = nullptr;
 }
 
 void HapticApp::finish_publishing() {
@@ -381,6 +459,17 @@ void HapticApp::shutdown() {
   j["wall_seconds"] = wall_seconds_;
   j["achieved_hz"] = achieved;
   j["tick_us"] = to_json(tick);
+  j["tick_cpu_us"] = to_json(tick_cpu_us_.summary());
+  // Where the loop ran and what took its CPU away (os/cpu_affinity.h): the loop's CPU (-1: not pinned), where the
+  // other threads went, how many of them may still run on the loop's CPU, and the loop thread's context switches
+  // (involuntary: preempted) and page faults during the loop.
+  j["cpu_placement"] = {{"loop_cpu", options_.cpu},
+                        {"others", placement_note_},
+                        {"other_threads_on_loop_cpu", other_threads_on_loop_cpu_}};
+  j["cpu_latency"] = cpu_latency_note_;
+  j["loop_involuntary_switches"] = loop_involuntary_switches_;
+  j["loop_voluntary_switches"] = loop_voluntary_switches_;
+  j["loop_page_faults"] = loop_page_faults_;
   j["wake_late_us"] = to_json(late);
   j["deadline_misses"] = deadline_misses_;
   j["contacts_max"] = contacts_max_;

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "async_writer.h"
 #include "core/stats.h"
@@ -31,6 +32,7 @@ struct HapticOptions {
   std::string record;               // write the input used as a trajectory file
   double speed = 1.0;               // replay speed; <= 0 means "max" (no pacing, tick-exact)
   std::string log;                  // per-tick CSV
+  std::string tick_trace;           // per-tick timing CSV, written after the loop (what made a tick late)
   std::string stats;                // JSON summary on exit
   std::string cache_dir;            // generated meshes and tensors
   int domain = -1;                  // DDS domain; < 0 = default ($SURGSIM_DOMAIN or 0)
@@ -39,7 +41,8 @@ struct HapticOptions {
   int rt_priority = 80;             // SCHED_FIFO priority; 0 = normal scheduling
   int dds_rt_priority = 20;         // SCHED_FIFO priority of the DDS threads (below the loop); 0 = normal scheduling
   bool lock_memory = true;
-  int cpu = -1;                     // pin the loop thread to this CPU (-1: don't)
+  int cpu = -1;                     // pin the loop thread to this CPU, the node's other threads off it (-1: don't)
+  int cpu_latency_us = 0;           // CPU wake-up latency asked while the paced loop runs (os/cpu_latency.h); -1: none
   double wait_for_visual = 0;       // s to wait for a visual node to match before starting (0 = don't wait)
   bool quiet = false;
 };
@@ -116,6 +119,18 @@ class HapticApp {
 
   // Tick statistics (preallocated).
   SampleRecorder tick_us_;
+  SampleRecorder tick_cpu_us_;             // the loop thread's CPU time per tick (tick_us_ is wall time)
+  /// --tick-trace: one row per tick, kept in memory during the loop (preallocated) and written after it.
+  struct TickTrace {
+    std::uint64_t due_ns = 0;   // the tick's deadline from the loop's start
+    std::uint32_t late_ns = 0;  // wake-up after the deadline
+    std::uint32_t wall_ns = 0;  // the tick's wall time
+    std::uint32_t cpu_ns = 0;   // the loop thread's CPU time during it
+    std::uint32_t misses = 0;   // missed deadlines counted up to this tick's wake-up (a late tick k shows at k + 1)
+  };
+  std::vector<TickTrace> tick_trace_;
+  std::FILE* tick_trace_file_ = nullptr;
+  void write_tick_trace();
   SampleRecorder wake_late_us_;
   std::int64_t deadline_misses_ = 0;
   int contacts_max_ = 0;
@@ -125,6 +140,12 @@ class HapticApp {
   std::uint64_t record_writer_stats_ = 0;   // lines dropped (ring full) or failed to write
   std::uint64_t log_writer_stats_ = 0;
   double wall_seconds_ = 0;
+  std::string cpu_latency_note_;          // the CPU latency request while the loop ran
+  std::string placement_note_;            // where the threads other than the loop went (--cpu)
+  int other_threads_on_loop_cpu_ = -1;    // threads besides the loop that may run on its CPU (-1: not pinned)
+  long loop_involuntary_switches_ = 0;    // the loop thread's context switches and page faults during the loop
+  long loop_voluntary_switches_ = 0;
+  long loop_page_faults_ = 0;
   std::uint64_t loop_start_ns_ = 0;  // monotonic, when tick 0 was due (stats: lets tests line up other processes)
 };
 

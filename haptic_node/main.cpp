@@ -29,6 +29,8 @@ int main(int argc, char** argv) {
   cli.add_option("--record", o.record, "Write the tool input used to this trajectory file");
   cli.add_option("--speed", speed, "Replay speed factor, or 'max' (as fast as possible, tick-exact)")->capture_default_str();
   cli.add_option("--log", o.log, "Per-tick CSV: tick,t,fx,fy,fz,contacts");
+  cli.add_option("--tick-trace", o.tick_trace, "Per-tick timing CSV written after the loop: tick,due_us,wake_late_us,"
+                 "tick_us,tick_cpu_us,misses (what made a tick late)");
   cli.add_option("--stats", o.stats, "Write a JSON summary here on exit");
   cli.add_option("--cache", o.cache_dir, "Cache folder for generated meshes and tensors (default $SURGSIM_CACHE_DIR or ~/.cache/surgsim)");
   cli.add_option("--domain", o.domain, "DDS domain id (default $SURGSIM_DOMAIN or 0)");
@@ -42,7 +44,14 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 99))
       ->capture_default_str();
   cli.add_flag("!--no-mlock", o.lock_memory, "Do not lock memory");
-  cli.add_option("--cpu", o.cpu, "Pin the loop thread to this CPU (default: not pinned)");
+  cli.add_option("--cpu", o.cpu, "Pin the loop thread to this CPU and keep the node's other threads (DDS, publisher, "
+                 "log writers) off it (default -1: not pinned; scripts/run_local.sh gives 0 on a machine with 2 or more "
+                 "CPUs)");
+  cli.add_option("--cpu-latency-us", o.cpu_latency_us,
+                 "While the paced loop runs, ask the kernel to keep every CPU's wake-up latency at most this (PM QoS, "
+                 "/dev/cpu_dma_latency; 0: idle CPUs poll instead of halting, so a virtual machine's CPU is awake when "
+                 "the loop's timer fires); -1: ask nothing")
+      ->capture_default_str();
   cli.add_option("--wait-for-visual", o.wait_for_visual, "Wait up to S seconds for a visual node before starting");
   cli.add_flag("--quiet", o.quiet, "Print nothing but errors");
   CLI11_PARSE(cli, argc, argv);

@@ -7,6 +7,10 @@
 #       replays it and the page watches.)
 # Environment: SURGSIM_OUT (default out/<scene>), SURGSIM_BUILD_DIR, SURGSIM_DOMAIN, HAPTIC_ARGS, VISUAL_ARGS;
 # with --web: WEB_PORT (8080), WEB_FPS (frames streamed per second, 20), WEB_ARGS (e.g. "--bind 0.0.0.0").
+# CPU placement (issue 15): on a machine with 2 or more CPUs the haptic loop thread gets one CPU to itself,
+# SURGSIM_HAPTIC_CPU (default 0): haptic_node --cpu puts its other threads (DDS, publisher, log writers) on the
+# remaining CPUs, and the visual node (and surgsim-web) start there (taskset). SURGSIM_HAPTIC_CPU=none, a 1-CPU
+# machine, or a --cpu in HAPTIC_ARGS leave the placement to the nodes (nothing pinned unless HAPTIC_ARGS asks).
 set -euo pipefail
 web=0
 args=()
@@ -33,6 +37,26 @@ rm -rf "$out"
 mkdir -p "$out/frames"
 
 
+haptic_cpu=${SURGSIM_HAPTIC_CPU:-0}
+cpu_args=()
+others=()   # the command prefix that starts a program on the other CPUs (empty: not pinned)
+if [ "$haptic_cpu" != none ] && [[ " ${HAPTIC_ARGS:-} " != *" --cpu"* ]] && command -v taskset >/dev/null; then
+  allowed=()
+  for range in $(taskset -cp $$ | sed 's/.*: *//' | tr ',' ' '); do
+    allowed+=($(seq "${range%-*}" "${range#*-}"))
+  done
+  if [ "${#allowed[@]}" -ge 2 ]; then
+    [[ " ${allowed[*]} " == *" $haptic_cpu "* ]] || {
+      echo "run_local: SURGSIM_HAPTIC_CPU=$haptic_cpu is not one of this machine's CPUs (${allowed[*]}); give one" \
+           "of them, or none not to pin" >&2; exit 2; }
+    cpu_args=(--cpu "$haptic_cpu")
+    other_cpus=()
+    for c in "${allowed[@]}"; do [ "$c" = "$haptic_cpu" ] || other_cpus+=("$c"); done
+    others=(taskset -c "$(IFS=,; echo "${other_cpus[*]}")")
+    echo "run_local: the haptic loop on CPU $haptic_cpu; its other threads and the visual node on CPUs ${other_cpus[*]}"
+  fi
+fi
+
 replay=()
 [ -n "$trajectory" ] && replay=(--replay "$trajectory")
 stream=()
@@ -41,13 +65,14 @@ if [ "$web" = 1 ]; then
   [ -z "$trajectory" ] && replay=(--input device)
 fi
 
-"$bin/visual_node" --scene "$scene" --out "$out/frames" --stats "$out/visual_stats.json" "${stream[@]+"${stream[@]}"}" \
-  ${VISUAL_ARGS:-} >"$out/visual.log" 2>&1 &
+"${others[@]+"${others[@]}"}" "$bin/visual_node" --scene "$scene" --out "$out/frames" --stats "$out/visual_stats.json" \
+  "${stream[@]+"${stream[@]}"}" ${VISUAL_ARGS:-} >"$out/visual.log" 2>&1 &
 visual=$!
 web_pid=
 trap 'kill -INT $visual ${web_pid} 2>/dev/null || true' EXIT
 if [ "$web" = 1 ]; then
-  "$bin/surgsim-web" --scene "$scene" --port "${WEB_PORT:-8080}" --stats "$out/web_stats.json" ${WEB_ARGS:-} \
+  "${others[@]+"${others[@]}"}" "$bin/surgsim-web" --scene "$scene" --port "${WEB_PORT:-8080}" \
+    --stats "$out/web_stats.json" ${WEB_ARGS:-} \
     >"$out/web.url" 2>"$out/web.log" &
   web_pid=$!
   for _ in $(seq 100); do
@@ -66,7 +91,7 @@ fi
 
 start=$(date +%s%N)
 if ! "$bin/haptic_node" --scene "$scene" "${replay[@]}" --wait-for-visual 20 --stats "$out/haptic_stats.json" \
-     --log "$out/haptic_log.csv" ${HAPTIC_ARGS:-} 2>&1 | tee "$out/haptic.log"; then
+     --log "$out/haptic_log.csv" "${cpu_args[@]+"${cpu_args[@]}"}" ${HAPTIC_ARGS:-} 2>&1 | tee "$out/haptic.log"; then
   echo "run_local: haptic_node failed (see $out/haptic.log)" >&2
   exit 1
 fi

@@ -1,0 +1,108 @@
+// Issue 15: where the haptic node's threads run and what its loop records about late ticks, on a real paced run of
+// the intestine scene (real Fast DDS, no visual node).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "haptic_app.h"
+#include "os/cpu_affinity.h"
+
+namespace surgsim {
+namespace {
+
+HapticOptions paced_intestine(const std::string& name) {
+  setenv("SURGSIM_CONFIG_DIR", SURGSIM_TEST_CONFIG_DIR, 1);
+  HapticOptions o;
+  o.scene = "intestine";
+  o.quiet = true;
+  o.cache_dir = SURGSIM_TEST_CACHE_DIR;
+  o.domain = 1 + static_cast<int>((getpid() * 17) % 200);
+  o.rt_priority = 0;  // no SCHED_FIFO needed: placement and the trace do not depend on it
+  o.lock_memory = false;
+  o.rate_hz = 1000;
+  o.duration = 0.05;  // 50 paced ticks
+  o.stats = ::testing::TempDir() + "/" + name + "_stats.json";
+  o.tick_trace = ::testing::TempDir() + "/" + name + "_ticks.csv";
+  std::filesystem::create_directories(o.cache_dir);
+  return o;
+}
+
+nlohmann::json run(const HapticOptions& o) {
+  {
+    HapticApp app(o);
+    EXPECT_EQ(app.run(), 0);
+    app.shutdown();
+  }
+  std::ifstream in(o.stats);
+  return nlohmann::json::parse(in);
+}
+
+// --cpu N: the loop runs on N alone; the DDS, publisher and writer threads and the threads that ran before the node
+// started (OpenBLAS's pool) are on the other CPUs.
+TEST(HapticPlacement, CpuKeepsTheLoopAloneOnItsCpu) {
+  const std::vector<int> all = allowed_cpus();
+  if (all.size() < 2) GTEST_SKIP() << "needs 2 CPUs, this process may use " << cpu_list(all);
+  HapticOptions o = paced_intestine("placement");
+  o.cpu = all.back();
+  const nlohmann::json j = run(o);
+  set_thread_cpus(all);  // the node moved this (its loop) thread
+  const auto& p = j.at("cpu_placement");
+  EXPECT_EQ(p.at("loop_cpu").get<int>(), o.cpu);
+  EXPECT_EQ(p.at("other_threads_on_loop_cpu").get<int>(), 0) << p.dump();
+  std::vector<int> rest(all.begin(), all.end() - 1);
+  EXPECT_EQ(p.at("others").get<std::string>(), "other threads on CPUs " + cpu_list(rest));
+  EXPECT_NE(j.at("realtime").get<std::string>().find("pinned to CPU " + std::to_string(o.cpu)), std::string::npos);
+}
+
+TEST(HapticPlacement, ACpuTheProcessMayNotUseIsRefusedWithTheChoices) {
+  HapticOptions o = paced_intestine("bad_cpu");
+  o.cpu = CPU_SETSIZE - 1;
+  try {
+    HapticApp app(o);
+    FAIL() << "--cpu " << o.cpu << " accepted";
+  } catch (const std::exception& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("--cpu " + std::to_string(o.cpu) + ": this process may run on CPUs " +
+                        cpu_list(allowed_cpus())), std::string::npos) << what;
+  }
+}
+
+// --tick-trace: one row per tick with its deadline, wake-up lateness, wall and CPU time; the stats give the CPU time
+// beside the wall time and the loop thread's context switches and page faults.
+TEST(HapticPlacement, TickTraceHasEveryTick) {
+  HapticOptions o = paced_intestine("trace");
+  const nlohmann::json j = run(o);
+  std::ifstream in(o.tick_trace);
+  std::string line;
+  ASSERT_TRUE(std::getline(in, line));
+  EXPECT_EQ(line, "tick,due_us,wake_late_us,tick_us,tick_cpu_us,misses");
+  int rows = 0;
+  double last_due = -1;
+  while (std::getline(in, line)) {
+    std::stringstream s(line);
+    std::string f[6];
+    for (auto& v : f) std::getline(s, v, ',');
+    EXPECT_EQ(std::stoi(f[0]), rows);
+    const double due = std::stod(f[1]);
+    EXPECT_GT(due, last_due);
+    last_due = due;
+    EXPECT_GE(std::stod(f[2]), 0.0);
+    EXPECT_GT(std::stod(f[3]), 0.0);
+    EXPECT_GT(std::stod(f[4]), 0.0);
+    ++rows;
+  }
+  EXPECT_EQ(rows, 50);
+  EXPECT_EQ(j.at("tick_cpu_us").at("count").get<int>(), 50);
+  EXPECT_TRUE(j.contains("loop_involuntary_switches"));
+  EXPECT_TRUE(j.contains("loop_page_faults"));
+  EXPECT_TRUE(j.at("cpu_latency").is_string());
+}
+
+}  // namespace
+}  // namespace surgsim
