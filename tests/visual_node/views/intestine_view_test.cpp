@@ -214,5 +214,57 @@ TEST(IntestineView, OsMesaFrameShowsAShadedMesenteryAPinkTubeAndTheCavity) {
   EXPECT_GT(cavity, n / 20) << "a dark red-brown cavity around the organ";
 }
 
+// Issue 15: the shipped camera looks like a laparoscope through the abdominal wall at the bowel, and nothing crosses
+// right in front of the lens. For the rest shape and the shape it hangs in after 1.5 s under gravity (what the
+// shipped runs show before the probe arrives), of the tube's vertices (CPU skinning, LOD 3): at least 70 % are in
+// the picture (the loops fill the view; the ends along the root may leave it), their outline spans at least 60 % of
+// the image's width and height, and none in the picture is nearer the lens, along the line of sight, than half the
+// eye-target distance. The camera before (eye [0.25, 0.32, 0.18], fov 48) had the leg over the top of the vessel
+// crossing the middle of the picture at 0.42 of that distance in the rest shape.
+TEST(IntestineView, CameraSeesTheLoopsWithNothingRightInFrontOfTheLens) {
+  const Scene scene = shipped_intestine();
+  const Camera& camera = scene.visual.camera;
+  const intestine::IntestineModel model(scene.intestine.params);
+  intestine::IntestineState state(model);
+  std::vector<std::vector<double>> shapes{rest_positions(scene)};
+  intestine::StepReport report;
+  const intestine::Probe none{};
+  for (int s = 0; s < 1500; ++s) intestine::step(model, state, none, 1e-3, report);
+  shapes.emplace_back(state.positions(), state.positions() + 3 * state.point_count());
+  const Eigen::Vector3d forward = (camera.target - camera.eye).normalized();
+  const double distance = (camera.target - camera.eye).norm();
+  const int w = scene.visual.width, h = scene.visual.height;
+  for (std::size_t k = 0; k < shapes.size(); ++k) {
+    IntestineView view(scene, scene.hash(), intestine::TubeSkinning::kCpu);
+    ASSERT_TRUE(view.set_positions(shapes[k].data(), static_cast<int>(shapes[k].size() / 3)));
+    for (int i = 0; i < 8 && view.lod() != 3; ++i) {  // the controller down to LOD 3 (a frame 4x over its budget)
+      view.frame_done(4.0 / scene.visual.target_fps);
+      view.update();
+    }
+    ASSERT_TRUE(view.set_positions(shapes[k].data(), static_cast<int>(shapes[k].size() / 3)));
+    int inside = 0;
+    double nearest = std::numeric_limits<double>::infinity();
+    Eigen::Vector2f lo(1e9f, 1e9f), hi(-1e9f, -1e9f);
+    for (int v = 0; v < view.tube_vertices(); ++v) {
+      const Eigen::Vector3f p = view.tube_positions().row(v).transpose();
+      const double depth = (p.cast<double>() - camera.eye).dot(forward);
+      const Eigen::Vector2f px = project_to_pixel(camera, w, h, p);
+      if (depth <= 0 || px.x() < 0 || px.y() < 0 || px.x() > w || px.y() > h) continue;
+      ++inside;
+      nearest = std::min(nearest, depth);
+      lo = lo.cwiseMin(px);
+      hi = hi.cwiseMax(px);
+    }
+    const double share = static_cast<double>(inside) / view.tube_vertices();
+    std::printf("%s (LOD %d): %.0f %% of the tube in the picture, spanning %.0f %% x %.0f %% of it, nearest %.3f m = "
+                "%.2f of the eye-target distance\n", k == 0 ? "rest shape" : "hanging 1.5 s", view.lod(), 100 * share,
+                100 * (hi.x() - lo.x()) / w, 100 * (hi.y() - lo.y()) / h, nearest, nearest / distance);
+    EXPECT_GE(share, 0.7);
+    EXPECT_GE((hi.x() - lo.x()) / w, 0.6f);
+    EXPECT_GE((hi.y() - lo.y()) / h, 0.6f);
+    EXPECT_GE(nearest, 0.5 * distance);
+  }
+}
+
 }  // namespace
 }  // namespace surgsim
