@@ -473,6 +473,120 @@ bool NonlinearLaw::apply_force(const Eigen::Vector3d& f, const Eigen::Vector3d& 
   return true;
 }
 
+double SurfaceForceField::regression(double delta, double h, double lever_m) const noexcept {
+  if (degree <= 0 || !(h > 0)) return 1;
+  const double lam = lever_m / h;
+  const auto poly = [&](double e, double& slope) {
+    double v = 0, d = 0, p = 1;  // p = e^(k-1)
+    for (int k = 1; k <= degree; ++k) {
+      const double c = a[static_cast<std::size_t>(k)] + b[static_cast<std::size_t>(k)] * lam;
+      d += k * c * p;
+      p *= e;
+      v += c * p;
+    }
+    slope = d;
+    return v;
+  };
+  const double e = std::abs(delta) / h;
+  double slope = 0;
+  if (e <= e_max) return 1 + poly(e, slope);
+  const double end = poly(e_max, slope);
+  return 1 + end + slope * (e - e_max);
+}
+
+double SurfaceForceField::residual_at(const Eigen::Vector3d& c, double delta) const noexcept {
+  const auto j_count = static_cast<std::size_t>(depths.size());
+  const std::size_t sites = site_centre.size();
+  if (j_count == 0 || sites == 0 || site_residual.size() != sites * j_count) return 1;
+  // Which fit depths bracket delta: linear between (0, 1) and them, held beyond the last.
+  std::size_t j = 0;
+  while (j < j_count && depths[j] < delta) ++j;
+  const auto at = [&](std::size_t s, std::size_t k) { return site_residual[s * j_count + k]; };
+  double sum_w = 0, v0 = 0, v1 = 0;
+  for (std::size_t s = 0; s < sites; ++s) {
+    const double r2 = (site_centre[s] - c).squaredNorm();
+    if (r2 < 1e-16) {  // on a site: its own values
+      sum_w = 1;
+      v0 = j == 0 ? 1.0 : at(s, std::min(j, j_count) - 1);
+      v1 = at(s, std::min(j, j_count - 1));
+      break;
+    }
+    const double w = 1 / (r2 * r2);  // kPower = 4
+    sum_w += w;
+    v0 += w * (j == 0 ? 1.0 : at(s, std::min(j, j_count) - 1));
+    v1 += w * at(s, std::min(j, j_count - 1));
+  }
+  v0 /= sum_w;
+  v1 /= sum_w;
+  if (j >= j_count) return v1;
+  const double x0 = j == 0 ? 0.0 : depths[j - 1], x1 = depths[j];
+  return v0 + (v1 - v0) * (delta - x0) / (x1 - x0);
+}
+
+double SurfaceForceField::ratio(const int* nodes, int m, const Eigen::Vector3d& direction,
+                                double delta) const noexcept {
+  if (degree <= 0 || nodes == nullptr || m <= 0) return 1;
+  const int n = node_count();
+  if (static_cast<int>(lever.size()) != n || static_cast<int>(position.size()) != n ||
+      static_cast<int>(normal.size()) != n)
+    return 1;
+  double h = 0, lever_m = 0;
+  Eigen::Vector3d c = Eigen::Vector3d::Zero(), outward = Eigen::Vector3d::Zero();
+  int used = 0;
+  for (int l = 0; l < m; ++l) {
+    const int node = nodes[l];
+    if (node < 0 || node >= n || !(thickness[static_cast<std::size_t>(node)] > 0)) continue;
+    h += thickness[static_cast<std::size_t>(node)];
+    lever_m += lever[static_cast<std::size_t>(node)];
+    c += position[static_cast<std::size_t>(node)];
+    outward += normal[static_cast<std::size_t>(node)];
+    ++used;
+  }
+  if (used == 0 || !(direction.dot(outward) < 0)) return 1;  // not a push into the organ
+  const double value = regression(delta, h / used, lever_m / used) * residual_at(c / used, delta);
+  if (!std::isfinite(value)) return 1;
+  return std::clamp(value, kMinRatio, kMaxRatio);
+}
+
+NonlinearLaw::NonlinearLaw(std::optional<CurveFit> displacement, std::optional<CurveFit> force,
+                           SurfaceForceField field)
+    : NonlinearLaw(std::move(displacement), std::move(force)) {
+  const std::size_t n = field.thickness.size();
+  if (field.degree < 0 || field.degree > kMaxLawDegree || field.lever.size() != n || field.position.size() != n ||
+      field.normal.size() != n ||
+      field.site_residual.size() != field.site_centre.size() * field.depths.size())
+    throw_error("organ surface field: degree ", field.degree, ", ", n, " thicknesses, ", field.lever.size(),
+                " levers, ", field.position.size(), " positions, ", field.site_residual.size(), " residuals for ",
+                field.site_centre.size(), " sites x ", field.depths.size(),
+                " depths: the sizes do not match (recompute the organ curves)");
+  field_ = std::move(field);
+}
+
+bool NonlinearLaw::apply_force(const Eigen::Vector3d& f, const Eigen::Vector3d& direction, const int* nodes,
+                               const Eigen::Vector3d* imposed, int m, Eigen::Vector3d& out) const noexcept {
+  if (field_.empty() || nodes == nullptr || imposed == nullptr || m <= 0) return apply_force(f, direction, out);
+  Eigen::Vector3d d;
+  if (!f.allFinite() || !unit_direction(direction, d)) {
+    out = f;
+    return false;
+  }
+  double delta = 0;
+  for (int l = 0; l < m; ++l) delta += imposed[l].dot(d);
+  delta = std::abs(delta / m);
+  if (!std::isfinite(delta)) {
+    out = f;
+    return false;
+  }
+  const double along = f.dot(d);
+  const Eigen::Vector3d result = f + (field_.ratio(nodes, m, d, delta) - 1) * along * d;
+  if (!result.allFinite()) {
+    out = f;
+    return false;
+  }
+  out = result;
+  return true;
+}
+
 NonlinearLaw load_nonlinear_law(const NonlinearSpec& spec) {
   if (!spec.enabled()) return NonlinearLaw();
   if (spec.degree < kMinLawDegree || spec.degree > kMaxLawDegree)

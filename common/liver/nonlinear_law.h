@@ -183,6 +183,44 @@ void check_cylinder(const CylinderReference& cylinder, const std::string& where)
 /// sum is (numerically) zero.
 bool constraint_direction(const Eigen::Vector3d* imposed, int m, Eigen::Vector3d& direction) noexcept;
 
+/// The organ's force ratio over its surface (fitted by liver/organ_curves.h): a push of depth delta along d on a patch
+/// of surface nodes feels the linear force times
+///   ratio = [1 + sum_k (a_k + b_k L / h) e^k] * residual(c, delta),   e = delta / h,
+/// with h and L the means over the patch nodes of each node's thickness along its inward normal and its distance to
+/// the nearest fixed node (m), and residual the regression's own error at the fit sites (Newton / (linear x
+/// regression), at each fit depth), interpolated to the patch's rest centroid c by inverse distance to the power
+/// kPower (so a fit site's own punch gets its own residual back), 1 at delta = 0, linear in delta between the fit
+/// depths and held beyond the last. Beyond e_max the polynomial continues along its tangent; the ratio is kept in
+/// [kMinRatio, kMaxRatio]. Only a push has it: when the direction does not point into the organ (against the mean
+/// outward normal of the patch nodes: a pull, a lift, a tangential drag) the ratio is 1, the linear force, as the
+/// field was fitted on pushes only.
+struct SurfaceForceField {
+  static constexpr double kMinRatio = 0.1;
+  static constexpr double kMaxRatio = 10.0;
+  static constexpr double kPower = 4;
+  int degree = 0;                                  // K, 1..kMaxLawDegree (0: an empty field)
+  std::array<double, kMaxLawDegree + 1> a{}, b{};  // a_k, b_k for k = 1..K (index 0 unused)
+  double e_max = 0;                                // end of the fitted range of e
+  std::vector<double> thickness;                   // #V, m (0 off the surface: such nodes are skipped)
+  std::vector<double> lever;                       // #V, m
+  std::vector<Eigen::Vector3d> position;           // #V, m, rest positions
+  std::vector<Eigen::Vector3d> normal;             // #V, unit outward normals at rest (0 off the surface)
+  std::vector<double> depths;                      // J fit depths, m, ascending, > 0
+  std::vector<Eigen::Vector3d> site_centre;        // S, m: rest centroid of each fit site's punch
+  std::vector<double> site_residual;               // S x J (site-major)
+
+  bool empty() const { return degree == 0; }
+  int node_count() const { return static_cast<int>(thickness.size()); }
+  /// The regression part for a mean thickness h and lever (m) at depth delta (m).
+  double regression(double delta, double h, double lever_m) const noexcept;
+  /// The interpolated residual at rest point c, depth delta (m).
+  double residual_at(const Eigen::Vector3d& c, double delta) const noexcept;
+  /// The ratio of a patch: nodes[0..m) (nodes outside 0..node_count() or off the surface are skipped), pushed along
+  /// the unit `direction` by delta >= 0 (m). 1 when no node is usable or the direction is not a push. Run phase, no
+  /// allocation.
+  double ratio(const int* nodes, int m, const Eigen::Vector3d& direction, double delta) const noexcept;
+};
+
 /// P and Q of a scene. Immutable after construction; the const run-phase members may be called from any thread.
 class NonlinearLaw {
  public:
@@ -191,8 +229,12 @@ class NonlinearLaw {
   /// Either may be absent (that part stays linear). Throws surgsim::Error when a fit is not increasing, or a fit of
   /// the wrong quantity is given.
   NonlinearLaw(std::optional<CurveFit> displacement, std::optional<CurveFit> force);
+  /// With the organ's surface field: apply_force with the contact nodes uses it instead of Q (Q stays the fallback
+  /// of the node-less apply_force). Throws surgsim::Error for a field whose sizes do not match.
+  NonlinearLaw(std::optional<CurveFit> displacement, std::optional<CurveFit> force, SurfaceForceField field);
 
-  bool identity() const { return !displacement_ && !force_; }
+  bool identity() const { return !displacement_ && !force_ && field_.empty(); }
+  const SurfaceForceField& surface_field() const { return field_; }
   const std::optional<CurveFit>& displacement_fit() const { return displacement_; }
   const std::optional<CurveFit>& force_fit() const { return force_; }
 
@@ -211,10 +253,16 @@ class NonlinearLaw {
   /// Run phase, no allocation: out = f_r + sign(f.d) Q(|f.d|) d with f_r = f - (f.d) d. Non-finite f or a bad
   /// direction: out = f, false. out may alias f.
   bool apply_force(const Eigen::Vector3d& f, const Eigen::Vector3d& direction, Eigen::Vector3d& out) const noexcept;
+  /// Run phase, no allocation: as above, with the contact nodes `nodes[l]` and their imposed displacements
+  /// `imposed[l]` (l < m). With a surface field: out = f_r + ratio (f.d) d, ratio = field.ratio(nodes, m, d, delta),
+  /// delta = |mean of imposed[l].d|; without one (or m <= 0): the node-less apply_force (Q).
+  bool apply_force(const Eigen::Vector3d& f, const Eigen::Vector3d& direction, const int* nodes,
+                   const Eigen::Vector3d* imposed, int m, Eigen::Vector3d& out) const noexcept;
 
  private:
   std::optional<CurveFit> displacement_;
   std::optional<CurveFit> force_;
+  SurfaceForceField field_;
 };
 
 /// The scene's law: each named curve loaded, checked for its column (x,d_r for displacement_curve, x,f for

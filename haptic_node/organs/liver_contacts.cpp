@@ -384,8 +384,19 @@ void LiverContacts::finish(int t, Eigen::Vector3d force, const Eigen::Vector3d& 
     drop_solution();
     return;
   }
-  // --- quasi non-linear law: Q on the force component along the mean imposed displacement ---
-  if (law_ != nullptr && dn > 0 && !law_->apply_force(force, out.direction, force)) out.nonfinite = true;
+  // --- quasi non-linear law: Q (the organ law: its surface field at this instrument's contact nodes) on the force
+  // component along the mean imposed displacement ---
+  if (law_ != nullptr && dn > 0) {
+    std::array<int, kMaxContacts> nodes;
+    std::array<Eigen::Vector3d, kMaxContacts> imposed;
+    int m = 0;
+    for (int l = 0; l < solution_.count; ++l) {
+      if (node_instrument_[static_cast<std::size_t>(l)] != t) continue;
+      nodes[static_cast<std::size_t>(m)] = solution_.nodes[static_cast<std::size_t>(l)];
+      imposed[static_cast<std::size_t>(m++)] = solution_.displacement[static_cast<std::size_t>(l)];
+    }
+    if (!law_->apply_force(force, out.direction, nodes.data(), imposed.data(), m, force)) out.nonfinite = true;
+  }
   if (!force.allFinite()) {
     out.nonfinite = true;
     drop_solution();

@@ -91,14 +91,14 @@ inline Eigen::VectorXd visible_part(const Organ& o, const Eigen::MatrixX3d& u) {
 
 inline double rel(double err, double scale) { return err / std::max(scale, 1e-300); }
 
-/// The quasi non-linear law as the nodes apply it: the haptic node's Q on the tool force `force` along the mean
-/// imposed displacement (`imposed`, `m` of them; haptic_node/organs/liver_contacts.cpp), the visual node's P on every
-/// visible row of `u` (3R, the "visual" block's rows) along the direction of the summed rows of the contact nodes
+/// The quasi non-linear law as the nodes apply it: the haptic node's Q (the organ law: its surface field at the
+/// contact nodes) on the tool force `force` along the mean imposed displacement (`imposed`, `m` of them;
+/// haptic_node/organs/liver_contacts.cpp), the visual node's P on every visible row of `u` (3R, the "visual" block's rows) along the direction of the summed rows of the contact nodes
 /// (visual_node/views/surface_deformer.cpp).
 inline void apply_quasi(const NonlinearLaw& law, const Eigen::Vector3d* imposed, int m, const int* nodes,
                         const TensorBlock& visual, Eigen::Vector3d& force, Eigen::VectorXd& u) {
   Eigen::Vector3d dir;
-  if (constraint_direction(imposed, m, dir)) law.apply_force(force, dir, force);
+  if (constraint_direction(imposed, m, dir)) law.apply_force(force, dir, nodes, imposed, m, force);
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   for (int l = 0; l < m; ++l) sum += u.segment<3>(3 * visual.row_of_node[static_cast<std::size_t>(nodes[l])]);
   if (constraint_direction(&sum, 1, dir)) law.apply_displacements(u, dir);

@@ -496,6 +496,95 @@ TEST(NonlinearLaw, NodeHooksAllocateNothing) {
 }
 
 // ---------------------------------------------------------------------------------------------------------------
+// The organ law's surface field (liver/organ_curves.h fits it): a hand-made field on four surface nodes.
+
+// Nodes 0, 1 on a top (outward normal +z) near site A, 2, 3 near site B; node 4 off the surface (thickness 0).
+// ratio = (1 + 0.5 e + 0.2 (L / h) e^2) * residual: a_1 = 0.5, b_2 = 0.2.
+SurfaceForceField two_site_field() {
+  SurfaceForceField f;
+  f.degree = 2;
+  f.a[1] = 0.5;
+  f.b[2] = 0.2;
+  f.e_max = 0.4;
+  f.thickness = {0.04, 0.06, 0.05, 0.05, 0.0};
+  f.lever = {0.04, 0.06, 0.10, 0.10, 0.0};
+  f.position = {{0, 0, 0}, {0.02, 0, 0}, {0.2, 0, 0}, {0.2, 0.02, 0}, {0.1, 0.1, 0}};
+  f.normal = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, 0}};
+  f.depths = {0.01, 0.02};
+  f.site_centre = {{0.01, 0, 0}, {0.2, 0.01, 0}};
+  f.site_residual = {1.1, 1.2, 0.9, 0.8};  // A at 1 and 2 cm, B at 1 and 2 cm
+  return f;
+}
+
+TEST(SurfaceForceField, RegressionResidualAndTheirInterpolation) {
+  const SurfaceForceField f = two_site_field();
+  // Regression: e = delta / h, L / h; the tangent beyond e_max.
+  EXPECT_NEAR(f.regression(0.01, 0.05, 0.05), 1 + 0.5 * 0.2 + 0.2 * 1 * 0.04, 1e-14);
+  const double end = 0.5 * 0.4 + 0.2 * 0.16, slope = 0.5 + 2 * 0.2 * 0.4;  // at e_max, L / h = 1
+  EXPECT_NEAR(f.regression(0.03, 0.05, 0.05), 1 + end + slope * (0.6 - 0.4), 1e-14);
+  // Residual: a site's own values at its centre, 1 at depth 0, linear between the fit depths, held beyond.
+  EXPECT_NEAR(f.residual_at({0.01, 0, 0}, 0.01), 1.1, 1e-14);
+  EXPECT_NEAR(f.residual_at({0.01, 0, 0}, 0.005), 1.05, 1e-14);
+  EXPECT_NEAR(f.residual_at({0.01, 0, 0}, 0.015), 1.15, 1e-14);
+  EXPECT_NEAR(f.residual_at({0.01, 0, 0}, 0.05), 1.2, 1e-14);
+  EXPECT_NEAR(f.residual_at({0.2, 0.01, 0}, 0.02), 0.8, 1e-14);
+  EXPECT_NEAR(f.residual_at({0.2, 0.01, 0}, 0.0), 1.0, 1e-14);
+  // Halfway between the sites: the mean (equal inverse-distance weights); near A: nearly A's.
+  EXPECT_NEAR(f.residual_at({0.105, 0.005, 0}, 0.01), 1.0, 1e-12);
+  EXPECT_NEAR(f.residual_at({0.03, 0, 0}, 0.01), 1.1, 1e-3);
+}
+
+TEST(SurfaceForceField, PatchRatioIsForPushesOnly) {
+  const SurfaceForceField f = two_site_field();
+  const int a[] = {0, 1}, b[] = {2, 3, 4, 99, -1};  // 4 is off the surface, 99 and -1 out of range: skipped
+  const Eigen::Vector3d down(0, 0, -1);
+  // Patch A: h = 0.05, L = 0.05, centroid (0.01, 0, 0) = site A.
+  EXPECT_NEAR(f.ratio(a, 2, down, 0.01), (1 + 0.5 * 0.2 + 0.2 * 0.04) * 1.1, 1e-14);
+  // Patch B: h = 0.05, L = 0.10 (L / h = 2), centroid = site B.
+  EXPECT_NEAR(f.ratio(b, 5, down, 0.02), (1 + 0.5 * 0.4 + 0.2 * 2 * 0.16) * 0.8, 1e-14);
+  // A pull (or a drag along the surface) keeps the linear force: the field was fitted on pushes.
+  EXPECT_EQ(f.ratio(a, 2, -down, 0.01), 1.0);
+  EXPECT_EQ(f.ratio(a, 2, Eigen::Vector3d::UnitX(), 0.01), 1.0);
+  // No usable node, no field: 1.
+  const int none[] = {4, 7};
+  EXPECT_EQ(f.ratio(none, 2, down, 0.01), 1.0);
+  EXPECT_EQ(SurfaceForceField().ratio(a, 2, down, 0.01), 1.0);
+  // Clamped: a huge depth stays bounded.
+  EXPECT_LE(f.ratio(a, 2, down, 10.0), SurfaceForceField::kMaxRatio);
+}
+
+TEST(SurfaceForceField, LawAppliesItAtTheContactNodesWithoutAllocating) {
+  std::optional<CurveFit> q = fit_curve(load_curve(kForceCurve), 6);
+  const NonlinearLaw law(std::nullopt, q, two_site_field());
+  EXPECT_FALSE(law.identity());
+  const int nodes[] = {0, 1};
+  const Eigen::Vector3d u[] = {{0.001, 0, -0.01}, {-0.001, 0, -0.01}};
+  const Eigen::Vector3d down(0, 0, -1);
+  const Eigen::Vector3d f(0.3, 0.1, 2.0);  // on the tool: up, with a sideways part
+  Eigen::Vector3d out, no_nodes;
+  long allocations = 0;
+  bool ok = false;
+  {
+    test::AllocationCounter counter;
+    ok = law.apply_force(f, down, nodes, u, 2, out);
+    allocations = counter.count();
+  }
+  EXPECT_TRUE(ok);
+  EXPECT_EQ(allocations, 0);
+  const double r = law.surface_field().ratio(nodes, 2, down, 0.01);
+  EXPECT_NEAR(out.z(), r * 2.0, 1e-12);  // the collinear part scaled, the sideways part kept
+  EXPECT_EQ(out.x(), 0.3);
+  EXPECT_EQ(out.y(), 0.1);
+  // Without the nodes: Q, as before.
+  EXPECT_TRUE(law.apply_force(f, down, no_nodes));
+  EXPECT_NEAR(no_nodes.z(), law.q(2.0), 1e-12);
+  // A field whose sizes do not match is refused.
+  SurfaceForceField bad = two_site_field();
+  bad.lever.pop_back();
+  EXPECT_THROW(NonlinearLaw(std::nullopt, std::nullopt, bad), Error);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
 // Paper fig. 13: the quasi non-linear cylinder reproduces its input curves.
 
 TEST(NonlinearLaw, QuasiNonlinearCylinderReproducesItsCurves) {
