@@ -18,7 +18,7 @@
 //      w(t) = 3 t^2 - 2 t^3. Because w'(0) = w'(1) = 0 the axis leaves each ring along that ring's tangent, so
 //      the skinned tube is C1 across rings and the axis is a Hermite-like cubic between them.
 //   7. levels of detail: LOD i (0..kTubeMaxLod) has sides x rings quads per interval: 16 x 2, 24 x 2, 24 x 4,
-//      32 x 4, 32 x 8, 48 x 8, 64 x 8 (32 to 512 quads; each level 1.3 to 2 times the previous one's triangles).
+//      32 x 4, 32 x 8, 40 x 8, 48 x 8 (32 to 384 quads; each level 1.2 to 2 times the previous one's triangles).
 //      The paper's ladder doubles from 4 sides x 1 ring (4 2^i quads): its coarsest levels are a square and an
 //      octagon in cross-section with straight pieces between the samples, and a frame-rate controller held below
 //      its target (issue 15: live next to the haptic node on 2 cores) draws them. Here the coarsest level is still
