@@ -542,7 +542,8 @@ double SurfaceForceField::ratio(const int* nodes, int m, const Eigen::Vector3d& 
     outward += normal[static_cast<std::size_t>(node)];
     ++used;
   }
-  if (used == 0 || !(direction.dot(outward) < 0)) return 1;  // not a push into the organ
+  if (used == 0 || !(-direction.dot(outward) >= kPushCosine * direction.norm() * outward.norm()))
+    return 1;  // not a push into the organ
   const double value = regression(delta, h / used, lever_m / used) * residual_at(c / used, delta);
   if (!std::isfinite(value)) return 1;
   return std::clamp(value, kMinRatio, kMaxRatio);

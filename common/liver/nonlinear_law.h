@@ -191,13 +191,14 @@ bool constraint_direction(const Eigen::Vector3d* imposed, int m, Eigen::Vector3d
 /// regression), at each fit depth), interpolated to the patch's rest centroid c by inverse distance to the power
 /// kPower (so a fit site's own punch gets its own residual back), 1 at delta = 0, linear in delta between the fit
 /// depths and held beyond the last. Beyond e_max the polynomial continues along its tangent; the ratio is kept in
-/// [kMinRatio, kMaxRatio]. Only a push has it: when the direction does not point into the organ (against the mean
-/// outward normal of the patch nodes: a pull, a lift, a tangential drag) the ratio is 1, the linear force, as the
-/// field was fitted on pushes only.
+/// [kMinRatio, kMaxRatio]. Only a push has it: when the direction is not within 60 degrees of the patch's inward
+/// normal (the mean of its nodes' unit normals; a pull, a lift, a drag along the surface) the ratio is 1, the linear
+/// force, as the field was fitted on pushes straight down on top nodes whose normals are within 60 degrees of up.
 struct SurfaceForceField {
   static constexpr double kMinRatio = 0.1;
   static constexpr double kMaxRatio = 10.0;
   static constexpr double kPower = 4;
+  static constexpr double kPushCosine = 0.5;  // cos 60 degrees
   int degree = 0;                                  // K, 1..kMaxLawDegree (0: an empty field)
   std::array<double, kMaxLawDegree + 1> a{}, b{};  // a_k, b_k for k = 1..K (index 0 unused)
   double e_max = 0;                                // end of the fitted range of e

@@ -545,6 +545,11 @@ TEST(SurfaceForceField, PatchRatioIsForPushesOnly) {
   // A pull (or a drag along the surface) keeps the linear force: the field was fitted on pushes.
   EXPECT_EQ(f.ratio(a, 2, -down, 0.01), 1.0);
   EXPECT_EQ(f.ratio(a, 2, Eigen::Vector3d::UnitX(), 0.01), 1.0);
+  // An oblique push within 60 degrees of the inward normal has it, a push farther off the normal (mostly a drag)
+  // does not.
+  const Eigen::Vector3d at45 = Eigen::Vector3d(1, 0, -1).normalized(), at70(std::sin(1.22), 0, -std::cos(1.22));
+  EXPECT_EQ(f.ratio(a, 2, at45, 0.01), f.ratio(a, 2, down, 0.01));
+  EXPECT_EQ(f.ratio(a, 2, at70, 0.01), 1.0);
   // No usable node, no field: 1.
   const int none[] = {4, 7};
   EXPECT_EQ(f.ratio(none, 2, down, 0.01), 1.0);
