@@ -1170,6 +1170,17 @@ def large_deformation_section(rep):
     if path:
         rep.md("![error against depth and angle](plots/%s)" % os.path.basename(path))
         rep.md()
+    motion = report_large_deformation.motion_markdown(os.path.join(rep.root, "csv"))
+    rep.md("multirate with the tool moving from rest to each target (`csv/%s`): force error against the Newton "
+           "quasi-static force at the same tool position over the motion, the 1 kHz loop on the newest snapshot "
+           "of the slow Newton thread. The static errors above are Newton's tolerance by construction; these are "
+           "the honest ones." % report_large_deformation.MOTION if motion else
+           "**Missing**: `csv/%s` (multirate in motion) was not written." % report_large_deformation.MOTION)
+    rep.md()
+    for line in motion:
+        rep.md(line)
+    if motion:
+        rep.md()
 
 
 def scale_section(rep):

@@ -100,6 +100,27 @@ void CholmodSolver::analyze(const Eigen::SparseMatrix<double>& a) {
   if (!s.l || s.common.status < CHOLMOD_OK) s.fail("analyze");
 }
 
+void CholmodSolver::refactorize(const Eigen::SparseMatrix<double>& a) {
+  Impl& s = *impl_;
+  if (!s.l || !s.a) throw_error("CholmodSolver: refactorize() before analyze()");
+  const int n = static_cast<int>(s.a->nrow);
+  if (a.rows() != n || a.cols() != n) throw_error("CholmodSolver: refactorize() with a ", a.rows(), " x ", a.cols(), " matrix, analysed ", n);
+  const auto* p = static_cast<const int*>(s.a->p);
+  const auto* i = static_cast<const int*>(s.a->i);
+  auto* v = static_cast<double*>(s.a->x);
+  for (int j = 0; j < n; ++j) {
+    int k = p[j];
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it)
+      if (it.row() <= j) {
+        if (k >= p[j + 1] || i[k] != it.row()) throw_error("CholmodSolver: refactorize() with another pattern (column ", j, ")");
+        v[k++] = it.value();
+      }
+    if (k != p[j + 1]) throw_error("CholmodSolver: refactorize() with another pattern (column ", j, ")");
+  }
+  s.factorized = false;
+  factorize();
+}
+
 std::size_t CholmodSolver::factor_bytes() const {
   const Impl& s = *impl_;
   if (!s.l) return 0;

@@ -37,6 +37,10 @@ class CholmodSolver {
   /// stiffness matrix: a rigid mode is free or an element is inverted) or when memory runs out.
   void factorize();
 
+  /// New values of the analysed matrix (the same pattern: throws surgsim::Error otherwise), then factorize(): the
+  /// symbolic analysis is kept (a Newton loop refactoring its tangent, liver/multirate.h).
+  void refactorize(const Eigen::SparseMatrix<double>& a);
+
   bool factorized() const;
   int rows() const;
   /// CHOLMOD's reciprocal condition estimate of the factored matrix, (min / max diagonal of L)^2 (cholmod_rcond):

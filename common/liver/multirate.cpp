@@ -21,7 +21,11 @@ NonlinearTracker::NonlinearTracker(const HyperelasticSolver& solver, std::vector
     : solver_(solver), model_(solver.model()), surface_nodes_(std::move(surface_nodes)), options_(options) {
   if (options_.iterations_per_cycle < 1)
     throw_error("multirate: iterations_per_cycle must be >= 1, got ", options_.iterations_per_cycle);
+  if (options_.corrections_per_cycle < 0)
+    throw_error("multirate: corrections_per_cycle must be >= 0, got ", options_.corrections_per_cycle);
   if (!(options_.residual_tolerance > 0)) throw_error("multirate: residual_tolerance must be positive");
+  if (!(options_.max_step > 0)) throw_error("multirate: max_step must be positive");
+  if (!(options_.move_tolerance > 0)) throw_error("multirate: move_tolerance must be positive");
   if (!(options_.max_extrapolation > 0)) throw_error("multirate: max_extrapolation must be positive");
   const int n = model_.node_count();
   for (int node : surface_nodes_)
@@ -38,6 +42,8 @@ void NonlinearTracker::reset() {
   u_ = Eigen::VectorXd::Zero(3 * model_.node_count());
   sys_ = ReducedSystem();
   dof_contact_.clear();
+  analysed_ = false;
+  stuck_ = false;
 }
 
 TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
@@ -64,6 +70,7 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
   if (imposed != sys_.imposed_dofs || sys_.unknown.empty()) {
     sys_ = ReducedSystem::make(model_, imposed);
     out.set_changed = true;
+    analysed_ = false;
   }
   dof_contact_.resize(dofs.size());
   for (std::size_t j = 0; j < dofs.size(); ++j) {
@@ -98,16 +105,30 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
     }
     sys_.refresh(kt_);
     const double r0 = relative_residual();
+    // Move the contact dofs towards their targets only from a state near equilibrium (else this iteration is a
+    // correction), by at most max_step per node: each predictor starts from a converged state, as load steps do.
     bool at_target = true;
-    b_.setZero(sys_.count, 1 + m);
-    rhs_ = -ri_;  // the predictor's (K_ii du_i = -r_i - K_ic dc) or, at the targets, the correction's right side
+    double largest = 0, node_sq = 0;
     for (int j = 0; j < m; ++j) {
       const int d = imposed[static_cast<std::size_t>(j)];
       const double dc = sys_.target[j] - u_[d];
-      if (dc != 0) {
-        at_target = false;
-        sys_.subtract_coupling(kt_, d, dc, rhs_);
+      if (dc != 0) at_target = false;
+      node_sq += dc * dc;
+      if (j + 1 == m || imposed[static_cast<std::size_t>(j + 1)] / 3 != d / 3) {
+        largest = std::max(largest, std::sqrt(node_sq));
+        node_sq = 0;
       }
+    }
+    const bool move = !at_target && (r0 <= options_.move_tolerance || stuck_);
+    const double scale = move ? std::min(1.0, options_.max_step / largest) : 0.0;
+    const int columns = options_.contact_stiffness ? m : 0;
+    b_.setZero(sys_.count, 1 + columns);
+    rhs_ = -ri_;  // the predictor's (K_ii du_i = -r_i - K_ic dc) or the correction's right side
+    for (int j = 0; j < m; ++j) {
+      const int d = imposed[static_cast<std::size_t>(j)];
+      const double dc = scale * (sys_.target[j] - u_[d]);
+      if (dc != 0) sys_.subtract_coupling(kt_, d, dc, rhs_);
+      if (columns == 0) continue;
       for (Eigen::SparseMatrix<double>::InnerIterator e(kt_, d); e; ++e) {
         const int ri = sys_.unknown[static_cast<std::size_t>(e.row())];
         if (ri >= 0) b_(ri, 1 + j) = e.value();  // K_ic (K_T symmetric)
@@ -116,19 +137,44 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
     b_.col(0) = rhs_;
     out.assemble_ms += ms_since(t0);
     t0 = Clock::now();
-    if (!solve_reduced_tangent(sys_.kii, b_, x_, out.ldlt_fallback)) {
+    // CHOLMOD keeps the analysis of this contact set; a tangent that is not positive definite goes to LDL^T.
+    bool factored = false;
+    try {
+      if (!analysed_) {
+        chol_.analyze(sys_.kii);
+        analysed_ = true;
+        chol_.factorize();
+      } else {
+        chol_.refactorize(sys_.kii);
+      }
+      factored = true;
+    } catch (const Error&) {
+    }
+    out.factor_ms += ms_since(t0);
+    t0 = Clock::now();
+    bool solved = false;
+    if (factored) {
+      x_.resize(b_.rows(), b_.cols());
+      chol_.solve(b_, x_);
+      solved = x_.allFinite();
+    } else {
+      solved = solve_reduced_tangent(sys_.kii, b_, x_, out.ldlt_fallback);
+    }
+    out.solve_ms += ms_since(t0);
+    if (!solved) {
       out.failure = "singular tangent";
-      out.factor_ms += ms_since(t0);
       break;
     }
+    t0 = Clock::now();
     ++out.iterations;
     // The contact stiffness of this tangent: S = K_cc - K_ci K_ii^-1 K_ic.
     s_.resize(m, m);
     for (int j = 0; j < m; ++j)
       for (int l = 0; l < m; ++l) s_(j, l) = kt_.coeff(imposed[static_cast<std::size_t>(j)], imposed[static_cast<std::size_t>(l)]);
-    s_.noalias() -= b_.rightCols(m).transpose() * x_.rightCols(m);
+    if (columns == 0) s_.setZero();
+    else s_.noalias() -= b_.rightCols(m).transpose() * x_.rightCols(m);
     s_ = 0.5 * (s_ + s_.transpose()).eval();
-    out.factor_ms += ms_since(t0);
+    out.solve_ms += ms_since(t0);
     t0 = Clock::now();
     if (at_target && r0 <= options_.residual_tolerance) {
       out.converged = true;
@@ -138,14 +184,15 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
       break;
     }
     bool stepped = false;
-    if (!at_target) {
-      // Predictor: the contact dofs to their targets (halved while it inverts a tet), the unknowns with them.
+    if (move) {
+      // Predictor: the contact dofs by `scale` of the way to their targets (halved while it inverts a tet), the
+      // unknowns with them.
       double alpha = 1;
       for (int h = 0; h <= options_.max_predictor_halvings && !stepped; ++h, alpha *= 0.5) {
         v_ = u_;
         for (int j = 0; j < m; ++j) {
           const int d = imposed[static_cast<std::size_t>(j)];
-          v_[d] = alpha == 1 ? sys_.target[j] : u_[d] + alpha * (sys_.target[j] - u_[d]);
+          v_[d] = alpha * scale == 1 ? sys_.target[j] : u_[d] + alpha * scale * (sys_.target[j] - u_[d]);
         }
         sys_.add_unknowns(x_.col(0), alpha, v_);
         if (solver_.internal_force(v_, fv_)) {
@@ -157,20 +204,30 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
         }
       }
       if (!stepped) out.failure = "every cut of the predictor inverts a tet";
+      stuck_ = false;
     } else {
-      const Eigen::VectorXd du = x_.col(0);
-      stepped = solver_.line_search(sys_, du, ri_.norm(), u_, f_, trial_, ft_).accepted;
+      dx_ = x_.col(0);
+      stepped = solver_.line_search(sys_, dx_, ri_.norm(), u_, f_, trial_, ft_).accepted;
       if (!stepped) out.failure = "the line search found no decrease of the residual";
+      stuck_ = !stepped;
     }
-    const double r1 = relative_residual();
-    bool reached = true;
-    for (int j = 0; j < m; ++j) reached = reached && u_[imposed[static_cast<std::size_t>(j)]] == sys_.target[j];
+    double r1 = relative_residual();
+    // Modified Newton corrections with this factorization (no new tangent): cheap, and they keep the state near
+    // equilibrium while the targets move every cycle.
+    for (int k = 0; stepped && factored && k < options_.corrections_per_cycle && r1 > options_.residual_tolerance; ++k) {
+      rhs_ = -ri_;
+      dx_.resize(rhs_.size());
+      chol_.solve(rhs_, dx_);
+      if (!dx_.allFinite() || !solver_.line_search(sys_, dx_, ri_.norm(), u_, f_, trial_, ft_).accepted) break;
+      ++out.corrections;
+      r1 = relative_residual();
+    }
     out.residual = r1;
-    out.converged = reached && r1 <= options_.residual_tolerance;
     out.assemble_ms += ms_since(t0);
-    if (!stepped || out.converged || it + 1 == options_.iterations_per_cycle) {
-      // The state (moved or not) with this factorization's S: stale by the step just taken.
-      publish(targets, x_, out.converged, r1);
+    if (!stepped || it + 1 == options_.iterations_per_cycle) {
+      // The state (moved or not) with this factorization's S, stale by the step just taken: published as not
+      // converged. At equilibrium, the next iteration or cycle refactors there and publishes it as converged.
+      publish(targets, x_, false, r1);
       break;
     }
   }
@@ -195,7 +252,8 @@ void NonlinearTracker::publish(const ContactTargets& targets, const Eigen::Matri
   s.stiffness.topLeftCorner(3 * targets.count, 3 * targets.count).setZero();
   if (m > 0) {
     // f_c corrected for the out-of-balance force left on the unknowns: f_c + K_ci du_i, du_i = -K_ii^-1 r_i.
-    const Eigen::VectorXd correction = x.rightCols(m).transpose() * ri_;
+    const Eigen::VectorXd correction =
+        x.cols() == 1 + m ? Eigen::VectorXd(x.rightCols(m).transpose() * ri_) : Eigen::VectorXd::Zero(m);
     for (int j = 0; j < m; ++j) {
       const int cj = dof_contact_[static_cast<std::size_t>(j)];
       s.reaction[static_cast<std::size_t>(cj / 3)][cj % 3] = f_[sys_.imposed_dofs[static_cast<std::size_t>(j)]] - correction[j];

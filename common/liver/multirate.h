@@ -4,16 +4,20 @@
 // about that state; the 1 kHz loop evaluates the model at the tool's current position.
 //
 // Slow side, NonlinearTracker::cycle(targets): the contact nodes' three components are imposed (components of the
-// fixed set stay 0). From the current state u, each iteration assembles the tangent K_T(u), factors K_ii once
-// (CHOLMOD, LDL^T when not positive definite: solve_reduced_tangent) and solves for [predictor | K_ic]: the predictor
-// moves the contact dofs to their targets and the unknowns by the linearized response, or, when the contact dofs are
-// already there, a Newton correction with HyperelasticSolver's line search. A predictor that inverts a tet is halved
-// (the contact dofs then reach their targets over several cycles). From the same factorization:
+// fixed set stay 0). From the current state u, each iteration assembles the tangent K_T(u), factors K_ii (CHOLMOD,
+// the analysis kept while the contact set stays; LDL^T when not positive definite) and solves for [step | K_ic] at
+// once. The step is a predictor (the contact dofs towards their targets by at most max_step per node, the unknowns by
+// the linearized response, halved while it inverts a tet) when the state's relative residual is within
+// move_tolerance, else a Newton correction with HyperelasticSolver's line search; then up to corrections_per_cycle
+// modified Newton corrections on the same factor (cheap: an internal force and a one-column solve each). So every
+// predictor starts near equilibrium, as a load step does, and a fast tool is followed over several cycles. From the
+// same factorization:
 //   S = K_cc - K_ci K_ii^-1 K_ic   (the contact stiffness of the tangent, the Schur complement, 3m x 3m, N/m)
 //   f_c = f_int,c - (K_ii^-1 K_ic)^T r_i   (the reactions on the contact dofs, linearly corrected for the
 //                                           remaining out-of-balance force r_i of the unknowns)
-// The snapshot (u_c, f_c, S, the surface displacement) goes through a TripleBuffer (liver/corotation.h).
-// Allocates: the slow side only (a new contact set rebuilds the reduced system).
+// S is that of the tangent before the iteration's step (stale by one step; exact once converged). The snapshot
+// (u_c, f_c, S, the surface displacement) goes through a TripleBuffer (liver/corotation.h).
+// Allocates: the slow side only (a new contact set rebuilds the reduced system and the analysis).
 //
 // Fast side, local_contact_forces(): lambda = f_c + S (u_c(now) - u_c(snapshot)) per node, no allocation, O(m^2).
 // MultirateForce takes the newest snapshot and falls back to the linear precomputed model (Superposition::solve)
@@ -26,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "liver/cholmod_solver.h"
 #include "liver/corotation.h"
 #include "liver/hyperelastic.h"
 #include "liver/superposition.h"
@@ -37,7 +42,12 @@ struct MultirateOptions {
   double residual_tolerance = 1e-9;   // converged when |r_i| <= tol * max(|f_c|, force_floor), as HyperelasticOptions
   double force_floor = 1e-12;         // N
   int max_predictor_halvings = 6;     // a predictor that inverts a tet is halved up to this many times
+  int corrections_per_cycle = 10;     // modified Newton corrections after each step, on the same factor (>= 0)
+  double move_tolerance = 1e-2;       // the contact dofs move towards new targets only from a state whose relative
+                                      // residual is within this (else the iteration is a correction)
+  double max_step = 0.005;            // m: the largest move of a contact node per predictor
   double max_extrapolation = 0.01;    // m: the fast side clamps |u_c(now) - u_c(snapshot)| of each node to this
+  bool contact_stiffness = true;      // false: S left 0 and f_c uncorrected (a reference run that needs forces only)
 };
 
 /// The imposed displacements the fast side asks for (all three components of each node), fixed capacity.
@@ -57,19 +67,21 @@ struct TrackerSnapshot {
   std::array<Eigen::Vector3d, kMaxContacts> reaction{};  // N, force on the organ at each node (f_c)
   Eigen::MatrixXd stiffness;                       // (3 kMaxContacts)^2, N/m: S in the top-left 3 count block
   double residual = 0;                             // |r_i| / max(|f_c|, floor) of the state
-  bool converged = false;                          // residual within the tolerance and the targets reached
+  bool converged = false;                          // at the targets, residual within the tolerance, S exact
   Eigen::VectorXd surface;                         // 3 x #surface nodes, m: the state's displacement there
 };
 
 /// What one slow cycle did.
 struct TrackerCycle {
   int iterations = 0;          // factorizations
-  bool converged = false;      // the published state is converged at the targets
+  bool converged = false;      // the published state is converged at the targets, S the tangent's there
   bool set_changed = false;    // the contact set differed from the previous cycle's (reduced system rebuilt)
   double residual = 0;         // relative, of the published state
   int predictor_halvings = 0;  // inversion cuts of the predictor
+  int corrections = 0;         // modified Newton corrections accepted (on an iteration's factor)
   bool ldlt_fallback = false;  // the tangent was not positive definite
-  double assemble_ms = 0, factor_ms = 0, total_ms = 0;  // wall clock: tangent + internal force, factor + solves
+  double assemble_ms = 0, factor_ms = 0, solve_ms = 0, total_ms = 0;  // wall clock: tangent + internal force,
+                                                                     // analysis (a new set) + factor, solves
   std::string failure;         // "" or why nothing was published
 };
 
@@ -101,11 +113,14 @@ class NonlinearTracker {
   MultirateOptions options_;
   TripleBuffer<TrackerSnapshot> snapshots_;
   std::uint64_t cycles_ = 0;
-  Eigen::VectorXd u_, f_, v_, fv_, trial_, ft_, ri_, rhs_;
+  Eigen::VectorXd u_, f_, v_, fv_, trial_, ft_, ri_, rhs_, dx_;
   Eigen::SparseMatrix<double> kt_;
   ReducedSystem sys_;
   std::vector<int> dof_contact_;  // per imposed dof: 3 * (index in the targets) + component
   Eigen::MatrixXd b_, x_, s_;
+  CholmodSolver chol_;     // K_ii's factor: analysed when the contact set changes, refactored every iteration
+  bool analysed_ = false;
+  bool stuck_ = false;     // the last correction found no decrease: the next iteration moves regardless
 };
 
 /// The local model, no allocation: for each contact (node, u now) the snapshot's node, lambda = f_c + S du with du

@@ -47,6 +47,7 @@
 #include "liver/corotation.h"
 #include "liver/hyperelastic.h"
 #include "liver/liver_setup.h"
+#include "liver/multirate.h"
 #include "liver/nonlinear_law.h"
 #include "liver/organ_curves.h"
 #include "liver/patch_solve.h"
@@ -74,6 +75,8 @@ struct Case {
   std::vector<Eigen::Vector3d> u_star;  // m
   RigidFrame base;                   // identity unless the fixed set moves
   bool rigid = false;                // reference is the rigid motion itself
+  bool lift = false;                 // the path is a turn about `hinge` (else straight from rest)
+  Eigen::Vector3d hinge = Eigen::Vector3d::Zero();
   Eigen::Vector3d f_ref = Eigen::Vector3d::Zero();
   Eigen::VectorXd u_ref;             // visible, m
   Eigen::MatrixX3d newton_u;         // #V x 3, m (not for rigid)
@@ -180,6 +183,124 @@ class Corotational {
   Eigen::MatrixX3d ut_;
 };
 
+// ---- multirate (liver/multirate.h) ----
+
+// The contact targets of a case at fraction s of its motion, in the fixed set's frame: a press straight from rest
+// (s u*), a lift along the circle (the grasp turned by s times the angle about the hinge), the rigid case 0 (the
+// tracker works in the frame of its fixed set, so the organ's rigid motion imposes nothing there).
+ContactTargets targets_at(const Case& c, const Organ& o, double s) {
+  ContactTargets t;
+  t.count = static_cast<int>(c.nodes.size());
+  const Eigen::Matrix3d q = Eigen::AngleAxisd(s * c.angle * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  for (int k = 0; k < t.count; ++k) {
+    const int node = c.nodes[static_cast<std::size_t>(k)];
+    const Eigen::Vector3d x0 = o.mesh.nodes.row(node).transpose();
+    t.nodes[static_cast<std::size_t>(k)] = node;
+    if (c.rigid)
+      t.u[static_cast<std::size_t>(k)] = c.base.r.transpose() * (x0 + c.u_star[static_cast<std::size_t>(k)] - c.base.t) - x0;
+    else if (c.lift)
+      t.u[static_cast<std::size_t>(k)] = (q - Eigen::Matrix3d::Identity()) * (x0 - c.hinge);
+    else
+      t.u[static_cast<std::size_t>(k)] = s * c.u_star[static_cast<std::size_t>(k)];
+  }
+  return t;
+}
+
+std::vector<Contact> contacts_of(const ContactTargets& t) {
+  std::vector<Contact> out;
+  for (int k = 0; k < t.count; ++k) out.push_back({t.nodes[static_cast<std::size_t>(k)], t.u[static_cast<std::size_t>(k)]});
+  return out;
+}
+
+Eigen::Vector3d tool_force(const TrackerSnapshot& s) {
+  Eigen::Vector3d f = Eigen::Vector3d::Zero();
+  for (int k = 0; k < s.count; ++k) f -= s.reaction[static_cast<std::size_t>(k)];
+  return f;
+}
+
+// The Newton quasi-static force along a case's path at s = k / samples, k = 0 .. samples: a continuation of the
+// tracker converged at every sample (forces only). NaN where it did not converge.
+std::vector<Eigen::Vector3d> reference_path(const Case& c, const Organ& o, const HyperelasticSolver& solver, int samples) {
+  MultirateOptions mo;
+  mo.iterations_per_cycle = 25;
+  mo.contact_stiffness = false;
+  NonlinearTracker ref(solver, {}, mo);
+  std::vector<Eigen::Vector3d> out;
+  for (int k = 0; k <= samples; ++k) {
+    const ContactTargets t = targets_at(c, o, static_cast<double>(k) / samples);
+    bool ok = false;
+    for (int tries = 0; tries < 20 && !ok; ++tries) ok = ref.cycle(t).converged;
+    ref.snapshots().take();
+    out.push_back(ok ? tool_force(ref.snapshots().front()) : Eigen::Vector3d::Constant(std::nan("")));
+  }
+  return out;
+}
+
+// One motion of the tool from rest to the case's target in `duration_s`, the haptic loop at 1 kHz and the slow side
+// emulated in step: a cycle starts when the previous one ends, reads the targets of the tick it starts in, and its
+// snapshot becomes visible to the loop `cycle_ms` later (the cycle's own measured wall time, or `fixed_cycle_ms`).
+// Errors at the ticks whose s hits a reference sample: |F - F_ref(s)| / max(|F_ref(s)|, 5 % |F_ref(1)|).
+struct MotionResult {
+  std::vector<double> error, cycle_ms, iteration_ms, assemble_ms, factor_ms, solve_ms, tick_us;
+  int ticks = 0, fallback_ticks = 0;
+  int predictor_halvings = 0, failures = 0;  // of the slow cycles
+  double worst_residual = 0;                 // relative, of a published state
+};
+MotionResult run_motion(const Case& c, const Organ& o, NonlinearTracker& tracker, Superposition& linear,
+                        double duration_s, const std::vector<Eigen::Vector3d>& ref, double fixed_cycle_ms) {
+  MotionResult out;
+  const int ticks = static_cast<int>(std::lround(duration_s * 1000));
+  const int samples = static_cast<int>(ref.size()) - 1;
+  const double floor = 0.05 * ref.back().norm();
+  tracker.reset();
+  TrackerSnapshot pending = tracker.snapshots().front(), visible = pending;
+  visible.valid = pending.valid = false;
+  bool has_pending = false;
+  double pending_at = 0, next_start = 0;
+  ContactSolution sol;
+  for (int k = 0; k <= ticks; ++k) {
+    while (next_start <= k) {
+      if (has_pending) std::swap(visible, pending);  // published when this cycle starts
+      const ContactTargets t = targets_at(c, o, std::floor(next_start) / ticks);
+      const TrackerCycle cy = tracker.cycle(t);
+      const double d = fixed_cycle_ms > 0 ? fixed_cycle_ms : cy.total_ms;
+      out.cycle_ms.push_back(cy.total_ms);
+      out.predictor_halvings += cy.predictor_halvings;
+      out.failures += cy.failure.empty() ? 0 : 1;
+      out.worst_residual = std::max(out.worst_residual, cy.residual);
+      if (cy.iterations > 0) {
+        out.iteration_ms.push_back((cy.assemble_ms + cy.factor_ms + cy.solve_ms) / cy.iterations);
+        out.assemble_ms.push_back(cy.assemble_ms / cy.iterations);
+        out.factor_ms.push_back(cy.factor_ms / cy.iterations);
+        out.solve_ms.push_back(cy.solve_ms / cy.iterations);
+      }
+      tracker.snapshots().take();
+      pending = tracker.snapshots().front();
+      has_pending = true;
+      pending_at = next_start + d;
+      next_start += std::max(d, 1e-3);
+    }
+    if (has_pending && pending_at <= k) {
+      std::swap(visible, pending);
+      has_pending = false;
+    }
+    const double s = static_cast<double>(k) / ticks;
+    const std::vector<Contact> contacts = contacts_of(targets_at(c, o, s));
+    const auto t0 = Clock::now();
+    bool ok = local_contact_forces(visible, contacts.data(), static_cast<int>(contacts.size()),
+                                   tracker.options().max_extrapolation, sol);
+    if (!ok) linear.solve(contacts.data(), static_cast<int>(contacts.size()), sol);
+    out.tick_us.push_back(us_since(t0));
+    out.fallback_ticks += ok ? 0 : 1;
+    ++out.ticks;
+    if ((static_cast<long>(k) * samples) % ticks == 0) {
+      const Eigen::Vector3d& fr = ref[static_cast<std::size_t>(static_cast<long>(k) * samples / ticks)];
+      if (fr.allFinite()) out.error.push_back((sol.tool_force - fr).norm() / std::max(fr.norm(), floor));
+    }
+  }
+  return out;
+}
+
 std::string sci(double v) {
   if (!std::isfinite(v)) return "nan";
   char buf[32];
@@ -191,8 +312,11 @@ std::string sci(double v) {
 
 int main(int argc, char** argv) {
   std::string scene_name = "liver", out_dir, cache;
-  int nodes = 1500, repeats = 300;
-  bool quick = false;
+  int nodes = 1500, repeats = 300, motion_samples = 1000, iterations_per_cycle = 1, corrections_per_cycle = 10;
+  bool quick = false, slow_cycle_only = false;
+  std::vector<double> durations{1.0, 0.5};
+  double fixed_cycle_ms = 0, max_step_mm = 5, move_tolerance = 1e-2;
+  std::vector<std::string> only;
   CLI::App app{"large_deformation_bench: the liver at large deformation (issue 16): linear, quasi non-linear "
                "(cylinder and organ curves), corotational and corotational with organ curves against a neo-Hookean "
                "Newton reference, indentation 5-30 %, a lobe lifted 45 and 90 degrees, a rigid 90-degree turn; "
@@ -202,9 +326,39 @@ int main(int argc, char** argv) {
   app.add_option("--scene", scene_name, "Scene (name or YAML): material, clamp, cylinder curves")->capture_default_str();
   app.add_option("--nodes", nodes, "Target node count of the liver")->capture_default_str();
   app.add_option("--repeats", repeats, "Timed repeats per case and method")->capture_default_str();
-  app.add_flag("--quick", quick, "Short run: fewer timing repeats, organ curves from 3 depths");
+  app.add_flag("--quick", quick, "Short run: fewer timing repeats, organ curves from 3 depths, 100 motion samples");
+  app.add_option("--durations", durations, "multirate: durations of the tool's motion from rest to each target, s")
+      ->capture_default_str();
+  app.add_option("--motion-samples", motion_samples,
+                 "multirate: Newton reference samples along each path (the error is taken at the ticks that hit one)")
+      ->capture_default_str()->check(CLI::Range(10, 100000));
+  app.add_option("--iterations-per-cycle", iterations_per_cycle, "multirate: Newton iterations per slow cycle")
+      ->capture_default_str()->check(CLI::Range(1, 50));
+  app.add_option("--corrections-per-cycle", corrections_per_cycle,
+                 "multirate: modified Newton corrections after each iteration, on its factor")
+      ->capture_default_str()->check(CLI::Range(0, 50));
+  app.add_option("--max-step-mm", max_step_mm, "multirate: largest move of a contact node per predictor, mm")
+      ->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--move-tolerance", move_tolerance,
+                 "multirate: relative residual a state must reach before the contact nodes move on")
+      ->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--slow-cycle-ms", fixed_cycle_ms,
+                 "multirate: emulate every slow cycle as taking this long (0: each cycle's measured wall time)")
+      ->capture_default_str();
+  app.add_option("--only", only, "Only these cases (a study; rigid_90's error needs indent_10 in the list)");
+  app.add_flag("--slow-cycle-only", slow_cycle_only,
+               "Only time the multirate slow cycle (one Newton iteration: tangent, factor, contact solves) on this "
+               "liver during a 1 s press to 20 % and lift to 90 degrees; no reference, no other method");
   CLI11_PARSE(app, argc, argv);
-  if (quick) repeats = std::min(repeats, 60);
+  if (quick) {
+    repeats = std::min(repeats, 60);
+    motion_samples = std::min(motion_samples, 100);
+  }
+  for (double d : durations)
+    if (!(d >= 0.01 && d <= 100)) {
+      std::cerr << "large_deformation_bench: --durations " << d << " is out of [0.01, 100] s\n";
+      return 2;
+    }
 
   try {
     const auto start = Clock::now();
@@ -218,32 +372,6 @@ int main(int argc, char** argv) {
     popts.memory_limit_mb = 0;
     const Tensors tensors = precompute_tensors(*o.model, o.contacts, o.rows, popts);
 
-    // The laws: the scene's cylinder curves, and the organ's own (cached next to the tensors).
-    const NonlinearLaw cylinder = load_nonlinear_law(scene.nonlinear, scene.material);
-    OrganCurveSettings ocs;
-    if (quick) ocs.depths = {0.1, 0.2, 0.3};
-    const std::uint64_t tensor_key = liver_tensor_setup(scene.material, scene.fixed, o.mesh, cache, scene.file).key.combined();
-    OrganCurvesOutcome oc_outcome;
-    const auto tc0 = Clock::now();
-    const OrganCurves curves = load_or_compute_organ_curves(*o.model, ocs, tensor_key, cache, &std::cerr, &oc_outcome);
-    const double curves_s = us_since(tc0) * 1e-6;
-    FitReport q_rep;
-    const NonlinearLaw organ_law = fit_organ_law(curves, o.mesh, o.fixed, ocs, &q_rep);
-    // The organ law's surface field, leave-one-site-out; the punch below is not a fit site (its distance to the
-    // nearest one is printed).
-    const OrganLawValidation cv = validate_organ_law(curves, ocs);
-    double nearest_site = 1e9;
-    for (const auto& s : cv.sites) nearest_site = std::min(nearest_site, (Eigen::Vector2d(s.site_x, s.site_y) - kPunchCentre).norm());
-    std::printf("Liver %d nodes, %d visible; organ curves %s in %.1f s (%zu Newton indentations at %zu sites over the "
-                "free top, the nearest %.1f cm from the punch's centre), Q fit max residual %.2e, P left out\n"
-                "Organ surface field, leave-one-site-out force error over every site and depth: mean %.2f %%, worst "
-                "%.1f %% (in sample %.2f %%)\n",
-                static_cast<int>(o.mesh.nodes.rows()), static_cast<int>(o.visible.size()),
-                oc_outcome == OrganCurvesOutcome::kLoaded ? "loaded" : "computed", curves_s, curves.samples.size(),
-                cv.sites.size(), 100 * nearest_site, q_rep.max_residual, 100 * cv.mean, 100 * cv.worst, 100 * cv.fitted_worst);
-    for (const auto& s : cv.sites)
-      std::printf("  site (%6.3f, %6.3f) %2d nodes: held out %5.1f %%, one Q for the organ %5.1f %%\n", s.site_x, s.site_y,
-                  s.nodes, 100 * s.worst, 100 * s.q_worst);
 
     // ---- the cases and their references ----
     std::vector<Case> cases;
@@ -262,6 +390,8 @@ int main(int argc, char** argv) {
       Case c;
       c.name = "lift_" + std::to_string(static_cast<int>(deg));
       c.angle = deg;
+      c.lift = true;
+      c.hinge = hinge;
       c.nodes = grasp;
       const Eigen::Matrix3d q = Eigen::AngleAxisd(deg * kPi / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
       for (int k : grasp) {
@@ -294,8 +424,71 @@ int main(int argc, char** argv) {
       c.u_ref = visible_part(o, u_all);
       cases.push_back(c);
     }
+    if (!only.empty())
+      cases.erase(std::remove_if(cases.begin(), cases.end(),
+                                 [&](const Case& c) { return std::find(only.begin(), only.end(), c.name) == only.end(); }),
+                  cases.end());
     if (punch.empty() || grasp.empty()) throw surgsim::Error("no punch or grasp nodes on this mesh");
     if (static_cast<int>(std::max(punch.size(), grasp.size())) > kMaxContacts) throw surgsim::Error("more than kMaxContacts constrained nodes");
+
+    // The multirate slow side on this liver: a Newton iteration's cost decides the snapshot rate.
+    const HyperelasticSolver newton(*o.model);
+    MultirateOptions mopts;
+    mopts.iterations_per_cycle = iterations_per_cycle;
+    mopts.corrections_per_cycle = corrections_per_cycle;
+    mopts.max_step = max_step_mm * 1e-3;
+    mopts.move_tolerance = move_tolerance;
+    NonlinearTracker tracker(newton, o.visible, mopts);
+    Superposition linear_fallback(tensors, "haptic");
+    const auto print_slow_cycle = [&](const char* what, const MotionResult& mr) {
+      std::printf("%-10s %-22s | %9.2f %9.2f | %9.2f %9.2f | %6zu | %6d / %d\n", what,
+                  ("assemble " + sci(bench::percentile(mr.assemble_ms, 0.5)) + ", factor " +
+                   sci(bench::percentile(mr.factor_ms, 0.5)) + ", solve " + sci(bench::percentile(mr.solve_ms, 0.5))).c_str(), bench::percentile(mr.iteration_ms, 0.5),
+                  bench::percentile(mr.iteration_ms, 0.99), bench::percentile(mr.cycle_ms, 0.5),
+                  bench::percentile(mr.cycle_ms, 0.99), mr.cycle_ms.size(), mr.fallback_ticks, mr.ticks);
+    };
+    const char* slow_header = "%-10s %-22s | %9s %9s | %9s %9s | %6s | %s\n";
+    if (slow_cycle_only) {
+      std::printf("Liver %d nodes (%d dofs), %d visible; multirate slow cycle, %d Newton iteration(s) per cycle, tool "
+                  "moved in 1 s (ms)\n", static_cast<int>(o.mesh.nodes.rows()), 3 * static_cast<int>(o.mesh.nodes.rows()),
+                  static_cast<int>(o.visible.size()), iterations_per_cycle);
+      std::printf(slow_header, "case", "", "iter p50", "iter p99", "cycle p50", "cycle p99", "cycles", "fallback ticks");
+      for (const Case& c : cases) {
+        if (c.name != "indent_20" && c.name != "lift_90") continue;
+        const std::vector<Eigen::Vector3d> no_ref(2, Eigen::Vector3d::Constant(std::nan("")));
+        std::printf("%s: %zu contact nodes\n", c.name.c_str(), c.nodes.size());
+        print_slow_cycle(c.name.c_str(), run_motion(c, o, tracker, linear_fallback, 1.0, no_ref, fixed_cycle_ms));
+      }
+      std::printf("\nTotal %.1f s\n", us_since(start) * 1e-6);
+      return 0;
+    }
+
+    // The laws: the scene's cylinder curves, and the organ's own (cached next to the tensors).
+    const NonlinearLaw cylinder = load_nonlinear_law(scene.nonlinear, scene.material);
+    OrganCurveSettings ocs;
+    if (quick) ocs.depths = {0.1, 0.2, 0.3};
+    const std::uint64_t tensor_key = liver_tensor_setup(scene.material, scene.fixed, o.mesh, cache, scene.file).key.combined();
+    OrganCurvesOutcome oc_outcome;
+    const auto tc0 = Clock::now();
+    const OrganCurves curves = load_or_compute_organ_curves(*o.model, ocs, tensor_key, cache, &std::cerr, &oc_outcome);
+    const double curves_s = us_since(tc0) * 1e-6;
+    FitReport q_rep;
+    const NonlinearLaw organ_law = fit_organ_law(curves, o.mesh, o.fixed, ocs, &q_rep);
+    // The organ law's surface field, leave-one-site-out; the punch below is not a fit site (its distance to the
+    // nearest one is printed).
+    const OrganLawValidation cv = validate_organ_law(curves, ocs);
+    double nearest_site = 1e9;
+    for (const auto& s : cv.sites) nearest_site = std::min(nearest_site, (Eigen::Vector2d(s.site_x, s.site_y) - kPunchCentre).norm());
+    std::printf("Liver %d nodes, %d visible; organ curves %s in %.1f s (%zu Newton indentations at %zu sites over the "
+                "free top, the nearest %.1f cm from the punch's centre), Q fit max residual %.2e, P left out\n"
+                "Organ surface field, leave-one-site-out force error over every site and depth: mean %.2f %%, worst "
+                "%.1f %% (in sample %.2f %%)\n",
+                static_cast<int>(o.mesh.nodes.rows()), static_cast<int>(o.visible.size()),
+                oc_outcome == OrganCurvesOutcome::kLoaded ? "loaded" : "computed", curves_s, curves.samples.size(),
+                cv.sites.size(), 100 * nearest_site, q_rep.max_residual, 100 * cv.mean, 100 * cv.worst, 100 * cv.fitted_worst);
+    for (const auto& s : cv.sites)
+      std::printf("  site (%6.3f, %6.3f) %2d nodes: held out %5.1f %%, one Q for the organ %5.1f %%\n", s.site_x, s.site_y,
+                  s.nodes, 100 * s.worst, 100 * s.q_worst);
 
     double f_indent10 = 0;
     for (Case& c : cases) {
@@ -323,6 +516,12 @@ int main(int argc, char** argv) {
     const TensorBlock& vis = visual.block();
     Corotational corot(o, tensors);
     bench::CsvOut csv(out_dir, "liver_large_deformation", "case,method,force_rel_error,disp_rel_error,tick_us_p99");
+    struct MotionRow {
+      std::string name;
+      double duration_s;
+      MotionResult result;
+    };
+    std::vector<MotionRow> motion_rows;
     std::printf("\n%-10s %-18s | %12s %12s | %10s | %9s\n", "case", "method", "force err", "disp err", "tick p99 us",
                 "F N");
     for (const Case& c : cases) {
@@ -359,7 +558,44 @@ int main(int argc, char** argv) {
         apply_quasi(organ_law, imposed.data(), m, c.nodes.data(), vis, co.force, co.u);
         res["corotational_organ"] = std::move(co);
       }
-      for (const char* method : {"linear", "quasi_cylinder", "quasi_organ", "corotational", "corotational_organ"}) {
+      {
+        // multirate: the tool moved from rest to the target in each duration (the motion table), then, after the
+        // first motion, held there until the tracker converged: the static error (Newton's tolerance by construction).
+        const std::vector<Eigen::Vector3d> path =
+            c.rigid ? std::vector<Eigen::Vector3d>{} : reference_path(c, o, newton, motion_samples);
+        if (!c.rigid && path.back().allFinite() && c.converged)
+          progress(c.name + ": reference path end against Newton's solve: " +
+                   sci((path.back() - c.f_ref).norm() / c.f_ref.norm()));
+        if (c.rigid)
+          tracker.reset();
+        else
+          motion_rows.push_back({c.name, durations[0], run_motion(c, o, tracker, linear_fallback, durations[0], path, fixed_cycle_ms)});
+        const ContactTargets target = targets_at(c, o, 1.0);
+        int hold = 0;
+        while (hold < 200 && !tracker.cycle(target).converged) ++hold;
+        tracker.snapshots().take();
+        const TrackerSnapshot& snap = tracker.snapshots().front();
+        const std::vector<Contact> local = contacts_of(target);
+        Outcome mo;
+        ContactSolution ms;
+        for (int rep = 0; rep < repeats; ++rep) {
+          const auto t0 = Clock::now();
+          if (!local_contact_forces(snap, local.data(), m, mopts.max_extrapolation, ms)) linear_fallback.solve(local.data(), m, ms);
+          mo.tick_us.push_back(us_since(t0));
+        }
+        if (!local_contact_forces(snap, local.data(), m, mopts.max_extrapolation, ms))
+          progress(c.name + ": multirate: no valid snapshot after " + std::to_string(hold) + " held cycles");
+        mo.force = c.base.r * ms.tool_force;
+        mo.u.resize(3 * static_cast<Eigen::Index>(o.visible.size()));
+        for (std::size_t r = 0; r < o.visible.size(); ++r) {
+          const Eigen::Vector3d x0 = o.mesh.nodes.row(o.visible[r]).transpose();
+          mo.u.segment<3>(3 * static_cast<Eigen::Index>(r)) = c.base.apply(x0 + snap.surface.segment<3>(3 * static_cast<Eigen::Index>(r))) - x0;
+        }
+        res["multirate"] = std::move(mo);
+        for (std::size_t k = 1; k < durations.size() && !c.rigid; ++k)
+          motion_rows.push_back({c.name, durations[k], run_motion(c, o, tracker, linear_fallback, durations[k], path, fixed_cycle_ms)});
+      }
+      for (const char* method : {"linear", "quasi_cylinder", "quasi_organ", "corotational", "corotational_organ", "multirate"}) {
         const Outcome& r = res[method];
         double fe, de;
         if (c.rigid) {
@@ -385,6 +621,38 @@ int main(int argc, char** argv) {
                     "-", d.force.norm());
       }
     }
+
+    // ---- multirate in motion ----
+    bench::CsvOut motion_csv(out_dir, "liver_large_deformation_motion",
+                             "case,method,duration_s,force_rel_error_p99,force_rel_error_max,slow_cycle_ms_p50,slow_cycle_ms_p99");
+    std::printf("\nmultirate in motion: the tool from rest to the target (straight press, circular lift) in the given "
+                "time, the 1 kHz loop on the newest snapshot the slow side has published (%d Newton iteration(s) and up "
+                "to %d corrections a cycle, %s); force error against the Newton quasi-static force at the same tool position, "
+                "|F - F_ref| / max(|F_ref|, 5 %% |F_ref(end)|), at the ticks hitting the %d reference samples\n",
+                iterations_per_cycle, corrections_per_cycle, fixed_cycle_ms > 0 ? "cycles emulated at --slow-cycle-ms" : "each cycle visible after its measured wall time",
+                motion_samples);
+    std::printf("%-10s %6s | %10s %10s | %9s %9s %9s | %6s | %8s | %-11s | %s\n", "case", "T s", "F err p99", "F err max",
+                "iter p50", "cycle p50", "cycle p99", "cycles", "tick p99", "fallback", "predictor cuts, failed cycles, worst residual");
+    std::vector<double> all_iter, all_cycle;
+    for (const MotionRow& r : motion_rows) {
+      const MotionResult& mr = r.result;
+      const double p99 = mr.error.empty() ? std::nan("") : bench::percentile(mr.error, 0.99);
+      const double mx = mr.error.empty() ? std::nan("") : *std::max_element(mr.error.begin(), mr.error.end());
+      all_iter.insert(all_iter.end(), mr.iteration_ms.begin(), mr.iteration_ms.end());
+      all_cycle.insert(all_cycle.end(), mr.cycle_ms.begin(), mr.cycle_ms.end());
+      std::printf("%-10s %6.2f | %10s %10s | %9.2f %9.2f %9.2f | %6zu | %8.2f | %4d / %-4d | %d, %d, %s\n", r.name.c_str(),
+                  r.duration_s, sci(p99).c_str(), sci(mx).c_str(), bench::percentile(mr.iteration_ms, 0.5),
+                  bench::percentile(mr.cycle_ms, 0.5), bench::percentile(mr.cycle_ms, 0.99), mr.cycle_ms.size(),
+                  bench::percentile(mr.tick_us, 0.99), mr.fallback_ticks, mr.ticks, mr.predictor_halvings, mr.failures,
+                  sci(mr.worst_residual).c_str());
+      motion_csv.row("%s,multirate,%g,%s,%s,%.6g,%.6g", r.name.c_str(), r.duration_s, sci(p99).c_str(), sci(mx).c_str(),
+                     bench::percentile(mr.cycle_ms, 0.5), bench::percentile(mr.cycle_ms, 0.99));
+    }
+    if (!all_cycle.empty())
+      std::printf("slow cycle over all motions: one Newton iteration (tangent, internal force, factor, %s) p50 %.2f p99 "
+                  "%.2f ms; cycle p50 %.2f p99 %.2f ms, i.e. %.0f snapshots/s at p50\n", "contact solves",
+                  bench::percentile(all_iter, 0.5), bench::percentile(all_iter, 0.99), bench::percentile(all_cycle, 0.5),
+                  bench::percentile(all_cycle, 0.99), 1000 / bench::percentile(all_cycle, 0.5));
 
     // ---- the haptic tick and the visual frame, linear against corotational ----
     std::printf("\nHaptic tick (LiverContacts, patch model, one instrument pressing 8 mm at (0.03, 0); us, %d ticks "
@@ -438,9 +706,31 @@ int main(int argc, char** argv) {
         haptic.solve(contacts.data(), static_cast<int>(contacts.size()), sol);
         tl.push_back(us_since(t0));
       }
-      std::printf("%zu contact nodes, solve only: linear p50 %.2f p99 %.2f us; corotational p50 %.2f p99 %.2f us\n",
+      // multirate: MultirateForce::evaluate (take the newest snapshot, f_c + S du) on a converged snapshot, the tool
+      // wobbling by up to 0.5 mm about it.
+      tracker.reset();
+      ContactTargets tt;
+      tt.count = static_cast<int>(ten.size());
+      for (std::size_t k = 0; k < ten.size(); ++k) {
+        tt.nodes[k] = ten[k];
+        tt.u[k] = Eigen::Vector3d(0, 0, -0.005);
+      }
+      for (int k = 0; k < 50 && !tracker.cycle(tt).converged; ++k) {
+      }
+      MultirateForce fast(tracker.snapshots(), linear_fallback, mopts.max_extrapolation);
+      std::vector<double> tm;
+      int nonlinear = 0;
+      for (int rep = 0; rep < 10 * repeats; ++rep) {
+        for (auto& x : contacts) x.displacement.z() = -0.005 + 0.0005 * std::sin(0.01 * rep);
+        const auto t0 = Clock::now();
+        nonlinear += fast.evaluate(contacts.data(), static_cast<int>(contacts.size()), sol) == MultirateSource::kNonlinear;
+        tm.push_back(us_since(t0));
+      }
+      std::printf("%zu contact nodes, solve only: linear p50 %.2f p99 %.2f us; corotational p50 %.2f p99 %.2f us; "
+                  "multirate (local model) p50 %.2f p99 %.2f us (%d of %d ticks on the snapshot)\n",
                   ten.size(), bench::percentile(tl, 0.5), bench::percentile(tl, 0.99), bench::percentile(co.tick_us, 0.5),
-                  bench::percentile(co.tick_us, 0.99));
+                  bench::percentile(co.tick_us, 0.99), bench::percentile(tm, 0.5), bench::percentile(tm, 0.99), nonlinear,
+                  10 * repeats);
     }
     {
       const SurfaceMesh surface = boundary_surface(o.mesh);

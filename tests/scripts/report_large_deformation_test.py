@@ -48,6 +48,32 @@ class ReportLargeDeformation(unittest.TestCase):
             self.assertEqual(list(rows), [("indent_5", "linear")])
             self.assertAlmostEqual(rows[("indent_5", "linear")]["force"], 0.0237)
 
+    def test_motion_table_and_plot(self):
+        # The multirate motion CSV: read, a markdown row per case and duration with a verdict, drawn in the plot.
+        with tempfile.TemporaryDirectory() as d:
+            with open(os.path.join(d, "liver_large_deformation.csv"), "w") as f:
+                f.write("case,method,force_rel_error,disp_rel_error,tick_us_p99\n")
+                for c in CASES:
+                    f.write("%s,multirate,1e-10,1e-9,1.5\n" % c)
+            with open(os.path.join(d, rld.MOTION), "w") as f:
+                f.write("# stamped\n")
+                f.write("case,method,duration_s,force_rel_error_p99,force_rel_error_max,slow_cycle_ms_p50,"
+                        "slow_cycle_ms_p99\n")
+                f.write("indent_20,multirate,1,0.012,0.02,31.5,40.1\n")
+                f.write("lift_90,multirate,0.5,0.15,0.3,33,45\n")
+            motion = rld.read_motion(d)
+            self.assertEqual(set(motion), {("indent_20", 1.0), ("lift_90", 0.5)})
+            self.assertAlmostEqual(motion[("lift_90", 0.5)]["cycle_p99"], 45)
+            md = rld.motion_markdown(d)
+            self.assertEqual(len(md), 4)
+            self.assertIn("| indent_20 | multirate | 1 | 1.20 % |", md[2])
+            self.assertTrue(md[2].endswith("| <= 5 % | within |"), md[2])
+            self.assertTrue(md[3].endswith("| <= 10 % | over |"), md[3])
+            out = rld.plot(d, os.path.join(d, "plots"))
+            self.assertTrue(os.path.getsize(out) > 10000, out)
+            os.remove(os.path.join(d, rld.MOTION))
+            self.assertEqual(rld.motion_markdown(d), [])
+
     def test_missing_csv_gives_none(self):
         with tempfile.TemporaryDirectory() as d:
             self.assertIsNone(rld.plot(d, d))
