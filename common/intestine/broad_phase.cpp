@@ -147,6 +147,12 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     return travel_[static_cast<std::size_t>(a)] + travel_[static_cast<std::size_t>(e)] <
            static_cast<double>(wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)]);
   };
+  // How much more the two elements may travel before a sleeping pair wakes (<= 0: it is awake).
+  auto slack = [&](int a, int e) {
+    return static_cast<double>(wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)]) -
+           (travel_[static_cast<std::size_t>(a)] + travel_[static_cast<std::size_t>(e)]);
+  };
+  // Puts a pair to sleep; returns its slack (0 when the gap is too small to sleep on).
   auto sleep = [&](int a, int e, double gap) {
     float w = 0.0f;
     if (gap > hair) {
@@ -155,6 +161,7 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
       if (static_cast<double>(w) > wake) w = std::nextafter(w, 0.0f);  // rounded down
     }
     wake_[static_cast<std::size_t>(a) * wide + static_cast<std::size_t>(e)] = w;
+    return gap > hair ? slack(a, e) : 0.0;
   };
   // How far apart two grown boxes are (the largest gap along an axis; <= 0 when they overlap): the elements are at
   // least this much farther apart than the sum of their radii and the margin.
@@ -168,6 +175,15 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
   auto block_asleep = [&](int i, int j) {
     return block_travel_[static_cast<std::size_t>(i)] + block_travel_[static_cast<std::size_t>(j)] <
            block_wake_[static_cast<std::size_t>(i) * blocks + static_cast<std::size_t>(j)];
+  };
+  // A block pair whose element pairs all sleep (or whose elements' boxes are apart from the other block's box) sleeps
+  // for the smallest of their slacks: an element's travel grows by at most its block's, so until the two blocks have
+  // travelled that much every element pair in them is still asleep, and none needs looking at.
+  auto block_sleep_for = [&](int i, int j, double least_slack) {
+    if (least_slack > hair) {
+      block_wake_[static_cast<std::size_t>(i) * blocks + static_cast<std::size_t>(j)] =
+          block_travel_[static_cast<std::size_t>(i)] + block_travel_[static_cast<std::size_t>(j)] + least_slack - hair;
+    }
   };
   auto block_sleep = [&](int i, int j, double gap) {
     block_wake_[static_cast<std::size_t>(i) * blocks + static_cast<std::size_t>(j)] =
@@ -275,17 +291,22 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
         block_sleep(i, j, box_gap(bi, bj));
         continue;
       }
+      double least = std::numeric_limits<double>::infinity();  // the block pair's smallest slack
       for (int a = a0; a < a1; ++a) {
         const Box& ba = seg_box_[static_cast<std::size_t>(a)];
-        if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) continue;
+        if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) {
+          least = std::min(least, box_gap(ba, bj));
+          continue;
+        }
         for (int b = std::max(b0, a + excl + 1); b < b1; ++b) {
           if (asleep(a, b)) {
             ++st.asleep;
+            least = std::min(least, slack(a, b));
             continue;
           }
           const Box& bb = seg_box_[static_cast<std::size_t>(b)];
           if (!overlap(ba.lo, ba.hi, bb.lo, bb.hi)) {
-            sleep(a, b, box_gap(ba, bb));
+            least = std::min(least, sleep(a, b, box_gap(ba, bb)));
             continue;
           }
           ++st.overlaps;
@@ -294,7 +315,7 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
           const double reach = seg_bound + sa[3] + sb[3];
           const double d2 = (sa.head<3>() - sb.head<3>()).squaredNorm();
           if (d2 >= reach * reach) {
-            sleep(a, b, std::sqrt(d2) - reach);
+            least = std::min(least, sleep(a, b, std::sqrt(d2) - reach));
             continue;
           }
           // The reference's distance; its contact only when closer than the bound.
@@ -305,10 +326,14 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
                                            Eigen::Map<const Eigen::Vector3d>(px + 3 * seg_node_[2 * a + 1]),
                                            Eigen::Map<const Eigen::Vector3d>(q),
                                            Eigen::Map<const Eigen::Vector3d>(px + 3 * seg_node_[2 * b + 1]), s_, t_);
-          sleep(a, b, d - seg_bound);
-          if (d < seg_bound) push(segment_contact(topo_, x, a, b, margin, c));
+          least = std::min(least, sleep(a, b, d - seg_bound));
+          if (d < seg_bound) {
+            segment_contact_at(topo_, x, a, b, d, s_, t_, c);  // the contact segment_contact would build
+            push(true);
+          }
         }
       }
+      block_sleep_for(i, j, least);
     }
   }
   // Intestine-mesentery: segment block x cell block, then segment x cell, then both triangles of the cell.
@@ -323,25 +348,30 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
         continue;
       }
       const int c0 = cell_block_first_[static_cast<std::size_t>(j)], c1 = cell_block_end_[static_cast<std::size_t>(j)];
+      double least = std::numeric_limits<double>::infinity();  // the block pair's smallest slack
       for (int a = a0; a < a1; ++a) {
         const Box& ba = seg_box_[static_cast<std::size_t>(a)];
-        if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) continue;
+        if (!overlap(ba.lo, ba.hi, bj.lo, bj.hi)) {
+          least = std::min(least, box_gap(ba, bj));
+          continue;
+        }
         const char* ok = &cell_ok_[static_cast<std::size_t>(a) * static_cast<std::size_t>(ncell_)];
         for (int cell = c0; cell < c1; ++cell) {
           if (!ok[cell]) continue;
           if (asleep(a, nseg_ + cell)) {
             ++st.asleep;
+            least = std::min(least, slack(a, nseg_ + cell));
             continue;
           }
           const Box& bc = cell_box_[static_cast<std::size_t>(cell)];
           if (!overlap(ba.lo, ba.hi, bc.lo, bc.hi)) {
-            sleep(a, nseg_ + cell, box_gap(ba, bc));
+            least = std::min(least, sleep(a, nseg_ + cell, box_gap(ba, bc)));
             continue;
           }
           ++st.overlaps;
           const double cg = cell_gap(a, cell);
           if (cg >= 0) {
-            sleep(a, nseg_ + cell, cg);
+            least = std::min(least, sleep(a, nseg_ + cell, cg));
             continue;
           }
           double gap = std::numeric_limits<double>::infinity();
@@ -363,11 +393,15 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
                                               Eigen::Map<const Eigen::Vector3d>(px + 3 * n[t % 2 == 0 ? 2 : 3]), s_,
                                               bary);
             gap = std::min(gap, d - tri_bound);
-            if (d < tri_bound) push(triangle_contact(topo_, x, a, t, margin, c, false));
+            if (d < tri_bound) {
+              triangle_contact_at(topo_, x, a, t, d, s_, bary, c);  // the contact triangle_contact would build
+              push(true);
+            }
           }
-          sleep(a, nseg_ + cell, gap);
+          least = std::min(least, sleep(a, nseg_ + cell, gap));
         }
       }
+      block_sleep_for(i, nsb + j, least);
     }
   }
   return st;

@@ -828,12 +828,20 @@ DetectStats StochasticDetector::detect(const Eigen::Matrix3Xd& x, ContactList& o
 
 bool segment_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, int a, int b, double margin,
                      CollisionContact& c) noexcept {
-  const double rr = 2 * topo.intestine_radius;
   const Eigen::Vector3d p0 = x.col(topo.node(0, a)), p1 = x.col(topo.node(0, a + 1));
   const Eigen::Vector3d q0 = x.col(topo.node(0, b)), q1 = x.col(topo.node(0, b + 1));
   double s = 0, t = 0;
   const double d = segment_segment(p0, p1, q0, q1, s, t);
-  if (d >= rr + margin) return false;
+  if (d >= 2 * topo.intestine_radius + margin) return false;
+  segment_contact_at(topo, x, a, b, d, s, t, c);
+  return true;
+}
+
+void segment_contact_at(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, int a, int b, double d, double s,
+                        double t, CollisionContact& c) noexcept {
+  const double rr = 2 * topo.intestine_radius;
+  const Eigen::Vector3d p0 = x.col(topo.node(0, a)), p1 = x.col(topo.node(0, a + 1));
+  const Eigen::Vector3d q0 = x.col(topo.node(0, b)), q1 = x.col(topo.node(0, b + 1));
   c = CollisionContact{};
   c.kind = ContactKind::kSegmentSegment;
   c.nodes = {topo.node(0, a), topo.node(0, a + 1), topo.node(0, b), topo.node(0, b + 1), -1};
@@ -844,7 +852,6 @@ bool segment_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, i
   c.distance = d;
   c.element_a = a;
   c.element_b = b;
-  return true;
 }
 
 bool triangle_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, int a, int tri, double margin,
@@ -860,6 +867,17 @@ bool triangle_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, 
   const double d = segment_triangle(p0, p1, A, B, C, s, bary,
                                    cull ? rm + margin : std::numeric_limits<double>::infinity());
   if (!(d < rm + margin)) return false;
+  triangle_contact_at(topo, x, a, tri, d, s, bary, c);
+  return true;
+}
+
+void triangle_contact_at(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, int a, int tri, double d, double s,
+                         const Eigen::Vector3d& bary, CollisionContact& c) noexcept {
+  const double rm = topo.intestine_radius + topo.mesentery_half_thickness;
+  const Eigen::Vector3d p0 = x.col(topo.node(0, a)), p1 = x.col(topo.node(0, a + 1));
+  int n[3];
+  topo.triangle(tri, n);
+  const Eigen::Vector3d A = x.col(n[0]), B = x.col(n[1]), C = x.col(n[2]);
   c = CollisionContact{};
   c.kind = ContactKind::kSegmentTriangle;
   c.count_b = 3;
@@ -876,7 +894,6 @@ bool triangle_contact(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, 
   c.distance = d;
   c.element_a = a;
   c.element_b = tri;
-  return true;
 }
 
 void detect_brute_force(const CollisionTopology& topo, const Eigen::Matrix3Xd& x, ContactList& out,

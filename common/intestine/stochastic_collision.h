@@ -246,6 +246,14 @@ bool segment_contact(const CollisionTopology& topology, const Eigen::Matrix3Xd& 
 bool triangle_contact(const CollisionTopology& topology, const Eigen::Matrix3Xd& x, int a, int tri, double margin,
                       CollisionContact& c, bool cull = true) noexcept;
 
+/// The contacts segment_contact and triangle_contact build, from the distance and closest-point parameters the caller
+/// got from segment_segment / segment_triangle on the same positions (a pair already found closer than the bound):
+/// the same contact without a second exact test (BroadPhaseDetector).
+void segment_contact_at(const CollisionTopology& topology, const Eigen::Matrix3Xd& x, int a, int b, double d, double s,
+                        double t, CollisionContact& c) noexcept;
+void triangle_contact_at(const CollisionTopology& topology, const Eigen::Matrix3Xd& x, int a, int tri, double d,
+                         double s, const Eigen::Vector3d& bary, CollisionContact& c) noexcept;
+
 /// Reference: every tested element pair closer than the sum of the radii + margin (m), appended to `out`.
 /// No allocation; O(segments^2 + segments x cells) with a bounding-box cull.
 void detect_brute_force(const CollisionTopology& topology, const Eigen::Matrix3Xd& x, ContactList& out,
