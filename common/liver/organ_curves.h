@@ -26,7 +26,7 @@
 // tensors' key (mesh, material, fixed set, solver settings) combined with the settings here: a new material (or
 // mesh, fixed set, sites, depths, degree) gives another key, so the old file is never read for it. The file repeats
 // its key and a checksum of its rows; a file that does not match is recomputed and rewritten (atomically: temp file,
-// rename). Init phase only (allocates; about 20 s of Newton on the 1.4k liver on first use).
+// rename). Init phase only (allocates; 23-28 s of Newton for the 21 sites of the 1.4k liver on first use).
 #pragma once
 #include <Eigen/Core>
 #include <cstdint>
