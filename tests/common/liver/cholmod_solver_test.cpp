@@ -32,6 +32,26 @@ TEST(CholmodSolver, MatchesEigenOnManyRightHandSidesInBlocks) {
   EXPECT_EQ(0, std::memcmp(x.data(), x2.data(), sizeof(double) * static_cast<std::size_t>(x.size())));
 }
 
+TEST(CholmodSolver, RefactorizeKeepsTheAnalysisAndRefusesAnotherPattern) {
+  // New values in the same pattern (a Newton loop's tangent, liver/multirate.h): the new matrix's solution.
+  auto organ = test::box_organ(3, 3, 2);
+  Eigen::SparseMatrix<double> k = organ->model.k_ff;
+  CholmodSolver solver(k);
+  for (int j = 0; j < k.outerSize(); ++j)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(k, j); it; ++it)
+      if (it.row() == j) it.valueRef() *= 3;  // still symmetric positive definite, other values
+  solver.refactorize(k);
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(k.rows());
+  Eigen::VectorXd x(b.size());
+  solver.solve(b, x);
+  EXPECT_LT((k * x - b).norm() / b.norm(), 1e-12);
+  Eigen::SparseMatrix<double> other = k;
+  other.coeffRef(0, k.rows() - 1) = 1e-3;  // a new entry in the upper triangle
+  other.coeffRef(k.rows() - 1, 0) = 1e-3;
+  EXPECT_THROW(solver.refactorize(other), Error);
+  EXPECT_THROW(CholmodSolver().refactorize(k), Error);
+}
+
 TEST(CholmodSolver, SimplicialWorksToo) {
   auto organ = test::box_organ(3, 3, 2);
   CholmodOptions opts;
