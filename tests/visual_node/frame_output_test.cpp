@@ -3,10 +3,17 @@
 #include "frame_output.h"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <future>
+#include <iterator>
+#include <thread>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -131,6 +138,7 @@ TEST(FrameOutput, NoVtkWhenTheSceneDoesNotAskOrTheOrganHasNoSurface) {
   {
     FrameOutput out(o);
     out.write(small_image(), 1, 1, 0.0, FakeOrgan(false), 1);  // the organ has no surface (e.g. the intestine)
+    out.flush();
     EXPECT_EQ(out.pngs_written(), 1u);
     EXPECT_EQ(out.vtk_written(), 0u);
   }
@@ -155,16 +163,96 @@ TEST(FrameOutput, AFailedWriteIsCountedAndTheNextOneStillWrites) {
   const FakeOrgan organ(true);
   EXPECT_NO_THROW(out.write(small_image(), 1, 1, 0.0, organ, 1));
   EXPECT_NO_THROW(out.write(small_image(), 2, 2, 0.0, organ, 1));
+  out.flush();
   EXPECT_EQ(out.png_errors(), 2u);
   EXPECT_EQ(out.pngs_written(), 0u);
   out.write(small_image(), 3, 3, 0.0, organ, 1);
-  EXPECT_EQ(out.pngs_written(), 1u);
   out.flush();
+  EXPECT_EQ(out.pngs_written(), 1u);
   EXPECT_EQ(read_text(o.out + "/frames.csv"),
             "png,seq,sim_time,contacts,max_displacement_m,instruments\nframe_000003.png,3,0.000000,3,0.004,1\n");
   nlohmann::json j;
   out.add_stats(j);
   EXPECT_EQ(j["first_png"], o.out + "/frame_000003.png");
+  fs::remove_all(o.out);
+}
+
+// The render loop hands a PNG over and goes on drawing while the disk is slow: here the PNG's path is a FIFO nobody
+// reads yet, so writing it blocks until the test opens the other end. write() must return before that (it wrote the
+// PNG on the render thread before: a 640 x 480 PNG took about one frame period of the intestine's 30 Hz display).
+TEST(FrameOutput, WriteReturnsWhileTheDiskIsBlockedAndNothingIsLost) {
+  FrameOutputOptions o;
+  o.out = fresh_dir("fifo");
+  o.png_every = 1;
+  FrameOutput out(o);
+  const std::string fifo = o.out + "/frame_000001.png";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const Image image = small_image();
+  const FakeOrgan organ(false);
+  std::promise<void> returned;
+  std::future<void> done = returned.get_future();
+  std::thread render([&] {
+    out.write(image, 1, 7, 0.25, organ, 1);
+    returned.set_value();
+  });
+  // Generous: the call only copies 384 bytes; before the fix it could not return until the FIFO is read below.
+  const bool returned_while_blocked = done.wait_for(std::chrono::seconds(20)) == std::future_status::ready;
+  EXPECT_TRUE(returned_while_blocked) << "write() waited for the disk";
+  // Read the FIFO: the PNG written through it is the picture.
+  std::string bytes;
+  {
+    std::ifstream in(fifo, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  render.join();
+  out.write(image, 2, 8, 0.5, organ, 1);  // and the next frame after it, in order
+  out.flush();
+  EXPECT_EQ(out.pngs_written(), 2u);
+  EXPECT_EQ(out.png_errors(), 0u);
+  EXPECT_EQ(out.png_waits(), 0u);
+  EXPECT_EQ(bytes.substr(1, 3), "PNG");
+  EXPECT_EQ(read_png(o.out + "/frame_000002.png").rgb, image.rgb);
+  EXPECT_EQ(read_text(o.out + "/frames.csv"),
+            "png,seq,sim_time,contacts,max_displacement_m,instruments\n"
+            "frame_000001.png,7,0.250000,3,0.004,1\nframe_000002.png,8,0.500000,3,0.004,1\n");
+  fs::remove_all(o.out);
+}
+
+// More PNGs than slots while the disk is blocked: write() waits for a slot (counted), none is dropped.
+TEST(FrameOutput, AFullQueueWaitsForTheDiskInsteadOfDroppingFrames) {
+  FrameOutputOptions o;
+  o.out = fresh_dir("full");
+  o.png_every = 1;
+  FrameOutput out(o);
+  const std::string fifo = o.out + "/frame_000001.png";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const Image image = small_image();
+  const FakeOrgan organ(false);
+  const int frames = FrameOutput::kSlots + 2;
+  std::atomic<int> handed{0};
+  std::thread render([&] {
+    for (int f = 1; f <= frames; ++f) {
+      out.write(image, static_cast<std::uint64_t>(f), static_cast<std::uint64_t>(f), 0.0, organ, 1);
+      handed.fetch_add(1);
+    }
+  });
+  // The writer is stuck on frame 1, so at most kSlots frames can be handed over until the FIFO is read.
+  while (handed.load() < FrameOutput::kSlots) std::this_thread::yield();
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_EQ(handed.load(), FrameOutput::kSlots);
+  {
+    std::ifstream in(fifo, std::ios::binary);
+    std::string drain((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }
+  render.join();
+  out.flush();
+  EXPECT_EQ(out.pngs_written(), static_cast<std::uint64_t>(frames));
+  EXPECT_GE(out.png_waits(), 1u);
+  for (int f = 2; f <= frames; ++f) {
+    char name[64];
+    std::snprintf(name, sizeof name, "/frame_%06d.png", f);
+    EXPECT_EQ(read_png(o.out + name).rgb, image.rgb) << name;
+  }
   fs::remove_all(o.out);
 }
 
