@@ -7,10 +7,11 @@
 #       replays it and the page watches.)
 # Environment: SURGSIM_OUT (default out/<scene>), SURGSIM_BUILD_DIR, SURGSIM_DOMAIN, HAPTIC_ARGS, VISUAL_ARGS;
 # with --web: WEB_PORT (8080), WEB_FPS (frames streamed per second, 20), WEB_ARGS (e.g. "--bind 0.0.0.0").
-# CPU placement (issue 15): on a machine with 2 or more CPUs the haptic loop thread gets one CPU to itself,
-# SURGSIM_HAPTIC_CPU (default 0): haptic_node --cpu puts its other threads (DDS, publisher, log writers) on the
-# remaining CPUs, and the visual node (and surgsim-web) start there (taskset). SURGSIM_HAPTIC_CPU=none, a 1-CPU
-# machine, or a --cpu in HAPTIC_ARGS leave the placement to the nodes (nothing pinned unless HAPTIC_ARGS asks).
+# CPU placement (issue 15): SURGSIM_HAPTIC_CPU=N (on a machine with 2 or more CPUs) gives the haptic loop thread CPU N
+# to itself: haptic_node --cpu N puts its other threads (DDS, publisher, log writers) on the remaining CPUs, and the
+# visual node (and surgsim-web) start there (taskset). The default, none, pins nothing: the haptic node's CPU latency
+# request (--cpu-latency-us 0) already brings its missed deadlines to the machine's floor, and the visual node keeps
+# both CPUs (level of detail ~2 instead of 0-1 on the intestine). A 1-CPU machine or a --cpu in HAPTIC_ARGS pin nothing.
 set -euo pipefail
 web=0
 args=()
@@ -37,7 +38,7 @@ rm -rf "$out"
 mkdir -p "$out/frames"
 
 
-haptic_cpu=${SURGSIM_HAPTIC_CPU:-0}
+haptic_cpu=${SURGSIM_HAPTIC_CPU:-none}
 cpu_args=()
 others=()   # the command prefix that starts a program on the other CPUs (empty: not pinned)
 if [ "$haptic_cpu" != none ] && [[ " ${HAPTIC_ARGS:-} " != *" --cpu"* ]] && command -v taskset >/dev/null; then
