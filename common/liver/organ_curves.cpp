@@ -13,6 +13,8 @@
 #include <ostream>
 #include <sstream>
 
+#include <unistd.h>
+
 #include "core/error.h"
 #include "liver/hyperelastic.h"
 #include "liver/static_solver.h"
@@ -447,7 +449,8 @@ void save_organ_curves(const std::string& path, const OrganCurves& curves) {
   std::error_code ec;
   const std::filesystem::path p(path);
   if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path(), ec);
-  const std::string tmp = path + ".tmp";
+  // Per process: both nodes compute and save the same file at once on a cache miss (as save_tensor_cache).
+  const std::string tmp = path + ".tmp." + std::to_string(static_cast<long>(::getpid()));
   {
     std::ofstream out(tmp);
     if (!out) throw_error(tmp, ": cannot write the organ curves (check the cache folder's permissions)");
