@@ -146,7 +146,6 @@ class MultirateForce {
   TripleBuffer<TrackerSnapshot>& snapshots_;
   Superposition& linear_;
   double max_extrapolation_;
-  bool have_ = false;
   std::uint64_t fallbacks_ = 0;
 };
 
