@@ -9,6 +9,7 @@
 #include <ctime>
 
 #include "core/clock.h"
+#include "os/cpu_affinity.h"
 
 namespace surgsim {
 
@@ -16,11 +17,8 @@ RealtimeStatus enter_realtime(int priority, bool lock_memory, int cpu) {
   RealtimeStatus s;
   std::string note;
   if (cpu >= 0) {
-    cpu_set_t set;
-    CPU_ZERO(&set);
-    CPU_SET(cpu, &set);
-    note += sched_setaffinity(0, sizeof set, &set) == 0 ? "pinned to CPU " + std::to_string(cpu) + ", "
-                                                        : "CPU " + std::to_string(cpu) + " refused, ";
+    note += set_thread_cpus({cpu}) ? "pinned to CPU " + std::to_string(cpu) + ", "
+                                   : "CPU " + std::to_string(cpu) + " refused, ";
   }
   if (priority > 0) {
     sched_param sp{};
