@@ -176,15 +176,10 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
     return block_travel_[static_cast<std::size_t>(i)] + block_travel_[static_cast<std::size_t>(j)] <
            block_wake_[static_cast<std::size_t>(i) * blocks + static_cast<std::size_t>(j)];
   };
-  // A block pair whose element pairs all sleep (or whose elements' boxes are apart from the other block's box) sleeps
-  // for the smallest of their slacks: an element's travel grows by at most its block's, so until the two blocks have
-  // travelled that much every element pair in them is still asleep, and none needs looking at.
-  auto block_sleep_for = [&](int i, int j, double least_slack) {
-    if (least_slack > hair) {
-      block_wake_[static_cast<std::size_t>(i) * blocks + static_cast<std::size_t>(j)] =
-          block_travel_[static_cast<std::size_t>(i)] + block_travel_[static_cast<std::size_t>(j)] + least_slack - hair;
-    }
-  };
+  // Puts a block pair to sleep for `gap`: the gap between their boxes, or the smallest slack of their element pairs
+  // (pairs whose elements' boxes are apart from the other block's box count with that gap): an element's travel grows
+  // by at most its block's, so until the two blocks have travelled that much every element pair in them is still
+  // asleep, and none needs looking at. A gap within the hair leaves the pair awake.
   auto block_sleep = [&](int i, int j, double gap) {
     block_wake_[static_cast<std::size_t>(i) * blocks + static_cast<std::size_t>(j)] =
         gap > hair ? block_travel_[static_cast<std::size_t>(i)] + block_travel_[static_cast<std::size_t>(j)] + gap - hair
@@ -333,7 +328,7 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
           }
         }
       }
-      block_sleep_for(i, j, least);
+      block_sleep(i, j, least);
     }
   }
   // Intestine-mesentery: segment block x cell block, then segment x cell, then both triangles of the cell.
@@ -401,7 +396,7 @@ BroadPhaseStats BroadPhaseDetector::detect(const Eigen::Matrix3Xd& x, ContactLis
           least = std::min(least, sleep(a, nseg_ + cell, gap));
         }
       }
-      block_sleep_for(i, nsb + j, least);
+      block_sleep(i, nsb + j, least);
     }
   }
   return st;
