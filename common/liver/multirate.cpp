@@ -83,8 +83,6 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
   if (m == 0) {
     // Nothing held: the rest shape is the equilibrium.
     u_.setZero();
-    solver_.internal_force(u_, f_);
-    ri_ = sys_.restrict(f_);
     x_.setZero(sys_.count, 1);
     s_.resize(0, 0);
     out.converged = true;
