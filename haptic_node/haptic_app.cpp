@@ -396,7 +396,8 @@ int HapticApp::run() {
     tick_cpu_us_.add(static_cast<double>(c1 - c0) * 1e-3);
     tick_us_.add(static_cast<double>(t1 - t0) * 1e-3);
     if (k < tick_trace_.size()) {
-      tick_trace_[k] = TickTrace{tick_due_ns_ - loop_start_ns_, static_cast<std::uint32_t>(late_ns),
+      // Unpaced, a tick has no deadline: its start stands for it.
+      tick_trace_[k] = TickTrace{(paced ? tick_due_ns_ : t0) - loop_start_ns_, static_cast<std::uint32_t>(late_ns),
                                  static_cast<std::uint32_t>(std::min<std::uint64_t>(t1 - t0, UINT32_MAX)),
                                  static_cast<std::uint32_t>(std::min<std::uint64_t>(c1 - c0, UINT32_MAX)),
                                  static_cast<std::uint32_t>(timer.misses())};
