@@ -41,7 +41,7 @@ mkdir -p "$out/frames"
 haptic_cpu=${SURGSIM_HAPTIC_CPU:-none}
 cpu_args=()
 others=()   # the command prefix that starts a program on the other CPUs (empty: not pinned)
-if [ "$haptic_cpu" != none ] && [[ " ${HAPTIC_ARGS:-} " != *" --cpu"* ]] && command -v taskset >/dev/null; then
+if [ "$haptic_cpu" != none ] && [[ " ${HAPTIC_ARGS:-} " != *" --cpu "* && " ${HAPTIC_ARGS:-} " != *" --cpu="* ]] && command -v taskset >/dev/null; then
   allowed=()
   for range in $(taskset -cp $$ | sed 's/.*: *//' | tr ',' ' '); do
     allowed+=($(seq "${range%-*}" "${range#*-}"))
