@@ -198,6 +198,13 @@ TEST(OrganCurves, CacheIsKeyedByTheMaterialAndRewrittenWhenDamaged) {
   }
   EXPECT_FALSE(load_organ_curves(path, first.key, dummy, &why));
   EXPECT_NE(why.find("not an organ curves v2 file"), std::string::npos) << why;
+
+  // Both nodes compute and save the curves at once on a cache miss: another process's temporary file in the way (here
+  // path.tmp held as a folder) must not stop this one. A shared path.tmp made the second node's save throw.
+  std::filesystem::create_directories(path + ".tmp");
+  EXPECT_NO_THROW(save_organ_curves(path, first));
+  EXPECT_TRUE(load_organ_curves(path, first.key, dummy, &why)) << why;
+  std::filesystem::remove_all(path + ".tmp");
 }
 
 }  // namespace
