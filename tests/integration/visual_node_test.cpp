@@ -252,7 +252,11 @@ TEST_F(VisualNode, SendsTheMeasuredFrameRateNotTheConfiguredOne) {
     const double seen = static_cast<double>(f[b].frames_rendered - f[a].frames_rendered) /
                         (static_cast<double>(f[b].stamp_ns - f[a].stamp_ns) * 1e-9);
     ++compared;
-    if (std::abs(f[b].fps - seen) > 0.15 * seen + 1.0 && mismatched++ == 0) {
+    // Within a factor of 2: the node's window ends at its newest frame, the test's between two statuses, so on a
+    // loaded machine (ctest -j2 beside the DDS security tests) a stall of the process falls in one and not the other
+    // (a fresh-clone run saw 360 sent against 238 between statuses, with 15 % allowed). The mistake this catches is
+    // of another order: the configured 100000 fps sent for a few hundred rendered.
+    if ((f[b].fps > 2 * seen + 1.0 || f[b].fps < seen / 2 - 1.0) && mismatched++ == 0) {
       first_mismatch = "status of frame " + std::to_string(f[b].frames_rendered) + ": sent " +
                        std::to_string(f[b].fps) + " fps, rendered " + std::to_string(seen) + " fps, configured " +
                        std::to_string(configured);
