@@ -26,6 +26,7 @@ NonlinearTracker::NonlinearTracker(const HyperelasticSolver& solver, std::vector
   if (!(options_.residual_tolerance > 0)) throw_error("multirate: residual_tolerance must be positive");
   if (!(options_.max_step > 0)) throw_error("multirate: max_step must be positive");
   if (!(options_.move_tolerance > 0)) throw_error("multirate: move_tolerance must be positive");
+  if (!(options_.publish_tolerance > 0)) throw_error("multirate: publish_tolerance must be positive");
   if (!(options_.max_extrapolation > 0)) throw_error("multirate: max_extrapolation must be positive");
   const int n = model_.node_count();
   for (int node : surface_nodes_)
@@ -44,6 +45,7 @@ void NonlinearTracker::reset() {
   dof_contact_.clear();
   analysed_ = false;
   stuck_ = false;
+  step_cut_ = 1;
 }
 
 TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
@@ -86,6 +88,7 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
     x_.setZero(sys_.count, 1);
     s_.resize(0, 0);
     out.converged = true;
+    out.published = true;
     publish(targets, x_, true, 0);
     out.total_ms = ms_since(t_start);
     return out;
@@ -118,7 +121,7 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
       }
     }
     const bool move = !at_target && (r0 <= options_.move_tolerance || stuck_);
-    const double scale = move ? std::min(1.0, options_.max_step / largest) : 0.0;
+    const double scale = move ? std::min(1.0, step_cut_ * options_.max_step / largest) : 0.0;
     const int columns = options_.contact_stiffness ? m : 0;
     b_.setZero(sys_.count, 1 + columns);
     rhs_ = -ri_;  // the predictor's (K_ii du_i = -r_i - K_ic dc) or the correction's right side
@@ -177,6 +180,7 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
     if (at_target && r0 <= options_.residual_tolerance) {
       out.converged = true;
       out.residual = r0;
+      out.published = true;
       publish(targets, x_, true, r0);
       out.assemble_ms += ms_since(t0);
       break;
@@ -185,6 +189,8 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
     if (move) {
       // Predictor: the contact dofs by `scale` of the way to their targets (halved while it inverts a tet), the
       // unknowns with them.
+      u_keep_ = u_;
+      f_keep_ = f_;
       double alpha = 1;
       for (int h = 0; h <= options_.max_predictor_halvings && !stepped; ++h, alpha *= 0.5) {
         v_ = u_;
@@ -220,12 +226,29 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
       ++out.corrections;
       r1 = relative_residual();
     }
+    if (move && stepped) {
+      // A predictor that left the state far from equilibrium (too long a step for the tangent) is taken back: from
+      // there the next tangents can be indefinite and the state lost (lift_90 in 0.5 s). The next ones are shorter.
+      if (r1 > options_.publish_tolerance) {
+        u_.swap(u_keep_);
+        f_.swap(f_keep_);
+        r1 = relative_residual();
+        step_cut_ = std::max(step_cut_ * 0.5, 1.0 / 64);
+        out.step_rejected = true;
+      } else {
+        step_cut_ = std::min(1.0, 2 * step_cut_);
+      }
+    }
     out.residual = r1;
     out.assemble_ms += ms_since(t0);
     if (!stepped || it + 1 == options_.iterations_per_cycle) {
       // The state (moved or not) with this factorization's S, stale by the step just taken: published as not
-      // converged. At equilibrium, the next iteration or cycle refactors there and publishes it as converged.
-      publish(targets, x_, false, r1);
+      // converged. At equilibrium, the next iteration or cycle refactors there and publishes it as converged. A state
+      // far from equilibrium is not published: its linearly corrected f_c and its S can be far off.
+      if (r1 <= options_.publish_tolerance) {
+        out.published = true;
+        publish(targets, x_, false, r1);
+      }
       break;
     }
   }

@@ -10,8 +10,9 @@
 // the linearized response, halved while it inverts a tet) when the state's relative residual is within
 // move_tolerance, else a Newton correction with HyperelasticSolver's line search; then up to corrections_per_cycle
 // modified Newton corrections on the same factor (cheap: an internal force and a one-column solve each). So every
-// predictor starts near equilibrium, as a load step does, and a fast tool is followed over several cycles. From the
-// same factorization:
+// predictor starts near equilibrium, as a load step does, and a fast tool is followed over several cycles. A predictor
+// whose state still has a relative residual above publish_tolerance after the corrections is taken back and the step
+// limit halved (doubled back after an accepted step), and no state above it is published. From the same factorization:
 //   S = K_cc - K_ci K_ii^-1 K_ic   (the contact stiffness of the tangent, the Schur complement, 3m x 3m, N/m)
 //   f_c = f_int,c - (K_ii^-1 K_ic)^T r_i   (the reactions on the contact dofs, linearly corrected for the
 //                                           remaining out-of-balance force r_i of the unknowns)
@@ -46,6 +47,11 @@ struct MultirateOptions {
   double move_tolerance = 1e-2;       // the contact dofs move towards new targets only from a state whose relative
                                       // residual is within this (else the iteration is a correction)
   double max_step = 0.005;            // m: the largest move of a contact node per predictor
+  double publish_tolerance = 2e-2;    // a predictor whose state (after the corrections) has a larger relative
+                                      // residual is taken back and the step limit halved (doubled back on success);
+                                      // any state above it is not published (the fast side keeps the previous
+                                      // snapshot): the linearly corrected f_c and S of a state far from equilibrium
+                                      // can be wrong in sign (lift_90 in 0.5 s: 140-309 % force error)
   double max_extrapolation = 0.01;    // m: the fast side clamps |u_c(now) - u_c(snapshot)| of each node to this
   bool contact_stiffness = true;      // false: S left 0 and f_c uncorrected (a reference run that needs forces only)
 };
@@ -79,10 +85,12 @@ struct TrackerCycle {
   double residual = 0;         // relative, of the published state
   int predictor_halvings = 0;  // inversion cuts of the predictor
   int corrections = 0;         // modified Newton corrections accepted (on an iteration's factor)
+  bool step_rejected = false;  // the predictor's state was above publish_tolerance: taken back, step limit halved
   bool ldlt_fallback = false;  // the tangent was not positive definite
   double assemble_ms = 0, factor_ms = 0, solve_ms = 0, total_ms = 0;  // wall clock: tangent + internal force,
                                                                      // analysis (a new set) + factor, solves
-  std::string failure;         // "" or why nothing was published
+  bool published = false;      // a snapshot was published (not when the state's residual > publish_tolerance)
+  std::string failure;         // "" or why the cycle did not step
 };
 
 class NonlinearTracker {
@@ -93,7 +101,8 @@ class NonlinearTracker {
                    const MultirateOptions& options = MultirateOptions());
 
   /// One slow cycle towards `targets` (see the file comment), then publishes a snapshot (unless the tangent was
-  /// singular or inverted: the state is left as it was and `failure` says why). Throws surgsim::Error for a node out
+  /// singular or inverted: the state is left as it was and `failure` says why; or the state's relative residual is
+  /// above publish_tolerance: the previous snapshot stays the newest). Throws surgsim::Error for a node out
   /// of range, a repeated node or more than kMaxContacts.
   TrackerCycle cycle(const ContactTargets& targets);
   /// Back to rest (u = 0), nothing published.
@@ -121,6 +130,8 @@ class NonlinearTracker {
   CholmodSolver chol_;     // K_ii's factor: analysed when the contact set changes, refactored every iteration
   bool analysed_ = false;
   bool stuck_ = false;     // the last correction found no decrease: the next iteration moves regardless
+  double step_cut_ = 1;    // fraction of max_step the predictor may take (halved on a rejected step)
+  Eigen::VectorXd u_keep_, f_keep_;  // the state before the predictor (restored when its step is rejected)
 };
 
 /// The local model, no allocation: for each contact (node, u now) the snapshot's node, lambda = f_c + S du with du

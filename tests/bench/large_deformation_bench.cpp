@@ -258,7 +258,7 @@ struct MotionResult {
 };
 MotionResult run_motion(const Case& c, const Organ& o, NonlinearTracker& tracker, Superposition& linear,
                         double duration_s, const std::vector<Eigen::Vector3d>& ref, double fixed_cycle_ms,
-                        bool predict) {
+                        bool predict, std::FILE* trace = nullptr) {
   MotionResult out;
   const int ticks = static_cast<int>(std::lround(duration_s * 1000));
   double last_d = 0;  // ms, the last slow cycle's time (the prediction horizon)
@@ -291,6 +291,20 @@ MotionResult run_motion(const Case& c, const Organ& o, NonlinearTracker& tracker
       out.predictor_halvings += cy.predictor_halvings;
       out.failures += cy.failure.empty() ? 0 : 1;
       out.worst_residual = std::max(out.worst_residual, cy.residual);
+      if (trace) {
+        tracker.snapshots().take();
+        const TrackerSnapshot& sn = tracker.snapshots().front();
+        double lag = 0, tgt = 0;
+        for (int q = 0; q < t.count; ++q) {
+          lag = std::max(lag, (t.u[static_cast<std::size_t>(q)] - sn.u[static_cast<std::size_t>(q)]).norm());
+          tgt = std::max(tgt, t.u[static_cast<std::size_t>(q)].norm());
+        }
+        std::fprintf(trace, "cycle %s T %g start %d visible %g ms %.2f it %d conv %d res %.3e halv %d corr %d ldlt %d "
+                            "rejected %d published %d lag_mm %.2f target_mm %.2f F %.4f |S| %.4g fail '%s'\n",
+                     c.name.c_str(), duration_s, k0, next_start + d, cy.total_ms, cy.iterations, cy.converged ? 1 : 0,
+                     cy.residual, cy.predictor_halvings, cy.corrections, cy.ldlt_fallback ? 1 : 0, cy.step_rejected ? 1 : 0, cy.published ? 1 : 0, 1e3 * lag, 1e3 * tgt,
+                     tool_force(sn).norm(), sn.stiffness.topLeftCorner(3 * sn.count, 3 * sn.count).norm(), cy.failure.c_str());
+      }
       if (cy.iterations > 0) {
         out.iteration_ms.push_back((cy.assemble_ms + cy.factor_ms + cy.solve_ms) / cy.iterations);
         out.assemble_ms.push_back(cy.assemble_ms / cy.iterations);
@@ -319,6 +333,15 @@ MotionResult run_motion(const Case& c, const Organ& o, NonlinearTracker& tracker
     if ((static_cast<long>(k) * samples) % ticks == 0) {
       const Eigen::Vector3d& fr = ref[static_cast<std::size_t>(static_cast<long>(k) * samples / ticks)];
       if (fr.allFinite()) out.error.push_back((sol.tool_force - fr).norm() / std::max(fr.norm(), floor));
+      if (trace) {
+        double du = 0;
+        for (int q = 0; q < visible.count && ok; ++q)
+          du = std::max(du, (contacts[static_cast<std::size_t>(q)].displacement - visible.u[static_cast<std::size_t>(q)]).norm());
+        std::fprintf(trace, "tick %s T %g k %d snap %llu ok %d du_mm %.2f F %.4f %.4f %.4f Fref %.4f %.4f %.4f err %.4f\n",
+                     c.name.c_str(), duration_s, k, static_cast<unsigned long long>(visible.cycle), ok ? 1 : 0, 1e3 * du,
+                     sol.tool_force.x(), sol.tool_force.y(), sol.tool_force.z(), fr.x(), fr.y(), fr.z(),
+                     (sol.tool_force - fr).norm() / std::max(fr.norm(), floor));
+      }
     }
   }
   return out;
@@ -340,6 +363,7 @@ int main(int argc, char** argv) {
   std::vector<double> durations{1.0, 0.5};
   double fixed_cycle_ms = 0, max_step_mm = 5, move_tolerance = 1e-2;
   std::vector<std::string> only;
+  std::string trace_path;
   CLI::App app{"large_deformation_bench: the liver at large deformation (issue 16): linear, quasi non-linear "
                "(cylinder and organ curves), corotational and corotational with organ curves against a neo-Hookean "
                "Newton reference, indentation 5-30 %, a lobe lifted 45 and 90 degrees, a rigid 90-degree turn; "
@@ -371,6 +395,8 @@ int main(int argc, char** argv) {
   app.add_flag("--predict,!--no-predict", predict,
                "multirate: the haptic side hands the slow side the tool's position extrapolated by the last slow "
                "cycle's time (its velocity over 10 ticks; the default), or (--no-predict) the current one");
+  app.add_option("--trace", trace_path,
+                 "multirate: write every slow cycle and every reference tick of the motions to this text file");
   app.add_option("--only", only, "Only these cases (a study; rigid_90's error needs indent_10 in the list)");
   app.add_flag("--slow-cycle-only", slow_cycle_only,
                "Only time the multirate slow cycle (one Newton iteration: tangent, factor, contact solves) on this "
@@ -465,6 +491,11 @@ int main(int argc, char** argv) {
     mopts.max_step = max_step_mm * 1e-3;
     mopts.move_tolerance = move_tolerance;
     NonlinearTracker tracker(newton, o.visible, mopts);
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
+    if (!trace_path.empty()) {
+      trace.reset(std::fopen(trace_path.c_str(), "w"));
+      if (!trace) throw surgsim::Error("--trace " + trace_path + ": cannot write the file (does its folder exist?)");
+    }
     Superposition linear_fallback(tensors, "haptic");
     const auto print_slow_cycle = [&](const char* what, const MotionResult& mr) {
       std::printf("%-10s %-22s | %9.2f %9.2f | %9.2f %9.2f | %6zu | %6d / %d\n", what,
@@ -595,7 +626,7 @@ int main(int argc, char** argv) {
         if (c.rigid)
           tracker.reset();
         else
-          motion_rows.push_back({c.name, durations[0], run_motion(c, o, tracker, linear_fallback, durations[0], path, fixed_cycle_ms, predict)});
+          motion_rows.push_back({c.name, durations[0], run_motion(c, o, tracker, linear_fallback, durations[0], path, fixed_cycle_ms, predict, trace.get())});
         const ContactTargets target = targets_at(c, o, 1.0);
         int hold = 0;
         while (hold < 200 && !tracker.cycle(target).converged) ++hold;
@@ -619,7 +650,7 @@ int main(int argc, char** argv) {
         }
         res["multirate"] = std::move(mo);
         for (std::size_t k = 1; k < durations.size() && !c.rigid; ++k)
-          motion_rows.push_back({c.name, durations[k], run_motion(c, o, tracker, linear_fallback, durations[k], path, fixed_cycle_ms, predict)});
+          motion_rows.push_back({c.name, durations[k], run_motion(c, o, tracker, linear_fallback, durations[k], path, fixed_cycle_ms, predict, trace.get())});
       }
       for (const char* method : {"linear", "quasi_cylinder", "quasi_organ", "corotational", "corotational_organ", "multirate"}) {
         const Outcome& r = res[method];
