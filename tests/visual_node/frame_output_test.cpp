@@ -177,16 +177,29 @@ TEST(FrameOutput, AFailedWriteIsCountedAndTheNextOneStillWrites) {
   fs::remove_all(o.out);
 }
 
+// Every frame written to a fresh folder whose first PNG path is a FIFO nobody reads yet: writing it blocks until the
+// test opens the other end (a disk that does not answer).
+FrameOutputOptions blocked_disk(const std::string& name) {
+  FrameOutputOptions o;
+  o.out = fresh_dir(name);
+  o.png_every = 1;
+  std::filesystem::create_directories(o.out);
+  EXPECT_EQ(::mkfifo((o.out + "/frame_000001.png").c_str(), 0600), 0);
+  return o;
+}
+
+// Reads the FIFO to its end (unblocking the writer): the bytes written through it.
+std::string read_fifo(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
 // The render loop hands a PNG over and goes on drawing while the disk is slow: here the PNG's path is a FIFO nobody
 // reads yet, so writing it blocks until the test opens the other end. write() must return before that (it wrote the
 // PNG on the render thread before: a 640 x 480 PNG took about one frame period of the intestine's 30 Hz display).
 TEST(FrameOutput, WriteReturnsWhileTheDiskIsBlockedAndNothingIsLost) {
-  FrameOutputOptions o;
-  o.out = fresh_dir("fifo");
-  o.png_every = 1;
+  const FrameOutputOptions o = blocked_disk("fifo");
   FrameOutput out(o);
-  const std::string fifo = o.out + "/frame_000001.png";
-  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
   const Image image = small_image();
   const FakeOrgan organ(false);
   std::promise<void> returned;
@@ -198,12 +211,7 @@ TEST(FrameOutput, WriteReturnsWhileTheDiskIsBlockedAndNothingIsLost) {
   // Generous: the call only copies 384 bytes; before the fix it could not return until the FIFO is read below.
   const bool returned_while_blocked = done.wait_for(std::chrono::seconds(20)) == std::future_status::ready;
   EXPECT_TRUE(returned_while_blocked) << "write() waited for the disk";
-  // Read the FIFO: the PNG written through it is the picture.
-  std::string bytes;
-  {
-    std::ifstream in(fifo, std::ios::binary);
-    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  }
+  const std::string bytes = read_fifo(o.out + "/frame_000001.png");  // the PNG written through it
   render.join();
   out.write(image, 2, 8, 0.5, organ, 1);  // and the next frame after it, in order
   out.flush();
@@ -220,12 +228,8 @@ TEST(FrameOutput, WriteReturnsWhileTheDiskIsBlockedAndNothingIsLost) {
 
 // More PNGs than slots while the disk is blocked: write() waits for a slot (counted), none is dropped.
 TEST(FrameOutput, AFullQueueWaitsForTheDiskInsteadOfDroppingFrames) {
-  FrameOutputOptions o;
-  o.out = fresh_dir("full");
-  o.png_every = 1;
+  const FrameOutputOptions o = blocked_disk("full");
   FrameOutput out(o);
-  const std::string fifo = o.out + "/frame_000001.png";
-  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
   const Image image = small_image();
   const FakeOrgan organ(false);
   const int frames = FrameOutput::kSlots + 2;
@@ -240,10 +244,7 @@ TEST(FrameOutput, AFullQueueWaitsForTheDiskInsteadOfDroppingFrames) {
   while (handed.load() < FrameOutput::kSlots) std::this_thread::yield();
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   EXPECT_EQ(handed.load(), FrameOutput::kSlots);
-  {
-    std::ifstream in(fifo, std::ios::binary);
-    std::string drain((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  }
+  read_fifo(o.out + "/frame_000001.png");
   render.join();
   out.flush();
   EXPECT_EQ(out.pngs_written(), static_cast<std::uint64_t>(frames));
