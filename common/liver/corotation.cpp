@@ -6,7 +6,15 @@
 namespace surgsim {
 
 const char* to_string(LiverDeformation deformation) {
-  return deformation == LiverDeformation::kCorotational ? "corotational" : "linear";
+  switch (deformation) {
+    case LiverDeformation::kCorotational:
+      return "corotational";
+    case LiverDeformation::kMultirate:
+      return "multirate";
+    case LiverDeformation::kLinear:
+    default:
+      return "linear";
+  }
 }
 
 int extract_rotation(const Eigen::Matrix3d& a_in, Eigen::Quaterniond& q, int max_iterations) noexcept {

@@ -49,6 +49,7 @@ namespace surgsim {
 enum class LiverDeformation : std::uint8_t {
   kLinear = 0,        // G as precomputed (Cotin 1998)
   kCorotational = 1,  // W_ij = R_i G_ij R_j^T with per-node rotations from the current displacement
+  kMultirate = 2,     // a neo-Hookean tracker off the loop, its local model at 1 kHz (liver/multirate.h)
 };
 const char* to_string(LiverDeformation deformation);
 

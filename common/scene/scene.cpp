@@ -425,9 +425,10 @@ LiverOptions read_liver(const Reader& r, const Field& f) {
   const Map m(r, f, {"deformation", "curves"});
   LiverOptions o;
   if (m.has("deformation")) {
-    o.deformation = r.one_of(m.at("deformation"), {"linear", "corotational"}) == "corotational"
-                        ? LiverDeformation::kCorotational
-                        : LiverDeformation::kLinear;
+    const std::string d = r.one_of(m.at("deformation"), {"linear", "corotational", "multirate"});
+    o.deformation = d == "corotational" ? LiverDeformation::kCorotational
+                    : d == "multirate"  ? LiverDeformation::kMultirate
+                                        : LiverDeformation::kLinear;
   }
   if (m.has("curves")) o.organ_curves = r.one_of(m.at("curves"), {"cylinder", "organ"}) == "organ";
   return o;
@@ -833,6 +834,11 @@ Scene load_scene(const std::string& path) {
     if (s.liver.deformation == LiverDeformation::kCorotational && s.tools[0].contact_model != ContactModel::kPatch) {
       r.fail(top.at("liver").line, "liver.deformation", "corotational needs the patch contact model",
              "set tool.contact_model: patch, or liver.deformation: linear");
+    }
+    if (s.liver.deformation == LiverDeformation::kMultirate && (s.liver.organ_curves || s.nonlinear.enabled())) {
+      r.fail(top.at("liver").line, "liver.deformation",
+             "multirate is given together with a quasi non-linear law (liver.curves: organ or a nonlinear section)",
+             "remove liver.curves / the nonlinear section: the multirate tracker is the non-linear model itself");
     }
     if (s.liver.organ_curves && s.nonlinear.enabled()) {
       r.fail(top.at("liver").line, "liver.curves", "organ is given together with nonlinear: curve files",

@@ -45,9 +45,10 @@ struct VisualSpec {
   int stream_quality = 75; // JPEG quality of the streamed frames, 1..100 (not in the scene hash: no physics)
 };
 
-/// The liver's run-time model (issue 16), YAML `liver: {deformation: linear | corotational, curves: cylinder | organ}`.
+/// The liver's run-time model (issue 16), YAML `liver: {deformation: linear | corotational | multirate, curves: cylinder | organ}`.
 struct LiverOptions {
-  LiverDeformation deformation = LiverDeformation::kLinear;  // corotational: warped compliance (liver/corotation.h)
+  LiverDeformation deformation = LiverDeformation::kLinear;  // corotational: warped compliance (liver/corotation.h);
+                                                             // multirate: neo-Hookean tracker (liver/multirate.h)
   bool organ_curves = false;  // curves: organ: P and Q fitted on the organ's own Newton indentations (cached)
   bool defaults() const { return deformation == LiverDeformation::kLinear && !organ_curves; }
 };

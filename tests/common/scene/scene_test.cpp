@@ -878,8 +878,21 @@ INSTANTIATE_TEST_SUITE_P(
                   "key 'intestine.self_collisions'", "true or false"},
         ErrorCase{"IntestineAxis", kIntestine + "intestine: {axis_direction: [0, 0, 0]}\n", 3,
                   "key 'intestine.axis_direction'", "zero vector"},
-        ErrorCase{"TargetFps", kIntestine + "visual: {target_fps: 0}\n", 3, "key 'visual.target_fps'", "[1, 1000]"}),
+        ErrorCase{"TargetFps", kIntestine + "visual: {target_fps: 0}\n", 3, "key 'visual.target_fps'", "[1, 1000]"},
+        ErrorCase{"LiverDeformation", kHead + "liver: {deformation: warped}\n", 3, "key 'liver.deformation'",
+                  "multirate"},
+        ErrorCase{"MultirateWithOrganCurves", kHead + "liver: {deformation: multirate, curves: organ}\n", 3,
+                  "key 'liver.deformation'", "the multirate tracker is the non-linear model itself"}),
     [](const ::testing::TestParamInfo<ErrorCase>& info) { return std::string(info.param.name); });
+
+TEST(SceneLoad, LiverMultirateIsReadAndHashed) {
+  const fs::path dir = test_dir();
+  const Scene linear = load_scene(write(dir / "linear.yaml", kMinimal));
+  const Scene multirate = load_scene(write(dir / "multirate.yaml", std::string(kMinimal) + "liver: {deformation: multirate}\n"));
+  EXPECT_EQ(multirate.liver.deformation, LiverDeformation::kMultirate);
+  EXPECT_STREQ(to_string(multirate.liver.deformation), "multirate");
+  EXPECT_NE(linear.hash(), multirate.hash());
+}
 
 TEST(SceneLoad, MissingFileIsAnErrorNamingIt) {
   const fs::path dir = test_dir();
