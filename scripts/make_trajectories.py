@@ -103,6 +103,39 @@ def intestine_lift(t):
     return (pitch, 0.0, ins, 0.0, 0.5)
 
 
+# Grasp and lift (config/liver_multirate.yaml): the tool's trocar at LIFT_TROCAR above the free left lobe, shaft
+# straight down at pitch 0 (positive pitch swings the tip towards +x); the tip touches the rest surface at
+# (-0.100, 0.010, 0.020), insertion 0.18 m. The grasped point is carried along a circle about the lobe's hinge
+# (large_deformation_bench's lift cases: about y through (-0.070, 0.010, -0.010)), i.e. the lobe turned by LIFT_DEG.
+LIFT_TROCAR = (-0.10, 0.01, 0.20)
+LIFT_HINGE = (-0.070, 0.010, -0.010)
+LIFT_GRASP = (-0.100, 0.010, 0.018)  # 2 mm below the rest surface
+LIFT_DEG = 60.0
+
+
+def lift_pose(theta):
+    """(pitch, insertion) that put the tip at the grasp point turned by theta (rad) about the hinge."""
+    vx, vz = LIFT_GRASP[0] - LIFT_HINGE[0], LIFT_GRASP[2] - LIFT_HINGE[2]
+    c, s = math.cos(theta), math.sin(theta)
+    px, pz = LIFT_HINGE[0] + c * vx + s * vz, LIFT_HINGE[2] - s * vx + c * vz
+    dx, dz = px - LIFT_TROCAR[0], pz - LIFT_TROCAR[2]
+    return math.atan2(dx, -dz), math.hypot(dx, dz)
+
+
+def grasp_and_lift(t):
+    # Come down over the free lobe with the jaw open, 2 mm in, close the jaw (grasp), lift the lobe by LIFT_DEG
+    # over 1.5 s, hold 1 s, open the jaw (release), withdraw 3 cm along the shaft.
+    _, touch = lift_pose(0.0)
+    theta = math.radians(LIFT_DEG) * (ramp(t, 1.4, 2.9, 0.0, 1.0))
+    pitch, ins = lift_pose(theta)
+    if t < 1.4:
+        ins = ramp(t, 0.3, 1.0, touch - 0.022, touch)
+    elif t >= 4.2:
+        ins = ramp(t, 4.2, 5.0, ins, ins - 0.03)
+    jaw = ramp(t, 1.0, 1.3, 0.5, 0.0) if t < 3.9 else ramp(t, 3.9, 4.2, 0.0, 0.5)
+    return (pitch, 0.0, ins, 0.0, jaw)
+
+
 # Two hands (config/liver_two_tools.yaml): insertions where each tip touches the rest surface (module docstring).
 GRASPER_TOUCH = 0.1727
 PROBE_TOUCH = 0.1770
@@ -140,6 +173,9 @@ if __name__ == "__main__":
     write("liver_grasp_pull.csv", 5.5, grasp_and_pull, "press, close the jaw (grasp), pull 1.5 cm up, open, withdraw")
     write("liver_sweep.csv", 6.0, sweep, "three 8 mm dips at different pitch/yaw")
     write("liver_fast_stab.csv", 3.0, fast_stab, "stab at 3.5 m/s to 1.2 cm deep, hold, withdraw")
+    write("liver_grasp_lift.csv", 5.5, grasp_and_lift,
+          "liver_multirate: grasp the free lobe, lift it %g degrees about its hinge in 1.5 s, hold, release, withdraw"
+          % LIFT_DEG)
     write("liver_two_hands.csv", 5.0, two_hands,
           "liver_two_tools: the grasper holds the free lobe and lifts it 4 mm while the probe presses 8 mm 3 cm away",
           instruments=("grasper", "probe"))

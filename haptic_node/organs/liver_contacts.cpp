@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "liver/nonlinear_law.h"
+#include "organs/liver_multirate.h"
 
 namespace surgsim {
 
@@ -56,6 +57,9 @@ LiverContacts::LiverContacts(const TetMesh& mesh, const SurfaceMesh& surface, co
       from_worker_.slot(i).q.assign(static_cast<std::size_t>(nv), Eigen::Quaterniond::Identity());
     }
   }
+  if (deformation_ == LiverDeformation::kMultirate && law_ != nullptr)
+    throw_error("LiverContacts: liver.deformation multirate takes no quasi non-linear law (the tracker is the "
+                "non-linear model)");
   if (model_ != ContactModel::kPatch) return;
   const ToolSpec& tool_ = tools_.front();  // the tip radius of the patch surface: the first instrument's
   std::vector<std::uint8_t> free(static_cast<std::size_t>(mesh.nodes.rows()), 0);
@@ -222,6 +226,8 @@ void LiverContacts::step(const InstrumentInput* inputs, int count, ContactTick* 
   }
   count_instrument_nodes();
   if (deformation_ == LiverDeformation::kCorotational) publish_solution();
+  // Multirate: this tick's solution (nodes, displacements; none without contact) becomes the tracker's targets.
+  if (multirate_ != nullptr) multirate_->hand_over(solution_, h);
 }
 
 void LiverContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
@@ -355,6 +361,8 @@ void LiverContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
     drop_solution();
     return;
   }
+  // Multirate: the nodes' forces from the tracker's local model where its snapshot covers them.
+  if (multirate_ != nullptr) multirate_->apply(solution_);
   // The solution's nodes are in first-seen request order: each belongs to the instrument that requested it first.
   // (One instrument: the same sum, in the same order, as the solve's tool_force.)
   std::array<Eigen::Vector3d, kMaxInstruments> force;
@@ -851,6 +859,14 @@ void LiverContacts::step_patch(double dt, ContactTick* out) noexcept {
   // One instrument: the solve's own sum over the union nodes (bit-identical to before issue 19; the per-point sum
   // above is the same force in another order of additions).
   if (count_ == 1) force[0] = s.tool_force;
+  // Multirate: the nodes' forces from the tracker's local model where its snapshot covers them; each instrument's
+  // force is the sum over its own nodes.
+  if (multirate_ != nullptr) {
+    multirate_->apply(s);
+    for (auto& f : force) f.setZero();
+    for (int l = 0; l < s.count; ++l)
+      force[static_cast<std::size_t>(node_instrument_[static_cast<std::size_t>(l)])] -= s.lambda[static_cast<std::size_t>(l)];
+  }
   for (int t = 0; t < count_; ++t) {
     if (geometry_[static_cast<std::size_t>(t)] == nullptr) continue;
     finish(t, force[static_cast<std::size_t>(t)], dir_sum[static_cast<std::size_t>(t)], out[t]);

@@ -34,6 +34,12 @@
 // previous solution's rest-frame response and a background field of every surface node that refresh_rotations()
 // (LiverOrgan's 200 Hz thread) hands over lock-free. The onset gap and deformed() stay linear.
 //
+// Multirate (issue 16, liver.deformation: multirate, both contact models): after the tick's linear solve, the
+// solution's nodes and displacements are handed to a LiverMultirate (attach_multirate(); organs/liver_multirate.h) as
+// its tracker's targets, and the forces applied come from its newest snapshot's local model f_c + S du (nodes the
+// snapshot does not hold keep the linear lambda); each instrument's force is the sum over its own nodes, through the
+// device clamp (no quasi non-linear law: refused in this mode). Without an attached LiverMultirate the tick is linear.
+//
 // step() allocates nothing and never returns a non-finite force.
 #pragma once
 #include <Eigen/Core>
@@ -55,6 +61,7 @@
 namespace surgsim {
 
 class NonlinearLaw;
+class LiverMultirate;
 
 /// One tool point's contact (fixed capacity, plain data).
 struct PointContact {
@@ -138,6 +145,10 @@ class LiverContacts {
   /// Hz (LiverOrgan runs it at 200 Hz), or between steps in tests. No allocation.
   void refresh_rotations() noexcept;
   LiverDeformation deformation() const { return deformation_; }
+  /// Multirate: the non-linear side this object hands its solutions to and takes its forces from (must outlive it;
+  /// null: linear). Init only.
+  void attach_multirate(LiverMultirate* multirate) { multirate_ = multirate; }
+  LiverMultirate* multirate() const { return multirate_; }
   /// The loop's rotations (corotational; null otherwise): the contact nodes' are those of the last step().
   const NodeRotations* rotations() const { return rotations_.get(); }
   /// Drops every contact of every instrument and forgets the previous tool positions.
@@ -246,6 +257,8 @@ class LiverContacts {
   std::unique_ptr<NodeRotations> worker_rotations_;   // refresh_rotations()' thread
   Eigen::MatrixX3d worker_u_;
   std::array<Eigen::Vector3d, kMaxContacts> worker_rest_lambda_{};
+  // --- multirate (issue 16) ---
+  LiverMultirate* multirate_ = nullptr;
 };
 
 }  // namespace surgsim

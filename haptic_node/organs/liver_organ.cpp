@@ -1,17 +1,27 @@
 #include "organs/liver_organ.h"
 
 #include <chrono>
+#include <nlohmann/json.hpp>
+#include <ostream>
 #include <string>
 
+#include "core/error.h"
+#include "haptic_dds.h"
 #include "liver/liver_setup.h"
 #include "liver/organ_curves.h"
 #include "mesher/scene_mesh.h"
 
 namespace surgsim {
 
-LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress) {
+LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread) {
   mesh_ = load_scene_mesh(scene, cache_dir, progress);
   surface_ = boundary_surface(mesh_);
+  const bool multirate = scene.liver.deformation == LiverDeformation::kMultirate;
+  if (multirate && surface_.nodes.size() > static_cast<std::size_t>(msg::kMaxBodyPoints)) {
+    throw_error(scene.file, ": liver.deformation multirate: the liver's surface has ", surface_.nodes.size(),
+                " nodes, a BodyState carries at most ", msg::kMaxBodyPoints,
+                ": use a coarser mesh (mesh.target_nodes) or liver.deformation linear");
+  }
   mesh_hash_ = surgsim::mesh_hash(mesh_);
   const LiverTensorSetup setup = liver_tensor_setup(scene.material, scene.fixed, mesh_, cache_dir, scene.file);
   tensors_ = load_liver_tensors(setup, mesh_, scene.material, {"haptic"}, progress, nullptr, scene.file);
@@ -22,6 +32,15 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
           : load_nonlinear_law(scene.nonlinear, scene.material));
   contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene.tools,
                                               law_->identity() ? nullptr : law_.get(), scene.liver.deformation);
+  if (multirate) {
+    // The neo-Hookean organ on the tensors' own mesh, material and fixed set; its tracker thread is started from
+    // this (the main) thread, so with --cpu N it inherits the CPUs the haptic app left to everything but the loop.
+    multirate_ = std::make_unique<LiverMultirate>(mesh_, scene.material, setup.fixed, surface_.nodes, scene.file);
+    contacts_->attach_multirate(multirate_.get());
+    instruments_at_.resize(kInstrumentTicks);
+    min_period_ns_ = scene.visual.rate_hz > 0 ? static_cast<std::uint64_t>(1e9 / scene.visual.rate_hz) : 0;
+    if (tracker_thread) multirate_->start();
+  }
   if (scene.liver.deformation == LiverDeformation::kCorotational) {
     // Off the loop thread: the rotations of every surface node at kRotationRefreshHz (the loop keeps its contact
     // nodes' own every tick); absolute deadlines, a late refresh is skipped, not caught up.
@@ -43,6 +62,82 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
 LiverOrgan::~LiverOrgan() {
   stop_rotations_.store(true);
   if (rotation_thread_.joinable()) rotation_thread_.join();
+  if (multirate_ != nullptr) multirate_->stop();
+}
+
+void LiverOrgan::create_writers(dds::Participant& participant, std::uint64_t scene_hash) {
+  if (multirate_ == nullptr) return;
+  writer_ = participant.writer(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()),
+                               dds::kStreamWriter);
+  sample_.scene_hash(scene_hash);
+  // The only allocations of the sample: write() changes values only.
+  sample_.positions().resize(surface_.nodes.size());
+}
+
+void LiverOrgan::write(const TickRecord& r, std::uint64_t stamp_ns) noexcept {
+  if (writer_ == nullptr || multirate_ == nullptr) return;
+  // The instruments of every tick, for the BodyState of the surface computed for that tick's targets.
+  InstrumentsAt& at = instruments_at_[static_cast<std::size_t>(r.seq % kInstrumentTicks)];
+  at.seq = r.seq;
+  at.count = r.instrument_count;
+  at.instruments = r.instruments;
+  if (multirate_->take_surface()) body_pending_ = true;
+  if (!body_pending_ || (last_body_ns_ != 0 && stamp_ns - last_body_ns_ < min_period_ns_)) return;
+  body_pending_ = false;
+  const TrackerSurface& s = multirate_->surface();
+  if (!s.valid) return;
+  const InstrumentsAt& then = instruments_at_[static_cast<std::size_t>(s.tick % kInstrumentTicks)];
+  scratch_.instrument_count = then.seq == s.tick ? then.count : r.instrument_count;
+  scratch_.instruments = then.seq == s.tick ? then.instruments : r.instruments;
+  fill_instruments(scratch_, sample_.instruments());
+  auto& out = sample_.positions();
+  const std::size_t n = std::min(out.size(), surface_.nodes.size());
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::Index node = surface_.nodes[k];
+    const Eigen::Index i = 3 * static_cast<Eigen::Index>(k);
+    out[k].x(mesh_.nodes(node, 0) + s.u[i]);
+    out[k].y(mesh_.nodes(node, 1) + s.u[i + 1]);
+    out[k].z(mesh_.nodes(node, 2) + s.u[i + 2]);
+  }
+  sample_.seq(++body_seq_);
+  sample_.sim_time(s.sim_time);
+  sample_.stamp_ns(stamp_ns);
+  writer_->write(&sample_);
+  last_body_ns_ = stamp_ns;
+  body_published_.fetch_add(1, std::memory_order_relaxed);
+}
+
+void LiverOrgan::add_stats(nlohmann::json& j) const {
+  if (multirate_ == nullptr) return;
+  LiverMultirate& m = *multirate_;
+  m.stop();  // shutdown: its counters and cycle times are final
+  j["multirate"] = {{"tracker_cycles", m.tracker_cycles()},
+                    {"snapshots_published", m.snapshots_published()},
+                    {"tracker_failures", m.tracker_failures()},
+                    {"idle_sleeps", m.idle_sleeps()},
+                    {"cycle_ms_p50", m.cycle_ms(0.5)},
+                    {"cycle_ms_p99", m.cycle_ms(0.99)},
+                    {"ticks_nonlinear", m.ticks_nonlinear()},
+                    {"ticks_partial", m.ticks_partial()},
+                    {"ticks_linear_fallback", m.ticks_linear_fallback()},
+                    {"snapshot_age_ms_p50", m.age_ms(0.5)},
+                    {"snapshot_age_ms_p99", m.age_ms(0.99)},
+                    {"extrapolation_mm_p99", m.extrapolation_mm(0.99)},
+                    {"body_states_published", body_published_.load(std::memory_order_relaxed)}};
+}
+
+void LiverOrgan::print_summary(std::ostream& out) const {
+  if (multirate_ == nullptr) return;
+  nlohmann::json j;
+  add_stats(j);
+  const nlohmann::json& m = j["multirate"];
+  out << "haptic_node: multirate tracker " << m["tracker_cycles"].get<std::uint64_t>() << " cycles (p50 "
+      << m["cycle_ms_p50"].get<double>() << " ms, p99 " << m["cycle_ms_p99"].get<double>() << " ms), "
+      << m["snapshots_published"].get<std::uint64_t>() << " snapshots; ticks nonlinear "
+      << m["ticks_nonlinear"].get<std::uint64_t>() << ", partial " << m["ticks_partial"].get<std::uint64_t>()
+      << ", linear fallback " << m["ticks_linear_fallback"].get<std::uint64_t>() << "; snapshot age p99 "
+      << m["snapshot_age_ms_p99"].get<double>() << " ms; " << m["body_states_published"].get<std::uint64_t>()
+      << " body states published\n";
 }
 
 void LiverOrgan::step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept {

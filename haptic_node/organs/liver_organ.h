@@ -1,7 +1,13 @@
 // The liver in the haptic node (Cotin 1998, DESIGN.md 4.1-4.2): the scene's tetrahedral mesh, the "haptic" block of
 // the precomputed tensors (from the cache both nodes share), the quasi non-linear law and the contact model
 // (LiverContacts: bucket grid, unilateral contacts and grasps, mutual-influence correction, device clamp).
+// With liver.deformation multirate (issue 16) it also owns the scene's liver as a neo-Hookean organ tracked on a
+// thread of its own (organs/liver_multirate.h), whose snapshots give the contact forces, and publishes the tracker's
+// surface as BodyState (the wire protocol: one sample per new surface, at most the scene's visual rate; positions[k]
+// = rest + displacement of surface node k; sim_time of the targets it was computed for; the instruments of that
+// tick), written by the publisher thread, never the loop.
 #pragma once
+#include <array>
 #include <atomic>
 #include <memory>
 #include <thread>
@@ -11,14 +17,20 @@
 #include "mesh/mesh.h"
 #include "organ.h"
 #include "organs/liver_contacts.h"
+#include "organs/liver_multirate.h"
+#include "publisher.h"
+#include "surgsim_types.h"
+#include "dds_support.h"
 
 namespace surgsim {
 
 class LiverOrgan final : public HapticOrgan {
  public:
-  /// Init (allocates; may precompute the tensors, with progress on `progress`). Throws surgsim::Error.
-  LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress);
-  /// Stops the rotation thread (corotational).
+  /// Init (allocates; may precompute the tensors, with progress on `progress`). Throws surgsim::Error (multirate:
+  /// also for a surface of more than msg::kMaxBodyPoints nodes). `tracker_thread` false (tests): a multirate scene's
+  /// tracker is not started; the test cycles it with multirate()->cycle_once().
+  LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread = true);
+  /// Stops the rotation thread (corotational) and the tracker thread (multirate).
   ~LiverOrgan() override;
   LiverOrgan(const LiverOrgan&) = delete;
   LiverOrgan& operator=(const LiverOrgan&) = delete;
@@ -37,7 +49,20 @@ class LiverOrgan final : public HapticOrgan {
   bool nonlinear_law() const override { return !law_->identity(); }
   std::string describe() const override;
 
+  /// Multirate: the BodyState writer and its preallocated sample (nothing otherwise).
+  void create_writers(dds::Participant& participant, std::uint64_t scene_hash) override;
+  /// Multirate, publisher thread, no allocation: a BodyState of the newest tracker surface when there is a new one
+  /// and the last was at least 1 / visual rate ago.
+  void write(const TickRecord& record, std::uint64_t stamp_ns) noexcept override;
+  /// Shutdown: "multirate" in the stats JSON and its summary line (multirate only; stops the tracker thread first).
+  void add_stats(nlohmann::json& stats) const override;
+  void print_summary(std::ostream& out) const override;
+
   const TetMesh& mesh() const { return mesh_; }
+  const SurfaceMesh& surface() const { return surface_; }
+  /// Multirate (null otherwise).
+  LiverMultirate* multirate() const { return multirate_.get(); }
+  std::uint64_t body_states_published() const { return body_published_.load(std::memory_order_relaxed); }
   const LiverContacts& liver_contacts() const { return *contacts_; }
 
  private:
@@ -47,11 +72,28 @@ class LiverOrgan final : public HapticOrgan {
   Tensors tensors_;                        // "haptic" block only
   std::uint64_t tensor_hash_ = 0;
   std::unique_ptr<NonlinearLaw> law_;      // identity when the scene has no curves
+  std::unique_ptr<LiverMultirate> multirate_;  // multirate only (before contacts_: it outlives the pointer there)
   std::unique_ptr<LiverContacts> contacts_;
   // Corotational (issue 16): every surface node's rotation refreshed off the loop thread.
   static constexpr double kRotationRefreshHz = 200;
   std::atomic<bool> stop_rotations_{false};
   std::thread rotation_thread_;
+  // Multirate BodyState (publisher thread).
+  struct InstrumentsAt {  // the instruments of one tick
+    std::uint64_t seq = ~0ull;
+    int count = 0;
+    std::array<InstrumentRecord, kMaxInstruments> instruments{};
+  };
+  static constexpr std::size_t kInstrumentTicks = 512;  // ticks kept: more than a tracker cycle at 1 kHz
+  std::vector<InstrumentsAt> instruments_at_;
+  TickRecord scratch_;
+  std::uint64_t min_period_ns_ = 0;
+  std::uint64_t last_body_ns_ = 0;
+  std::uint64_t body_seq_ = 0;
+  bool body_pending_ = false;
+  eprosima::fastdds::dds::DataWriter* writer_ = nullptr;
+  msg::BodyState sample_;
+  std::atomic<std::uint64_t> body_published_{0};
 };
 
 }  // namespace surgsim

@@ -1,0 +1,254 @@
+#include "organs/liver_multirate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <exception>
+#include <utility>
+
+namespace surgsim {
+
+double SampleRing::percentile(double q) const {
+  const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(count_, values_.size()));
+  if (n == 0) return 0;
+  std::vector<double> v(values_.begin(), values_.begin() + static_cast<std::ptrdiff_t>(n));
+  std::sort(v.begin(), v.end());
+  const auto k = static_cast<std::size_t>(std::llround(std::clamp(q, 0.0, 1.0) * static_cast<double>(n - 1)));
+  return v[k];
+}
+
+MultirateOptions LiverMultirate::node_options() {
+  MultirateOptions o;
+  o.iterations_per_cycle = 1;
+  o.corrections_per_cycle = 10;
+  o.max_step = 0.005;
+  return o;
+}
+
+LiverMultirate::LiverMultirate(const TetMesh& mesh, const Material& material, const FixedSet& fixed,
+                               std::vector<int> surface_nodes, const std::string& where,
+                               const MultirateOptions& options)
+    : model_(std::make_unique<ElasticModel>(build_elastic_model(mesh, material, fixed, where))),
+      solver_(std::make_unique<HyperelasticSolver>(*model_)),
+      surface_nodes_(std::move(surface_nodes)),
+      tracker_(std::make_unique<NonlinearTracker>(*solver_, surface_nodes_, options)) {
+  const auto nv = static_cast<std::size_t>(mesh.nodes.rows());
+  snapshot_index_.assign(nv, -1);
+  last_u_.assign(nv, Eigen::Vector3d::Zero());
+  velocity_.assign(nv, Eigen::Vector3d::Zero());
+  last_tick_.assign(nv, 0);
+  for (int i = 0; i < 3; ++i) surfaces_.slot(i).u = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(surface_nodes_.size()));
+  for (auto& t : cycle_tick_) t.store(0, std::memory_order_relaxed);
+}
+
+LiverMultirate::~LiverMultirate() { stop(); }
+
+void LiverMultirate::start() {
+  if (thread_.joinable()) return;
+  stop_.store(false);
+  thread_ = std::thread([this] { run(); });
+}
+
+void LiverMultirate::stop() {
+  stop_.store(true);
+  if (thread_.joinable()) thread_.join();
+}
+
+void LiverMultirate::run() noexcept {
+  while (!stop_.load(std::memory_order_relaxed)) {
+    bool cycled = false;
+    try {
+      cycled = cycle_if_needed();
+    } catch (const std::exception&) {
+      // A refused target set (it cannot happen with the loop's solutions: distinct in-range nodes, finite) or an
+      // allocation failure: counted, and the tracker starts again from rest.
+      failures_.fetch_add(1, std::memory_order_relaxed);
+      tracker_->reset();
+      have_cycled_ = false;
+    }
+    if (!cycled) std::this_thread::sleep_for(kIdleSleep);
+  }
+}
+
+bool LiverMultirate::cycle_once() { return cycle_if_needed(); }
+
+namespace {
+bool same_targets(const ContactTargets& a, const ContactTargets& b) {
+  if (a.count != b.count) return false;
+  for (int k = 0; k < a.count; ++k) {
+    const auto sk = static_cast<std::size_t>(k);
+    if (a.nodes[sk] != b.nodes[sk] || (a.u[sk] - b.u[sk]).norm() > 1e-9) return false;
+  }
+  return true;
+}
+}  // namespace
+
+bool LiverMultirate::cycle_if_needed() {
+  targets_.take();
+  const LoopTargets& in = targets_.front();
+  // Idle: the same targets as a cycle that converged (a held tool), or no contact with the organ already at rest.
+  if (have_cycled_ && last_converged_ && same_targets(in.targets, cycled_)) {
+    idle_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  cycled_ = in.targets;
+  predicted_ = in.targets;
+  // The prediction: the snapshot becomes visible about one cycle later, so ask for where each node will be then
+  // (its velocity times the last cycle's time, at most kMaxPrediction).
+  if (predict_ && last_cycle_s_ > 0) {
+    for (int k = 0; k < predicted_.count; ++k) {
+      const auto sk = static_cast<std::size_t>(k);
+      Eigen::Vector3d d = in.velocity[sk] * last_cycle_s_;
+      const double len = d.norm();
+      if (!(len <= kMaxPrediction)) d *= std::isfinite(len) ? kMaxPrediction / len : 0.0;
+      predicted_.u[sk] += d;
+    }
+  }
+  const std::uint64_t cycle = tracker_->cycles() + 1;
+  cycle_tick_[static_cast<std::size_t>(cycle % kCycleTicks)].store(in.tick, std::memory_order_relaxed);
+  const TrackerCycle cy = tracker_->cycle(predicted_);
+  have_cycled_ = true;
+  last_converged_ = cy.converged && cy.published;
+  last_cycle_s_ = cy.total_ms * 1e-3;
+  cycle_ms_.add(cy.total_ms);
+  cycles_.fetch_add(1, std::memory_order_relaxed);
+  if (!cy.failure.empty()) failures_.fetch_add(1, std::memory_order_relaxed);
+  if (cy.published) {
+    published_.fetch_add(1, std::memory_order_relaxed);
+    // The surface of the published state for the BodyState (the publisher thread takes it).
+    TrackerSurface& s = surfaces_.back();
+    const Eigen::VectorXd& u = tracker_->state();
+    for (std::size_t i = 0; i < surface_nodes_.size(); ++i)
+      s.u.segment<3>(3 * static_cast<Eigen::Index>(i)) = u.segment<3>(3 * surface_nodes_[i]);
+    s.valid = s.u.allFinite();
+    s.cycle = cycle;
+    s.sim_time = in.sim_time;
+    s.tick = in.tick;
+    surfaces_.publish();
+  }
+  return true;
+}
+
+void LiverMultirate::hand_over(const ContactSolution& solution, double dt) noexcept {
+  ++tick_;
+  dt_ = dt;
+  LoopTargets& out = targets_.back();
+  const int m = std::clamp(solution.count, 0, kMaxContacts);
+  out.targets.count = m;
+  out.sim_time = static_cast<double>(tick_ - 1) * dt;
+  out.tick = tick_ - 1;
+  for (int l = 0; l < m; ++l) {
+    const auto sl = static_cast<std::size_t>(l);
+    const int node = solution.nodes[sl];
+    const auto sn = static_cast<std::size_t>(node);
+    const Eigen::Vector3d& u = solution.displacement[sl];
+    out.targets.nodes[sl] = node;
+    out.targets.u[sl] = u;
+    // The node's velocity: filtered differences of consecutive ticks in contact; 0 for a node new to the contact.
+    if (last_tick_[sn] == tick_ - 1 && tick_ > 1 && dt > 0) {
+      velocity_[sn] += kVelocityFilter * ((u - last_u_[sn]) / dt - velocity_[sn]);
+    } else {
+      velocity_[sn].setZero();
+    }
+    if (!velocity_[sn].allFinite()) velocity_[sn].setZero();
+    last_u_[sn] = u;
+    last_tick_[sn] = tick_;
+    out.velocity[sl] = velocity_[sn];
+  }
+  targets_.publish();
+}
+
+MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
+  const int m = std::clamp(solution.count, 0, kMaxContacts);
+  if (m == 0) {
+    ++ticks_[0];
+    return MultirateUse::kNoContact;
+  }
+  NonlinearTracker& tracker = *tracker_;
+  tracker.snapshots().take();
+  const TrackerSnapshot& s = tracker.snapshots().front();
+  const int n = std::clamp(s.count, 0, kMaxContacts);
+  // The node -> snapshot index map of the newest snapshot (rebuilt only when the snapshot changed).
+  if (!indexed_ || s.cycle != indexed_cycle_) {
+    for (int i = 0; i < indexed_count_; ++i) snapshot_index_[static_cast<std::size_t>(indexed_nodes_[static_cast<std::size_t>(i)])] = -1;
+    indexed_count_ = 0;
+    if (s.valid) {
+      for (int j = 0; j < n; ++j) {
+        const int node = s.nodes[static_cast<std::size_t>(j)];
+        if (node < 0 || static_cast<std::size_t>(node) >= snapshot_index_.size()) continue;
+        snapshot_index_[static_cast<std::size_t>(node)] = j;
+        indexed_nodes_[static_cast<std::size_t>(indexed_count_++)] = node;
+      }
+    }
+    indexed_cycle_ = s.cycle;
+    indexed_ = true;
+  }
+  const auto fallback = [&] {
+    ++ticks_[3];
+    return MultirateUse::kLinearFallback;
+  };
+  if (!s.valid || s.stiffness.rows() < 3 * n || s.stiffness.cols() < 3 * n) return fallback();
+
+  // --- the common nodes and their clamped du (snapshot order) ---
+  const double max_d = tracker.options().max_extrapolation;
+  std::fill(common_.begin(), common_.begin() + n, 0);
+  std::fill(du_.begin(), du_.begin() + 3 * n, 0.0);
+  int matched = 0;
+  double largest = 0;
+  for (int l = 0; l < m; ++l) {
+    const auto sl = static_cast<std::size_t>(l);
+    const int node = solution.nodes[sl];
+    const int j = node >= 0 && static_cast<std::size_t>(node) < snapshot_index_.size()
+                      ? snapshot_index_[static_cast<std::size_t>(node)] : -1;
+    at_[sl] = j;
+    if (j < 0 || common_[static_cast<std::size_t>(j)]) {
+      at_[sl] = -1;
+      continue;
+    }
+    Eigen::Vector3d d = solution.displacement[sl] - s.u[static_cast<std::size_t>(j)];
+    if (!d.allFinite()) return fallback();
+    const double len = d.norm();
+    largest = std::max(largest, len);
+    if (len > max_d) d *= max_d / len;
+    common_[static_cast<std::size_t>(j)] = 1;
+    for (int c = 0; c < 3; ++c) du_[static_cast<std::size_t>(3 * j + c)] = d[c];
+    ++matched;
+  }
+  if (matched == 0) return fallback();
+
+  // --- lambda = f_c + S du over the common nodes; the linear lambda for the others ---
+  Eigen::Vector3d total = Eigen::Vector3d::Zero();
+  for (int l = 0; l < m; ++l) {
+    const auto sl = static_cast<std::size_t>(l);
+    const int j = at_[sl];
+    if (j < 0) {
+      lambda_[sl] = solution.lambda[sl];
+    } else {
+      Eigen::Vector3d f = s.reaction[static_cast<std::size_t>(j)];
+      for (int r = 0; r < 3; ++r) {
+        double acc = 0;
+        for (int q = 0; q < n; ++q) {
+          if (!common_[static_cast<std::size_t>(q)]) continue;
+          for (int c = 0; c < 3; ++c)
+            acc += s.stiffness(3 * j + r, 3 * q + c) * du_[static_cast<std::size_t>(3 * q + c)];
+        }
+        f[r] += acc;
+      }
+      lambda_[sl] = f;
+    }
+    total += lambda_[sl];
+  }
+  if (!total.allFinite()) return fallback();
+  for (int l = 0; l < m; ++l) solution.lambda[static_cast<std::size_t>(l)] = lambda_[static_cast<std::size_t>(l)];
+  solution.tool_force = -total;
+
+  // --- statistics: the snapshot's age (sim time since its targets) and the extrapolation ---
+  // This tick's index is tick_ (hand_over() follows apply()).
+  const std::uint64_t t_snap = cycle_tick_[static_cast<std::size_t>(s.cycle % kCycleTicks)].load(std::memory_order_relaxed);
+  age_ms_.add(1e3 * dt_ * static_cast<double>(tick_ >= t_snap ? tick_ - t_snap : 0));
+  extrapolation_mm_.add(1e3 * largest);
+  const bool all = matched == m && matched == n;
+  ++ticks_[all ? 1 : 2];
+  return all ? MultirateUse::kNonlinear : MultirateUse::kPartial;
+}
+
+}  // namespace surgsim

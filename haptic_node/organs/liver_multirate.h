@@ -1,0 +1,194 @@
+// The multirate non-linear liver in the haptic node (issue 16, scene key liver.deformation: multirate): the scene's
+// liver as a neo-Hookean organ (liver/hyperelastic.h: same mesh, material and fixed set as the tensors) tracked by a
+// NonlinearTracker (liver/multirate.h) on a thread of its own, and the 1 kHz side that turns the tracker's snapshots
+// into the contact forces of the tick.
+//
+// Loop -> tracker: every tick hand_over() writes the tick's contact solution (its nodes and their displacements: the
+// linear solve's) as the tracker's targets into a TripleBuffer (no allocation), with the tick's sim time and each
+// node's velocity (for the prediction below). Tracker -> loop: the tracker's own snapshot buffer.
+// apply(): the forces of the tick from the newest snapshot's local model, lambda = f_c + S du, per node:
+//   - a node of the solution that the snapshot holds: f_c of that node + S du over the nodes both sets hold (du =
+//     u_now - u_snapshot, clamped to max_extrapolation per node, as local_contact_forces);
+//   - a node the snapshot does not hold (it just entered the contact): the linear solve's lambda;
+//   - a node of the snapshot no longer in contact: dropped (its force and its column of S).
+// So a patch whose edge nodes enter and leave while the tool slides does not fall back to the linear model as a
+// whole: the nodes that change are at the patch edge, where the Wendland weights and hence the reactions go to 0,
+// and the force changes by about their reaction only. The tick is counted nonlinear (the sets are equal), partial
+// (some nodes matched) or linear fallback (no valid snapshot, no node matched, or a non-finite result: then every
+// lambda stays the linear one). No allocation; O(m^2) with m <= kMaxContacts.
+//
+// The tracker thread (start()): normal priority, started by the caller's thread so it inherits that thread's CPU set
+// (the haptic node builds its organ after --cpu N moved every thread but the loop off CPU N). Each cycle reads the
+// newest targets, predicts them by the last cycle's time (each node moved along its velocity; off with
+// set_prediction(false)), runs one tracker cycle and publishes the tracker's surface displacement (for the organ's
+// BodyState) through another TripleBuffer. It sleeps kIdleSleep instead of cycling when nothing is left to do: the
+// targets have not changed since a cycle that converged, or there is no contact and the organ is back at rest.
+// Tests drive it without the thread: cycle_once() runs one such cycle on the calling thread.
+#pragma once
+#include <Eigen/Core>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "liver/corotation.h"
+#include "liver/fem.h"
+#include "liver/fixed_set.h"
+#include "liver/hyperelastic.h"
+#include "liver/multirate.h"
+#include "liver/superposition.h"
+#include "mesh/mesh.h"
+
+namespace surgsim {
+
+/// What the loop hands the tracker each tick (fixed size).
+struct LoopTargets {
+  ContactTargets targets;                                // the tick's contact nodes and displacements (m)
+  std::array<Eigen::Vector3d, kMaxContacts> velocity{};  // m/s, each node's displacement rate (filtered)
+  double sim_time = 0;                                   // s, the tick's haptic sim time
+  std::uint64_t tick = 0;                                // the tick's index (the node's record seq)
+};
+
+/// The tracker's surface for the organ's BodyState (tracker thread -> publisher thread).
+struct TrackerSurface {
+  bool valid = false;
+  std::uint64_t cycle = 0;      // the tracker cycle whose state it is
+  double sim_time = 0;          // s, sim time of the targets that cycle was computed for
+  std::uint64_t tick = 0;       // their tick
+  Eigen::VectorXd u;            // 3 x #surface nodes, m
+};
+
+/// Where a tick's forces came from (apply()).
+enum class MultirateUse : std::uint8_t { kNoContact = 0, kNonlinear, kPartial, kLinearFallback };
+
+/// Fixed-size ring of samples (a preallocated window of the newest `capacity`); percentiles at shutdown.
+class SampleRing {
+ public:
+  explicit SampleRing(std::size_t capacity) : values_(capacity, 0.0) {}
+  void add(double v) noexcept {
+    values_[static_cast<std::size_t>(count_ % values_.size())] = v;
+    ++count_;
+  }
+  std::uint64_t count() const { return count_; }
+  /// q in [0, 1] over the samples kept (0 without any). Allocates.
+  double percentile(double q) const;
+
+ private:
+  std::vector<double> values_;
+  std::uint64_t count_ = 0;
+};
+
+class LiverMultirate {
+ public:
+  static constexpr std::chrono::microseconds kIdleSleep{1500};
+  static constexpr double kVelocityFilter = 0.1;  // per tick: an exponential filter of about 10 ticks
+  static constexpr double kMaxPrediction = 0.005; // m: the prediction moves a target by at most this
+
+  /// The node's tracker options: those of large_deformation_bench's moving-tool figures (one Newton iteration and up
+  /// to 10 modified-Newton corrections per cycle, at most 5 mm per predictor; the rest MultirateOptions' defaults).
+  static MultirateOptions node_options();
+
+  /// Init (allocates): the neo-Hookean model of `mesh` with `material` and `fixed` (the tensors' own), a tracker
+  /// whose snapshots carry the displacement of `surface_nodes` (SurfaceMesh::nodes order). `mesh` must outlive
+  /// this object. Throws surgsim::Error (prefixed with `where`, the scene file) on a bad model.
+  LiverMultirate(const TetMesh& mesh, const Material& material, const FixedSet& fixed, std::vector<int> surface_nodes,
+                 const std::string& where, const MultirateOptions& options = node_options());
+  ~LiverMultirate();
+  LiverMultirate(const LiverMultirate&) = delete;
+  LiverMultirate& operator=(const LiverMultirate&) = delete;
+
+  /// Starts the tracker thread (once). stop() joins it; the destructor calls stop().
+  void start();
+  void stop();
+  /// Tests: one tracker cycle on the calling thread, as the thread would run it (with its idle rule: returns false
+  /// without cycling when it would sleep). Not while the thread runs.
+  bool cycle_once();
+  /// Predict the targets by the last cycle's time (default on). Before start() / between cycle_once() calls.
+  void set_prediction(bool on) { predict_ = on; }
+
+  // --- loop thread, noexcept, no allocation ---
+  /// The forces of this tick: replaces solution.lambda (and tool_force) of the nodes the newest snapshot covers by
+  /// its local model (file comment). Call it before this tick's hand_over().
+  MultirateUse apply(ContactSolution& solution) noexcept;
+  /// Hands this tick's solution (nodes, displacements; count 0 without contact) to the tracker as its targets.
+  void hand_over(const ContactSolution& solution, double dt) noexcept;
+
+  // --- publisher thread ---
+  /// The newest surface the tracker published since the last call (true), readable through surface().
+  bool take_surface() noexcept { return surfaces_.take(); }
+  const TrackerSurface& surface() const { return surfaces_.front(); }
+  const std::vector<int>& surface_nodes() const { return surface_nodes_; }
+
+  // --- counters (the loop's are exact once the loop stopped; the tracker's once stop() returned) ---
+  std::uint64_t ticks_nonlinear() const { return ticks_[1]; }
+  std::uint64_t ticks_partial() const { return ticks_[2]; }
+  std::uint64_t ticks_linear_fallback() const { return ticks_[3]; }
+  std::uint64_t tracker_cycles() const { return cycles_.load(std::memory_order_relaxed); }
+  std::uint64_t snapshots_published() const { return published_.load(std::memory_order_relaxed); }
+  std::uint64_t tracker_failures() const { return failures_.load(std::memory_order_relaxed); }
+  std::uint64_t idle_sleeps() const { return idle_.load(std::memory_order_relaxed); }
+  /// Shutdown (allocate): cycle wall time (ms) and snapshot age at use (ms, sim time of the tick minus that of the
+  /// snapshot's targets) percentiles, and the extrapolation |u_now - u_snapshot| (mm, largest node of a tick).
+  double cycle_ms(double q) const { return cycle_ms_.percentile(q); }
+  double age_ms(double q) const { return age_ms_.percentile(q); }
+  double extrapolation_mm(double q) const { return extrapolation_mm_.percentile(q); }
+  const NonlinearTracker& tracker() const { return *tracker_; }
+  /// The snapshot apply() used last (loop thread; tests).
+  const TrackerSnapshot& snapshot() const { return tracker_->snapshots().front(); }
+  double max_extrapolation() const { return tracker_->options().max_extrapolation; }
+
+ private:
+  void run() noexcept;
+  /// One cycle towards the newest targets unless idle; the cycle's wall time goes to the ring.
+  bool cycle_if_needed();
+
+  std::unique_ptr<ElasticModel> model_;
+  std::unique_ptr<HyperelasticSolver> solver_;
+  std::vector<int> surface_nodes_;
+  std::unique_ptr<NonlinearTracker> tracker_;
+  // loop -> tracker
+  TripleBuffer<LoopTargets> targets_;
+  // tracker -> publisher
+  TripleBuffer<TrackerSurface> surfaces_;
+  // The tick of the targets of tracker cycle c, at [c % kCycleTicks] (written before the cycle publishes: the
+  // snapshot buffer's release orders it for the loop).
+  static constexpr std::size_t kCycleTicks = 256;
+  std::array<std::atomic<std::uint64_t>, kCycleTicks> cycle_tick_{};
+
+  // --- loop thread ---
+  std::vector<int> snapshot_index_;             // #V: index of the node in the loop's snapshot, or -1
+  std::array<int, kMaxContacts> indexed_nodes_{};
+  int indexed_count_ = 0;
+  std::uint64_t indexed_cycle_ = 0;
+  bool indexed_ = false;
+  std::array<int, kMaxContacts> at_{};          // per solution node: its snapshot index or -1
+  std::array<unsigned char, kMaxContacts> common_{};  // per snapshot node: also in the solution
+  std::array<double, 3 * kMaxContacts> du_{};   // per snapshot dof (common nodes only; 0 otherwise)
+  std::array<Eigen::Vector3d, kMaxContacts> lambda_{};
+  std::vector<Eigen::Vector3d> last_u_;         // #V: each node's displacement at the tick last_tick_
+  std::vector<Eigen::Vector3d> velocity_;       // #V: m/s, filtered
+  std::vector<std::uint64_t> last_tick_;        // #V: the tick a node was last in contact (+1; 0: never)
+  std::uint64_t tick_ = 0;                      // ticks handed over
+  double dt_ = 0;                               // s, the last tick's
+  std::array<std::uint64_t, 4> ticks_{};        // by MultirateUse
+  SampleRing age_ms_{1 << 16};
+  SampleRing extrapolation_mm_{1 << 16};
+
+  // --- tracker thread ---
+  bool predict_ = true;
+  ContactTargets cycled_;          // the targets of the last cycle (before prediction)
+  bool have_cycled_ = false;
+  bool last_converged_ = false;
+  double last_cycle_s_ = 0;
+  ContactTargets predicted_;
+  SampleRing cycle_ms_{1 << 14};
+  std::atomic<std::uint64_t> cycles_{0}, published_{0}, failures_{0}, idle_{0};
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+}  // namespace surgsim
