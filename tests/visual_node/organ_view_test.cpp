@@ -11,6 +11,7 @@
 
 #include "instruments.h"
 #include "render/renderer.h"
+#include "support/contact_frame_util.h"
 #include "surgsim_types.h"
 #include "views/intestine_view.h"
 #include "views/liver_view.h"
@@ -104,17 +105,7 @@ TEST(OrganView, LiverSceneGetsTheLiverViewThatDeformsAndMarksContacts) {
 
   // One contact on a visible node, pressing down, of the scene's one instrument.
   const int node = liver->deformer().visible_nodes()[liver->deformer().visible_nodes().size() / 2];
-  msg::ContactFrame frame;
-  msg::ContactEntry e;
-  e.node(static_cast<std::uint32_t>(node));
-  e.instrument(0);
-  e.lambda().z(-0.2);
-  frame.contacts().push_back(e);
-  msg::InstrumentState tool;
-  tool.instrument(0);
-  tool.direction().z(-1.0);
-  tool.pose().insertion(0.1);
-  frame.instruments().push_back(tool);
+  const msg::ContactFrame frame = testing::press_frame(node, -0.2);
   EXPECT_GE(organ->update(&frame, true), 0.0);
   EXPECT_EQ(organ->instruments(), nullptr);  // the app draws the contact frame's instruments
   EXPECT_EQ(organ->contacts_shown(), 1);

@@ -3,62 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
-#include <mutex>
 
 #include "surgsim_types.h"
 #include "core/clock.h"
 #include "render/renderer.h"
+#include "views/body_state_listener.h"
 
 namespace surgsim {
-
-using eprosima::fastdds::dds::DataReader;
-using eprosima::fastdds::dds::DataReaderListener;
-using eprosima::fastdds::dds::SampleInfo;
-using eprosima::fastrtps::types::ReturnCode_t;
-
-// Keeps the newest BodyState (runs on the DDS listener thread; the frame loop copies it out under the lock).
-class BodyStateListener : public DataReaderListener {
- public:
-  BodyStateListener() {
-    incoming_.positions().reserve(msg::kMaxBodyPoints);
-    newest_.positions().reserve(msg::kMaxBodyPoints);
-  }
-  void on_data_available(DataReader* reader) override {
-    SampleInfo info;
-    while (reader->take_next_sample(&incoming_, &info) == ReturnCode_t::RETCODE_OK) {
-      if (!info.valid_data) continue;
-      std::lock_guard<std::mutex> lock(mutex_);
-      newest_ = incoming_;  // within the reserved capacity
-      ++received_;
-    }
-  }
-  /// Copies the newest state's positions into `xyz` (room for kMaxBodyPoints points) and its instruments (for a
-  /// scene of `tools` instruments) if it is newer than the last one taken: returns its point count, else -1.
-  int take(double* xyz, int tools, InstrumentPoses& instruments, std::uint64_t& seq, std::uint64_t& scene_hash,
-           std::uint64_t& received) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    received = received_;
-    if (received_ == taken_) return -1;
-    taken_ = received_;
-    const auto& p = newest_.positions();
-    for (std::size_t i = 0; i < p.size(); ++i) {
-      xyz[3 * i] = p[i].x();
-      xyz[3 * i + 1] = p[i].y();
-      xyz[3 * i + 2] = p[i].z();
-    }
-    take_instruments(newest_.instruments(), tools, instruments);
-    seq = newest_.seq();
-    scene_hash = newest_.scene_hash();
-    return static_cast<int>(p.size());
-  }
-
- private:
-  std::mutex mutex_;
-  msg::BodyState incoming_;
-  msg::BodyState newest_;
-  std::uint64_t received_ = 0;
-  std::uint64_t taken_ = 0;
-};
 
 namespace {
 
@@ -104,9 +55,7 @@ void IntestineView::set_skinning(intestine::TubeSkinning skinning) noexcept {
 }
 
 void IntestineView::subscribe(dds::Participant& participant) {
-  listener_ = std::make_unique<BodyStateListener>();
-  participant.reader(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()), dds::kStreamReader,
-                     listener_.get());
+  listener_ = subscribe_body_states(participant);
 }
 
 bool IntestineView::accept(const double* xyz, int count, const InstrumentPoses* instruments) noexcept {
@@ -127,12 +76,12 @@ bool IntestineView::accept(const double* xyz, int count, const InstrumentPoses* 
 bool IntestineView::update() noexcept {
   bool fresh = false;
   if (listener_ != nullptr) {
-    std::uint64_t seq = 0, hash = 0;
-    const int count = listener_->take(incoming_.data(), tools_, incoming_instruments_, seq, hash, states_received_);
+    BodyStateHeader header;
+    const int count = listener_->take(incoming_.data(), tools_, incoming_instruments_, header, states_received_);
     if (count >= 0) {
-      if (hash == scene_hash_ && accept(incoming_.data(), count, &incoming_instruments_)) {
+      if (header.scene_hash == scene_hash_ && accept(incoming_.data(), count, &incoming_instruments_)) {
         fresh = true;
-        last_seq_ = seq;
+        last_seq_ = header.seq;
       } else {
         ++states_rejected_;
       }

@@ -1,6 +1,8 @@
 #include "views/liver_view.h"
 
 #include <algorithm>
+#include <cmath>
+#include <iostream>
 #include <nlohmann/json.hpp>
 
 #include "surgsim_types.h"
@@ -10,6 +12,7 @@
 #include "liver/organ_curves.h"
 #include "mesher/scene_mesh.h"
 #include "render/renderer.h"
+#include "views/body_state_listener.h"
 
 namespace surgsim {
 
@@ -45,12 +48,83 @@ LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
     }
   }
   markers_.resize(kMaxContacts, 3);
+
+  // Multirate (issue 16): the tracker's shape arrives as BodyState, one position per boundary node.
+  multirate_ = scene.liver.deformation == LiverDeformation::kMultirate;
+  scene_hash_ = visual_scene_hash(scene, mesh_hash_);
+  scene_name_ = scene.name;
+  scene_file_ = scene.file;
+  if (multirate_) body_xyz_.assign(3 * static_cast<std::size_t>(msg::kMaxBodyPoints), 0.0);
+}
+
+LiverView::~LiverView() = default;
+
+void LiverView::subscribe(dds::Participant& participant) {
+  if (multirate_) listener_ = subscribe_body_states(participant);
+}
+
+void LiverView::say_rejection(BodyRejection why, std::uint64_t seq, int count, std::uint64_t scene_hash) noexcept {
+  const auto r = static_cast<std::size_t>(why);
+  ++body_rejected_[r];
+  if (body_rejection_said_[r]) return;
+  body_rejection_said_[r] = true;
+  std::cerr << "visual_node: body state " << seq << " ignored: ";
+  switch (why) {
+    case BodyRejection::kWrongScene:
+      std::cerr << "scene hash " << scene_hash << " but this node's scene '" << scene_name_ << "' (" << scene_file_
+                << ") with its mesh has hash " << scene_hash_
+                << ": start both nodes with the same scene and mesh (counted in stats "
+                   "multirate.body_states_rejected.wrong_scene)\n";
+      break;
+    case BodyRejection::kWrongCount:
+      std::cerr << count << " positions but the liver of scene '" << scene_name_ << "' (" << scene_file_ << ") has "
+                << surface_.nodes.size()
+                << " boundary surface nodes (liver.deformation multirate: one position per boundary node, in "
+                   "SurfaceMesh order; counted in stats multirate.body_states_rejected.wrong_count)\n";
+      break;
+    case BodyRejection::kNonFinite:
+      std::cerr << "a position is not finite (NaN or infinite) in scene '" << scene_name_ << "' (" << scene_file_
+                << "): the previous shape is kept (counted in stats multirate.body_states_rejected.non_finite)\n";
+      break;
+  }
+}
+
+bool LiverView::take_body_state(const double* xyz, int count, std::uint64_t scene_hash, std::uint64_t stamp_ns,
+                                std::uint64_t seq) noexcept {
+  if (scene_hash != scene_hash_) {
+    say_rejection(BodyRejection::kWrongScene, seq, count, scene_hash);
+    return false;
+  }
+  if (count != static_cast<int>(surface_.nodes.size())) {
+    say_rejection(BodyRejection::kWrongCount, seq, count, scene_hash);
+    return false;
+  }
+  // SurfaceDeformer's vertices are the boundary's nodes in SurfaceMesh order: position k is vertex k.
+  if (!deformer_->set_positions(xyz, count)) {
+    say_rejection(BodyRejection::kNonFinite, seq, count, scene_hash);
+    return false;
+  }
+  body_shown_ = true;
+  body_stamp_ns_ = stamp_ns;
+  body_seq_ = seq;
+  ++body_states_shown_;
+  return true;
 }
 
 double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
   // Deformation of the visible mesh from the newest contacts: u_n = sum_k G_nk lambda_k over the visible rows.
   contacts_ = frame != nullptr ? std::min<int>(static_cast<int>(frame->contacts().size()), kMaxContacts) : 0;
   double deform_us = -1;
+  // Multirate: the newest BodyState, when one arrived since the last frame.
+  if (listener_ != nullptr) {
+    const std::uint64_t b0 = monotonic_ns();
+    BodyStateHeader header;
+    const int count = listener_->take(body_xyz_.data(), tools_, body_instruments_, header, body_states_received_);
+    if (count >= 0 && take_body_state(body_xyz_.data(), count, header.scene_hash, header.stamp_ns, header.seq)) {
+      deform_us = static_cast<double>(monotonic_ns() - b0) * 1e-3;
+      body_apply_us_.add(deform_us);
+    }
+  }
   if (fresh && frame != nullptr) {
     const std::uint64_t d0 = monotonic_ns();
     for (int l = 0; l < contacts_; ++l) {
@@ -63,11 +137,24 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
           i < static_cast<std::uint32_t>(kMaxInstruments) ? static_cast<int>(i) : -1;
     }
     take_instruments(frame->instruments(), tools_, instruments_);  // absent instruments get a zero direction
-    if (deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), contact_instrument_.data(), contacts_,
+    // Once the tracker's shape is drawn (multirate) the contacts only place the markers.
+    if (!body_shown_ && deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), contact_instrument_.data(), contacts_,
                          instruments_.direction.data(), std::min(tools_, kMaxInstruments)) != ContactStatus::kOk) {
       ++deform_errors_;  // a frame naming nodes this scene does not have: keep the last good shape
     }
-    deform_us = static_cast<double>(monotonic_ns() - d0) * 1e-3;
+    if (!body_shown_) deform_us = static_cast<double>(monotonic_ns() - d0) * 1e-3;
+  }
+  // The shape's age at draw (the same host's CLOCK_MONOTONIC as the publisher's stamp).
+  if (body_shown_) {
+    ++frames_body_;
+    const std::uint64_t now = monotonic_ns();
+    if (now >= body_stamp_ns_) {
+      body_age_ms_.add(static_cast<double>(now - body_stamp_ns_) * 1e-6);
+    } else {
+      ++age_unknown_;
+    }
+  } else if (multirate_) {
+    ++frames_linear_;
   }
   // Contact nodes as markers (visual feedback only).
   marker_count_ = 0;
@@ -95,6 +182,24 @@ void LiverView::add_stats(nlohmann::json& j) const {
   j["model_built"] = "liver";
   j["visible_nodes"] = deformer_->visible_nodes().size();
   j["tensor_rows"] = tensors_.find("visual") != nullptr ? tensors_.find("visual")->row_count() : 0;
+  if (!multirate_) return;
+  nlohmann::json m;
+  m["surface_nodes"] = surface_.nodes.size();
+  m["body_states_received"] = body_states_received_;
+  m["body_states_shown"] = body_states_shown_;
+  std::uint64_t rejected = 0;
+  for (const std::uint64_t r : body_rejected_) rejected += r;
+  m["body_states_rejected"] = {{"total", rejected},
+                               {"wrong_scene", body_rejected_[static_cast<std::size_t>(BodyRejection::kWrongScene)]},
+                               {"wrong_count", body_rejected_[static_cast<std::size_t>(BodyRejection::kWrongCount)]},
+                               {"non_finite", body_rejected_[static_cast<std::size_t>(BodyRejection::kNonFinite)]}};
+  m["last_seq_shown"] = body_seq_;
+  m["frames_linear_fallback"] = frames_linear_;
+  m["frames_body_state"] = frames_body_;
+  m["shape_age_ms"] = to_json(body_age_ms_.summary());  // draw time - BodyState stamp_ns, per frame drawn
+  m["shape_age_unknown_frames"] = age_unknown_;
+  m["body_apply_us"] = to_json(body_apply_us_.summary());
+  j["multirate"] = m;
 }
 
 }  // namespace surgsim

@@ -6,12 +6,24 @@
 // bends each instrument's share about that instrument's own direction (SurfaceDeformer::apply with instruments).
 // liver.deformation corotational (issue 16): the deformer recomputes the rotations from the received forces (no
 // more data on the wire); liver.curves organ: the law from the organ's own curves (liver/organ_curves.h).
+//
+// liver.deformation multirate (issue 16): the haptic node's neo-Hookean tracker publishes the organ's shape as
+// BodyState (one position per boundary surface node, SurfaceMesh node order, the scene identity as scene_hash; see
+// the wire protocol in the README). The view subscribes to it and each frame draws the newest valid one: the boundary
+// takes the positions, an embedded visual.surface follows through its embedding, normals are recomputed by the
+// renderer as for every surface. A state of another scene, with another position count than the boundary's node
+// count, or with a non-finite position is ignored and counted by reason (one stderr line per reason, the first time,
+// naming what was expected). Until the first valid state the linear deformer draws the ContactFrame's contacts, so
+// the picture is never empty; the contact markers always come from the ContactFrame. Stats: key "multirate".
 #pragma once
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <string>
+#include <vector>
 
+#include "core/stats.h"
 #include "instruments.h"
 #include "liver/nonlinear_law.h"
 #include "liver/precompute.h"
@@ -22,15 +34,21 @@
 
 namespace surgsim {
 
+class BodyStateListener;
+
 class LiverView : public OrganView {
  public:
   /// Init: loads (or generates) the mesh, the tensors' "visual" block and the law; embeds visual.surface when the
   /// scene names one. Throws surgsim::Error (the embedded surface's errors name the scene key).
   LiverView(const Scene& scene, const OrganViewOptions& options);
+  ~LiverView() override;
 
   std::uint64_t mesh_hash() const override { return mesh_hash_; }
   std::uint64_t tensor_hash() const override { return tensor_hash_; }
   long surface_triangles() const override { return static_cast<long>(surface_.tris.rows()); }
+
+  /// Init (multirate only): the BodyState reader.
+  void subscribe(dds::Participant& participant) override;
 
   double update(const msg::ContactFrame* frame, bool fresh) noexcept override;
   void draw(Renderer& renderer) const override;
@@ -43,6 +61,25 @@ class LiverView : public OrganView {
   void add_stats(nlohmann::json& stats) const override;
 
   const SurfaceDeformer& deformer() const { return *deformer_; }
+
+  /// Why a BodyState was not drawn (multirate).
+  enum class BodyRejection { kWrongScene = 0, kWrongCount, kNonFinite };
+  static constexpr int kBodyRejections = 3;
+  /// Multirate: takes one BodyState (the DDS path and tests): `xyz` holds `count` points (x, y, z; m) for the boundary
+  /// surface nodes in SurfaceMesh order, `scene_hash` its scene identity, `stamp_ns` its publication time
+  /// (CLOCK_MONOTONIC), `seq` its number. True when it is the shape drawn from now on; false when it is ignored (the
+  /// previous shape kept; counted by reason, the first of each reason named on stderr). No allocation.
+  bool take_body_state(const double* xyz, int count, std::uint64_t scene_hash, std::uint64_t stamp_ns,
+                       std::uint64_t seq) noexcept;
+  bool multirate() const { return multirate_; }
+  /// A valid BodyState has been taken: the drawn shape is the tracker's, no longer the linear deformer's.
+  bool body_shown() const { return body_shown_; }
+  std::uint64_t body_states_shown() const { return body_states_shown_; }
+  std::uint64_t body_states_rejected(BodyRejection why) const {
+    return body_rejected_[static_cast<std::size_t>(why)];
+  }
+  /// The scene identity BodyStates must carry (visual_scene_hash of the scene and this mesh).
+  std::uint64_t scene_hash() const { return scene_hash_; }
 
  private:
   TetMesh mesh_;
@@ -63,6 +100,27 @@ class LiverView : public OrganView {
   Eigen::MatrixX3f markers_;  // contact points drawn as markers
   int marker_count_ = 0;
   std::uint64_t deform_errors_ = 0;
+
+  // --- multirate (issue 16): the tracker's shape from BodyState ---
+  bool multirate_ = false;
+  std::uint64_t scene_hash_ = 0;
+  std::string scene_name_, scene_file_;  // for the rejection lines
+  std::unique_ptr<BodyStateListener> listener_;
+  std::vector<double> body_xyz_;  // 3 x kMaxBodyPoints, the listener's newest copied out
+  InstrumentPoses body_instruments_;
+  bool body_shown_ = false;
+  std::uint64_t body_stamp_ns_ = 0;  // of the shape drawn
+  std::uint64_t body_seq_ = 0;
+  std::uint64_t body_states_received_ = 0;
+  std::uint64_t body_states_shown_ = 0;
+  std::array<std::uint64_t, kBodyRejections> body_rejected_{};
+  std::array<bool, kBodyRejections> body_rejection_said_{};
+  std::uint64_t frames_linear_ = 0;  // frames drawn by the linear deformer before the first BodyState
+  std::uint64_t frames_body_ = 0;    // frames drawn with the tracker's shape
+  std::uint64_t age_unknown_ = 0;    // frames whose shape's stamp is after the draw (another host's clock)
+  SampleRecorder body_age_ms_{1 << 18};  // the drawn shape's age at draw: draw time - BodyState stamp_ns
+  SampleRecorder body_apply_us_{1 << 18};
+  void say_rejection(BodyRejection why, std::uint64_t seq, int count, std::uint64_t scene_hash) noexcept;
 };
 
 }  // namespace surgsim

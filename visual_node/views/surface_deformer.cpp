@@ -184,6 +184,22 @@ ContactStatus SurfaceDeformer::apply(const int* nodes, const Eigen::Vector3d* la
   return ContactStatus::kOk;
 }
 
+bool SurfaceDeformer::set_positions(const double* xyz, int count) noexcept {
+  if (count != rest_.rows()) return false;
+  for (int i = 0; i < 3 * count; ++i) {
+    if (!std::isfinite(xyz[i])) return false;
+  }
+  double max2 = 0;
+  for (Eigen::Index v = 0; v < rest_.rows(); ++v) {
+    const Eigen::Vector3d p(xyz[3 * v], xyz[3 * v + 1], xyz[3 * v + 2]);
+    positions_.row(v) = p.cast<float>().transpose();
+    max2 = std::max(max2, (p - rest_.row(v).transpose().cast<double>()).squaredNorm());
+  }
+  max_displacement_ = std::sqrt(max2);
+  update_fine();
+  return true;
+}
+
 void SurfaceDeformer::set_shape(const Eigen::VectorXd& u_all) noexcept {
   double max2 = 0;
   for (Eigen::Index v = 0; v < rest_.rows(); ++v) {

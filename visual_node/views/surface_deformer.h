@@ -41,6 +41,12 @@ class SurfaceDeformer {
   ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, const int* instrument, int m,
                       const Eigen::Vector3d* directions, int instruments) noexcept;
 
+  /// The shape itself (issue 16, liver.deformation multirate: the haptic node's tracker publishes it as BodyState):
+  /// `xyz` holds x, y, z (m) of every visible vertex in SurfaceMesh node order (the order of visible_nodes()),
+  /// `count` of them; the embedded surface follows. False, and the previous shape kept, when `count` is not the
+  /// visible vertex count or a value is not finite. No allocation.
+  bool set_positions(const double* xyz, int count) noexcept;
+
   /// Embeds a finer visual surface: each of its vertices is tied to the closest point of the mechanical boundary
   /// (triangle, barycentric coordinates, offset along the triangle's normal) and follows it. Only boundary rows are
   /// used, so the visual node still holds no interior rows. Throws surgsim::Error naming the file and the first
