@@ -100,7 +100,7 @@ bool LiverMultirate::cycle_if_needed() {
       Eigen::Vector3d d = in.velocity[sk] * last_cycle_s_;
       const double len = d.norm();
       if (!(len <= kMaxPrediction)) d *= std::isfinite(len) ? kMaxPrediction / len : 0.0;
-      predicted_.u[sk] += d;
+      if (len >= kMinPrediction) predicted_.u[sk] += d;  // a held tool's decaying velocity moves nothing
     }
   }
   const std::uint64_t cycle = tracker_->cycles() + 1;

@@ -87,6 +87,7 @@ class LiverMultirate {
   static constexpr std::chrono::microseconds kIdleSleep{1500};
   static constexpr double kVelocityFilter = 0.1;  // per tick: an exponential filter of about 10 ticks
   static constexpr double kMaxPrediction = 0.005; // m: the prediction moves a target by at most this
+  static constexpr double kMinPrediction = 1e-6;  // m: and not at all when it would move it by less
 
   /// The node's tracker options: those of large_deformation_bench's moving-tool figures (one Newton iteration and up
   /// to 10 modified-Newton corrections per cycle, at most 5 mm per predictor; the rest MultirateOptions' defaults).

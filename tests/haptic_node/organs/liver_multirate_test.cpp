@@ -1,0 +1,174 @@
+// The multirate liver in the haptic node (issue 16, liver.deformation: multirate; organs/liver_multirate.h) on the
+// shipped scene config/liver_multirate.yaml (the 1.4k liver, tensors from the cache), with the tool moved over the
+// thick part of the liver (liver.yaml's trocar) and a device limit out of the way. The tracker runs without its
+// thread: the test cycles it with cycle_once() between ticks, so every figure is deterministic.
+//   - a held deep press: before any snapshot the force is the linear model's; once the tracker converged it is the
+//     snapshot's reaction sum (Newton's) and differs from the linear force by more than the linear model's error at
+//     that depth;
+//   - a slide under the press changes the patch's node set: those ticks take the partial match, stay finite and
+//     change the force by no more than the linear model's own largest step on the same slide plus 5 % of the force;
+//   - the tick allocates nothing; the tracker sleeps when nothing changes.
+// Figures are printed: ctest -R haptic_liver_multirate -V.
+#include "organs/liver_multirate.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iostream>
+#include <memory>
+
+#include "organs/liver_organ.h"
+#include "support/alloc_counter.h"
+#include "support/slab_util.h"
+
+namespace surgsim {
+namespace {
+
+constexpr double kDt = 1e-3;
+constexpr double kTopZ = 0.042;  // m, the rest surface under liver.yaml's trocar (x 0.03, y 0)
+
+Scene test_scene(LiverDeformation d) {
+  Scene s = load_scene(resolve_scene_path("liver_multirate"));
+  s.liver.deformation = d;
+  s.tools[0].force_limit = 1000;  // N: the clamp never acts here
+  return s;
+}
+
+struct Pair {
+  Scene mr_scene = test_scene(LiverDeformation::kMultirate);
+  Scene lin_scene = test_scene(LiverDeformation::kLinear);
+  LiverOrgan mr{mr_scene, SURGSIM_TEST_CACHE_DIR, nullptr, false};
+  LiverOrgan lin{lin_scene, SURGSIM_TEST_CACHE_DIR, nullptr, false};
+  LiverMultirate& m = *mr.multirate();
+
+  // One tick of both organs with a vertical tool whose tip is at `tip` (jaw open).
+  void step(const Eigen::Vector3d& tip, ContactTick& t_mr, ContactTick& t_lin) {
+    const ToolGeometry g = test::vertical_tool(tip);
+    mr.step(&g, 0.5, kDt, t_mr);
+    lin.step(&g, 0.5, kDt, t_lin);
+  }
+};
+
+Eigen::Vector3d snapshot_force(const TrackerSnapshot& s) {
+  Eigen::Vector3d f = Eigen::Vector3d::Zero();
+  for (int k = 0; k < s.count; ++k) f -= s.reaction[static_cast<std::size_t>(k)];
+  return f;
+}
+
+// Down from 3 mm above the top at 0.1 m/s to `depth` below it, both organs, the tracker never cycled.
+void press(Pair& p, double depth, ContactTick& t_mr, ContactTick& t_lin, double* worst_diff = nullptr) {
+  const int ticks = static_cast<int>(std::lround((depth + 0.003) / 0.1 / kDt));
+  for (int k = 0; k <= ticks; ++k) {
+    const Eigen::Vector3d tip(0.03, 0.0, kTopZ + 0.003 - (depth + 0.003) * k / ticks);
+    p.step(tip, t_mr, t_lin);
+    if (worst_diff != nullptr && t_lin.force.norm() > 0)
+      *worst_diff = std::max(*worst_diff, (t_mr.force - t_lin.force).norm() / t_lin.force.norm());
+  }
+}
+
+// Ticks at `tip` with a tracker cycle between them until the tracker goes idle (converged at unchanged targets).
+int hold_until_converged(Pair& p, const Eigen::Vector3d& tip, ContactTick& t_mr, ContactTick& t_lin) {
+  for (int c = 1; c <= 120; ++c) {
+    p.step(tip, t_mr, t_lin);
+    if (!p.m.cycle_once()) {
+      p.step(tip, t_mr, t_lin);
+      return c;
+    }
+  }
+  return -1;
+}
+
+TEST(LiverMultirateNode, HeldDeepPressIsLinearBeforeASnapshotThenNewtons) {
+  Pair p;
+  // 17 mm: 20 % of the liver's 85 mm height, where the linear model's force error against Newton is 10 % on the flat
+  // punch (README, large deformation table).
+  const double depth = 0.017;
+  ContactTick t_mr, t_lin;
+  double before = 0;
+  press(p, depth, t_mr, t_lin, &before);
+  ASSERT_GT(t_lin.force.norm(), 0.1);
+  EXPECT_LE(before, 1e-12) << "before any snapshot the force is the linear model's";
+  EXPECT_EQ(p.m.ticks_nonlinear() + p.m.ticks_partial(), 0u);
+
+  const Eigen::Vector3d tip(0.03, 0.0, kTopZ - depth);
+  const int cycles = hold_until_converged(p, tip, t_mr, t_lin);
+  ASSERT_GT(cycles, 0) << "the tracker did not converge on the held press";
+  const TrackerSnapshot& s = p.m.snapshot();
+  ASSERT_TRUE(s.valid && s.converged);
+  const Eigen::Vector3d f_snap = snapshot_force(s);
+  const double to_snapshot = (t_mr.force - f_snap).norm() / f_snap.norm();
+  const double to_linear = (t_mr.force - t_lin.force).norm() / t_lin.force.norm();
+  std::cout << "[press] " << depth * 1e3 << " mm held, " << p.mr.contacts() << " contact nodes: linear "
+            << t_lin.force.transpose() << " N; multirate after " << cycles << " tracker cycles "
+            << t_mr.force.transpose() << " N (snapshot reaction sum " << f_snap.transpose()
+            << " N, relative difference " << to_snapshot << "); multirate against linear " << 100 * to_linear
+            << " %\n";
+  EXPECT_LT(to_snapshot, 1e-9) << "the held press feels the converged snapshot's reactions";
+  EXPECT_GT(to_linear, 0.10) << "the non-linear force differs from the linear one by more than its known error";
+  EXPECT_GT(p.m.ticks_nonlinear(), 0u);
+  EXPECT_TRUE(t_mr.device_force.allFinite());
+}
+
+TEST(LiverMultirateNode, SlideThatChangesThePatchNodesIsPartialFiniteAndContinuous) {
+  Pair p;
+  const double depth = 0.010;
+  ContactTick t_mr, t_lin;
+  press(p, depth, t_mr, t_lin);
+  ASSERT_GT(hold_until_converged(p, Eigen::Vector3d(0.03, 0.0, kTopZ - depth), t_mr, t_lin), 0);
+  // Slide 2 cm along x at 0.05 m/s (the patch's edge nodes enter and leave), a tracker cycle every 30 ticks (about
+  // the node's cycle time on this liver).
+  const std::uint64_t partial0 = p.m.ticks_partial();
+  Eigen::Vector3d prev_mr = t_mr.force, prev_lin = t_lin.force;
+  double step_mr = 0, step_lin = 0, force_min = HUGE_VAL;
+  bool finite = true;
+  long allocations = 0;
+  for (int k = 1; k <= 400; ++k) {
+    const Eigen::Vector3d tip(0.03 + 0.02 * k / 400.0, 0.0, kTopZ - depth);
+    const ToolGeometry g = test::vertical_tool(tip);
+    {
+      test::AllocationCounter counter;
+      p.mr.step(&g, 0.5, kDt, t_mr);
+      allocations += counter.count();
+    }
+    p.lin.step(&g, 0.5, kDt, t_lin);
+    finite = finite && t_mr.device_force.allFinite() && !t_mr.nonfinite;
+    step_mr = std::max(step_mr, (t_mr.force - prev_mr).norm());
+    step_lin = std::max(step_lin, (t_lin.force - prev_lin).norm());
+    force_min = std::min(force_min, t_mr.force.norm());
+    prev_mr = t_mr.force;
+    prev_lin = t_lin.force;
+    if (k % 30 == 0) p.m.cycle_once();
+  }
+  const std::uint64_t partial = p.m.ticks_partial() - partial0;
+  const double bound = step_lin + 0.05 * force_min;
+  std::cout << "[slide] 2 cm at 0.05 m/s, 10 mm deep: " << partial << " partial ticks of 400, "
+            << p.m.ticks_linear_fallback() << " linear fallback ticks in all; largest one-tick force step multirate "
+            << step_mr << " N, linear " << step_lin << " N, bound " << bound << " N (force >= " << force_min
+            << " N); allocations in the ticks " << allocations << "\n";
+  EXPECT_GT(partial, 0u) << "the slide changed the patch's nodes: partial matches";
+  EXPECT_TRUE(finite);
+  EXPECT_LE(step_mr, bound);
+  EXPECT_EQ(allocations, 0);
+}
+
+TEST(LiverMultirateNode, TrackerSleepsWhenNothingChanges) {
+  Pair p;
+  // No contact: one cycle to rest, then nothing.
+  ContactTick t_mr, t_lin;
+  p.step(Eigen::Vector3d(0.03, 0.0, kTopZ + 0.01), t_mr, t_lin);
+  EXPECT_TRUE(p.m.cycle_once());
+  EXPECT_FALSE(p.m.cycle_once());
+  EXPECT_EQ(p.m.tracker_cycles(), 1u);
+  // A held press: cycles until converged, then nothing until the tool moves.
+  press(p, 0.005, t_mr, t_lin);
+  ASSERT_GT(hold_until_converged(p, Eigen::Vector3d(0.03, 0.0, kTopZ - 0.005), t_mr, t_lin), 0);
+  const std::uint64_t cycles = p.m.tracker_cycles();
+  EXPECT_FALSE(p.m.cycle_once());
+  EXPECT_EQ(p.m.tracker_cycles(), cycles);
+  p.step(Eigen::Vector3d(0.03, 0.0, kTopZ - 0.006), t_mr, t_lin);
+  EXPECT_TRUE(p.m.cycle_once());
+  EXPECT_EQ(p.m.tracker_cycles(), cycles + 1);
+}
+
+}  // namespace
+}  // namespace surgsim
