@@ -1,3 +1,7 @@
 # Issue 16: the multirate non-linear liver in the haptic node (haptic_node/organs/liver_multirate: the tracker on its
 # own thread, the loop's partial match of its snapshots, the tracker's surface as BodyState; config/liver_multirate.yaml).
 surgsim_test(haptic_liver_multirate_test SOURCES haptic_node/organs/liver_multirate_test.cpp ${ALLOC} LIBS surgsim_haptic)
+# The real haptic node on config/liver_multirate.yaml with its grasp-and-lift trajectory, against the same scene linear.
+surgsim_test(integration_haptic_multirate_test SOURCES integration/haptic_multirate_test.cpp
+  LIBS nlohmann_json::nlohmann_json Eigen3::Eigen)
+add_dependencies(integration_haptic_multirate_test haptic_node)

@@ -94,10 +94,11 @@ bool LiverMultirate::cycle_if_needed() {
   predicted_ = in.targets;
   // The prediction: the snapshot becomes visible about one cycle later, so ask for where each node will be then
   // (its velocity times the last cycle's time, at most kMaxPrediction).
-  if (predict_ && last_cycle_s_ > 0) {
+  const double horizon = fixed_horizon_s_ > 0 ? fixed_horizon_s_ : last_cycle_s_;
+  if (predict_ && horizon > 0) {
     for (int k = 0; k < predicted_.count; ++k) {
       const auto sk = static_cast<std::size_t>(k);
-      Eigen::Vector3d d = in.velocity[sk] * last_cycle_s_;
+      Eigen::Vector3d d = in.velocity[sk] * horizon;
       const double len = d.norm();
       if (!(len <= kMaxPrediction)) d *= std::isfinite(len) ? kMaxPrediction / len : 0.0;
       if (len >= kMinPrediction) predicted_.u[sk] += d;  // a held tool's decaying velocity moves nothing

@@ -108,8 +108,12 @@ class LiverMultirate {
   /// Tests: one tracker cycle on the calling thread, as the thread would run it (with its idle rule: returns false
   /// without cycling when it would sleep). Not while the thread runs.
   bool cycle_once();
-  /// Predict the targets by the last cycle's time (default on). Before start() / between cycle_once() calls.
-  void set_prediction(bool on) { predict_ = on; }
+  /// Predict the targets by the last cycle's measured time (default on), or with `fixed_horizon_s` > 0 by that
+  /// (deterministic: tests). Before start() / between cycle_once() calls.
+  void set_prediction(bool on, double fixed_horizon_s = 0) {
+    predict_ = on;
+    fixed_horizon_s_ = fixed_horizon_s;
+  }
 
   // --- loop thread, noexcept, no allocation ---
   /// The forces of this tick: replaces solution.lambda (and tool_force) of the nodes the newest snapshot covers by
@@ -181,6 +185,7 @@ class LiverMultirate {
 
   // --- tracker thread ---
   bool predict_ = true;
+  double fixed_horizon_s_ = 0;
   ContactTargets cycled_;          // the targets of the last cycle (before prediction)
   bool have_cycled_ = false;
   bool last_converged_ = false;
