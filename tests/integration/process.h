@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -92,14 +93,19 @@ inline std::uint64_t now_ns() {
   return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
 }
 
-/// Waits until `file` contains `text` (true) or `timeout_s` passes (false), polling every 10 ms.
-inline bool wait_for_text(const std::string& file, const std::string& text, double timeout_s) {
+/// Polls `done` every 10 ms until it holds (true) or `timeout_s` passes (false).
+inline bool wait_until(const std::function<bool()>& done, double timeout_s) {
   const std::uint64_t until = now_ns() + static_cast<std::uint64_t>(timeout_s * 1e9);
   while (now_ns() < until) {
-    if (read_file(file).find(text) != std::string::npos) return true;
+    if (done()) return true;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  return false;
+  return done();
+}
+
+/// Waits until `file` contains `text` (true) or `timeout_s` passes (false), polling every 10 ms.
+inline bool wait_for_text(const std::string& file, const std::string& text, double timeout_s) {
+  return wait_until([&] { return read_file(file).find(text) != std::string::npos; }, timeout_s);
 }
 
 /// A DDS domain id private to this test process, so parallel ctest runs never see each other.

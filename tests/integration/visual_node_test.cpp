@@ -46,6 +46,7 @@ using eprosima::fastdds::dds::DataWriter;
 using eprosima::fastdds::dds::SampleInfo;
 using eprosima::fastrtps::types::ReturnCode_t;
 using testing::Process;
+using testing::wait_until;
 
 struct StatusSeen {
   std::uint64_t stamp_ns;
@@ -95,16 +96,6 @@ class StatusRecorder : public DataReaderListener {
  private:
   msg::VisualStatus sample_;
 };
-
-// Polls `done` every 10 ms until it holds (true) or `timeout_s` passes (false).
-bool wait_until(const std::function<bool()>& done, double timeout_s) {
-  const std::uint64_t until = testing::now_ns() + static_cast<std::uint64_t>(timeout_s * 1e9);
-  while (testing::now_ns() < until) {
-    if (done()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  return done();
-}
 
 class VisualNode : public testing::NodeTest {
  protected:

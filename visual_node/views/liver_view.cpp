@@ -107,6 +107,7 @@ bool LiverView::take_body_state(const double* xyz, int count, std::uint64_t scen
   body_shown_ = true;
   body_stamp_ns_ = stamp_ns;
   body_seq_ = seq;
+  body_new_ = true;
   ++body_states_shown_;
   return true;
 }
@@ -149,10 +150,13 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
     ++frames_body_;
     const std::uint64_t now = monotonic_ns();
     if (now >= body_stamp_ns_) {
-      body_age_ms_.add(static_cast<double>(now - body_stamp_ns_) * 1e-6);
+      const double age_ms = static_cast<double>(now - body_stamp_ns_) * 1e-6;
+      body_age_ms_.add(age_ms);
+      if (body_new_) body_first_age_ms_.add(age_ms);
     } else {
       ++age_unknown_;
     }
+    body_new_ = false;
   } else if (multirate_) {
     ++frames_linear_;
   }
@@ -197,6 +201,7 @@ void LiverView::add_stats(nlohmann::json& j) const {
   m["frames_linear_fallback"] = frames_linear_;
   m["frames_body_state"] = frames_body_;
   m["shape_age_ms"] = to_json(body_age_ms_.summary());  // draw time - BodyState stamp_ns, per frame drawn
+  m["shape_age_first_draw_ms"] = to_json(body_first_age_ms_.summary());  // each state's age at its first frame
   m["shape_age_unknown_frames"] = age_unknown_;
   m["body_apply_us"] = to_json(body_apply_us_.summary());
   j["multirate"] = m;

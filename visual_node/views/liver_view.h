@@ -119,6 +119,8 @@ class LiverView : public OrganView {
   std::uint64_t frames_body_ = 0;    // frames drawn with the tracker's shape
   std::uint64_t age_unknown_ = 0;    // frames whose shape's stamp is after the draw (another host's clock)
   SampleRecorder body_age_ms_{1 << 18};  // the drawn shape's age at draw: draw time - BodyState stamp_ns
+  SampleRecorder body_first_age_ms_{1 << 18};  // the same at the first frame that draws each state (its delivery)
+  bool body_new_ = false;  // a state was taken since the last frame
   SampleRecorder body_apply_us_{1 << 18};
   void say_rejection(BodyRejection why, std::uint64_t seq, int count, std::uint64_t scene_hash) noexcept;
 };

@@ -115,6 +115,7 @@ TEST(LiverViewMultirate, DrawsTheBodyStatesShapeOnTheBoundary) {
   EXPECT_EQ(m["frames_body_state"].get<int>(), 2);
   EXPECT_EQ(m["frames_linear_fallback"].get<int>(), 0);
   EXPECT_EQ(m["shape_age_ms"]["count"].get<int>(), 2);
+  EXPECT_EQ(m["shape_age_first_draw_ms"]["count"].get<int>(), 1);  // one state, drawn in two frames
   EXPECT_GE(m["shape_age_ms"]["p50"].get<double>(), 0.0);
 }
 
