@@ -10,3 +10,7 @@ if(SURGSIM_BUILD_VISUAL)
     LIBS surgsim_visual nlohmann_json::nlohmann_json)
   add_dependencies(integration_visual_multirate_test visual_node haptic_node)
 endif()
+if(SURGSIM_BUILD_BENCHMARKS AND SURGSIM_BUILD_VISUAL)
+  # The visual node's cost of the multirate shape against the linear deformer; the BodyState's bytes on the wire.
+  surgsim_bench(multirate_view_bench SOURCES bench/multirate_view_bench.cpp LIBS surgsim_visual)
+endif()
