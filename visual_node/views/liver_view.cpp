@@ -207,4 +207,18 @@ void LiverView::add_stats(nlohmann::json& j) const {
   j["multirate"] = m;
 }
 
+void LiverView::print_summary(std::ostream& out, const nlohmann::json& j) const {
+  if (!multirate_ || !j.contains("multirate")) return;
+  const nlohmann::json& m = j["multirate"];
+  const nlohmann::json& r = m["body_states_rejected"];
+  out << "visual_node: multirate liver: " << m["body_states_shown"].get<std::uint64_t>() << " body states shown of "
+      << m["body_states_received"].get<std::uint64_t>() << " received (ignored: " << r["wrong_scene"].get<std::uint64_t>()
+      << " other scene, " << r["wrong_count"].get<std::uint64_t>() << " wrong count, "
+      << r["non_finite"].get<std::uint64_t>() << " non-finite), " << m["frames_linear_fallback"].get<std::uint64_t>()
+      << " frames by the linear deformer before the first; shape age at its first draw p50 "
+      << m["shape_age_first_draw_ms"]["p50"].get<double>() << " ms p99 "
+      << m["shape_age_first_draw_ms"]["p99"].get<double>() << " ms, at every draw p50 "
+      << m["shape_age_ms"]["p50"].get<double>() << " ms p99 " << m["shape_age_ms"]["p99"].get<double>() << " ms\n";
+}
+
 }  // namespace surgsim

@@ -59,6 +59,8 @@ class LiverView : public OrganView {
   bool write_vtk(const std::string& path) const override;
   std::uint64_t deform_errors() const override { return deform_errors_; }
   void add_stats(nlohmann::json& stats) const override;
+  /// Multirate: one line with the body states shown and ignored and the shape's age at draw.
+  void print_summary(std::ostream& out, const nlohmann::json& stats) const override;
 
   const SurfaceDeformer& deformer() const { return *deformer_; }
 

@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <vector>
 
 #include "core/clock.h"
@@ -117,6 +118,14 @@ TEST(LiverViewMultirate, DrawsTheBodyStatesShapeOnTheBoundary) {
   EXPECT_EQ(m["shape_age_ms"]["count"].get<int>(), 2);
   EXPECT_EQ(m["shape_age_first_draw_ms"]["count"].get<int>(), 1);  // one state, drawn in two frames
   EXPECT_GE(m["shape_age_ms"]["p50"].get<double>(), 0.0);
+  std::ostringstream summary;
+  nlohmann::json j;
+  view.add_stats(j);
+  view.print_summary(summary, j);
+  EXPECT_NE(summary.str().find("visual_node: multirate liver: 1 body states shown of 0 received (ignored: 0 other "
+                               "scene, 0 wrong count, 0 non-finite)"),
+            std::string::npos)
+      << summary.str();
 }
 
 // Until the first body state the multirate liver is drawn by the linear deformer from the contact frame, exactly as a
