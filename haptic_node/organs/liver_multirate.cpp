@@ -184,6 +184,7 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
     indexed_ = true;
   }
   const auto fallback = [&] {
+    weight_ = 0;
     ++ticks_[3];
     return MultirateUse::kLinearFallback;
   };
@@ -215,6 +216,15 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
     ++matched;
   }
   if (matched == 0) return fallback();
+  // Trust: a local model evaluated far from its state (a tool faster than the tracker, a released grasp fading in
+  // 50 ms) hands over to the linear solve continuously: full weight up to half the extrapolation limit, none at it.
+  // The weight moves by at most kBlendRate a tick, so the hand-over (and the take-over from the linear model when a
+  // contact's first snapshot arrives) lasts 1 / kBlendRate ticks at least; until it reaches 0 the clamped local model
+  // is still used, with a shrinking weight.
+  const double target = std::clamp((max_d - largest) / (max_d - kTrustFraction * max_d), 0.0, 1.0);
+  weight_ = std::clamp(target, weight_ - kBlendRate, weight_ + kBlendRate);
+  const double w = weight_;
+  if (!(w > 0)) return fallback();
 
   // --- lambda = f_c + S du over the common nodes; the linear lambda for the others ---
   Eigen::Vector3d total = Eigen::Vector3d::Zero();
@@ -234,7 +244,7 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
         }
         f[r] += acc;
       }
-      lambda_[sl] = f;
+      lambda_[sl] = w * f + (1 - w) * solution.lambda[sl];
     }
     total += lambda_[sl];
   }
@@ -247,6 +257,7 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
   const std::uint64_t t_snap = cycle_tick_[static_cast<std::size_t>(s.cycle % kCycleTicks)].load(std::memory_order_relaxed);
   age_ms_.add(1e3 * dt_ * static_cast<double>(tick_ >= t_snap ? tick_ - t_snap : 0));
   extrapolation_mm_.add(1e3 * largest);
+  if (w < 1) ++blended_;
   const bool all = matched == m && matched == n;
   ++ticks_[all ? 1 : 2];
   return all ? MultirateUse::kNonlinear : MultirateUse::kPartial;

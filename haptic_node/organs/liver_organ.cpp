@@ -120,6 +120,7 @@ void LiverOrgan::add_stats(nlohmann::json& j) const {
                     {"ticks_nonlinear", m.ticks_nonlinear()},
                     {"ticks_partial", m.ticks_partial()},
                     {"ticks_linear_fallback", m.ticks_linear_fallback()},
+                    {"ticks_blended", m.ticks_blended()},
                     {"snapshot_age_ms_p50", m.age_ms(0.5)},
                     {"snapshot_age_ms_p99", m.age_ms(0.99)},
                     {"extrapolation_mm_p99", m.extrapolation_mm(0.99)},
@@ -135,7 +136,8 @@ void LiverOrgan::print_summary(std::ostream& out) const {
       << m["cycle_ms_p50"].get<double>() << " ms, p99 " << m["cycle_ms_p99"].get<double>() << " ms), "
       << m["snapshots_published"].get<std::uint64_t>() << " snapshots; ticks nonlinear "
       << m["ticks_nonlinear"].get<std::uint64_t>() << ", partial " << m["ticks_partial"].get<std::uint64_t>()
-      << ", linear fallback " << m["ticks_linear_fallback"].get<std::uint64_t>() << "; snapshot age p99 "
+      << ", linear fallback " << m["ticks_linear_fallback"].get<std::uint64_t>() << " (blended with linear "
+      << m["ticks_blended"].get<std::uint64_t>() << "); snapshot age p99 "
       << m["snapshot_age_ms_p99"].get<double>() << " ms; " << m["body_states_published"].get<std::uint64_t>()
       << " body states published\n";
 }
