@@ -35,13 +35,22 @@ Scene test_scene(LiverDeformation d) {
   return s;
 }
 
+Scene with_model(Scene s, ContactModel model) {
+  s.tools[0].contact_model = model;
+  return s;
+}
+
 struct Pair {
-  Scene mr_scene = test_scene(LiverDeformation::kMultirate);
-  Scene lin_scene = test_scene(LiverDeformation::kLinear);
+  explicit Pair(ContactModel model = ContactModel::kPatch)
+      : mr_scene(with_model(test_scene(LiverDeformation::kMultirate), model)),
+        lin_scene(with_model(test_scene(LiverDeformation::kLinear), model)) {
+    m.set_prediction(true, 0.030);  // deterministic: the horizon of a 30-tick cycle, not a measured one
+  }
+  Scene mr_scene;
+  Scene lin_scene;
   LiverOrgan mr{mr_scene, SURGSIM_TEST_CACHE_DIR, nullptr, false};
   LiverOrgan lin{lin_scene, SURGSIM_TEST_CACHE_DIR, nullptr, false};
   LiverMultirate& m = *mr.multirate();
-  Pair() { m.set_prediction(true, 0.030); }  // deterministic: the horizon of a 30-tick cycle, not a measured one
 
   // One tick of both organs with a vertical tool whose tip is at `tip` (jaw open).
   void step(const Eigen::Vector3d& tip, ContactTick& t_mr, ContactTick& t_lin) {
@@ -166,6 +175,24 @@ Slide slide(bool predict) {
   }
   r.partial = p.m.ticks_partial() - partial0;
   return r;
+}
+
+// The paper's triangle contact model takes the same path: its solution's nodes and displacements are the targets.
+TEST(LiverMultirateNode, TriangleModelHeldPressFeelsTheConvergedSnapshot) {
+  Pair p(ContactModel::kTriangle);
+  const double depth = 0.010;
+  ContactTick t_mr, t_lin;
+  double before = 0;
+  press(p, depth, t_mr, t_lin, &before);
+  ASSERT_GT(t_lin.force.norm(), 0.01);
+  EXPECT_LE(before, 1e-12);
+  ASSERT_GT(hold_until_converged(p, Eigen::Vector3d(0.03, 0.0, kTopZ - depth), t_mr, t_lin), 0);
+  const Eigen::Vector3d f_snap = snapshot_force(p.m.snapshot());
+  std::cout << "[triangle] 10 mm held, " << p.mr.contacts() << " contact nodes: linear " << t_lin.force.transpose()
+            << " N, multirate " << t_mr.force.transpose() << " N, snapshot " << f_snap.transpose() << " N\n";
+  EXPECT_LT((t_mr.force - f_snap).norm(), 1e-9 * f_snap.norm());
+  EXPECT_GT((t_mr.force - t_lin.force).norm(), 1e-3 * t_lin.force.norm());
+  EXPECT_GT(p.m.ticks_nonlinear(), 0u);
 }
 
 TEST(LiverMultirateNode, SlideThatChangesThePatchNodesIsPartialFiniteAndContinuous) {
