@@ -14,9 +14,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <iostream>
 #include <memory>
+#include <sstream>
+#include <string>
 
+#include "core/error.h"
+#include "mesh/box_mesh.h"
 #include "organs/liver_organ.h"
 #include "support/alloc_counter.h"
 #include "support/slab_util.h"
@@ -26,6 +31,13 @@ namespace surgsim {
 namespace {
 
 constexpr double kDt = 1e-3;
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
 constexpr double kTopZ = 0.042;  // m, the rest surface under liver.yaml's trocar (x 0.03, y 0)
 
 Scene test_scene(LiverDeformation d) {
@@ -264,6 +276,31 @@ TEST(LiverMultirateNode, GraspAndLiftAndReleaseHaveNoForceStep) {
   EXPECT_TRUE(finite);
   EXPECT_GT(held.norm(), 1.0);
   EXPECT_LE(step_mr, bound);
+}
+
+// A liver whose surface has more nodes than a BodyState carries is refused at init, naming the scene file, the
+// count and the fix (a 30 x 30 x 4 box: 2282 surface nodes).
+TEST(LiverMultirateNode, SurfaceOverTheBodyStateCapacityIsRefused) {
+  const std::string dir = ::testing::TempDir();
+  const std::string msh = dir + "/multirate_big_surface.msh", yaml = dir + "/multirate_big_surface.yaml";
+  write_msh(msh, make_box_mesh(30, 30, 4, Eigen::Vector3d(0.2, 0.2, 0.04)));
+  std::string text = read_text(std::string(SURGSIM_TEST_CONFIG_DIR) + "/liver_multirate.yaml");
+  const auto from = text.find("  generate: liver"), to = text.find("material:");
+  ASSERT_TRUE(from != std::string::npos && to != std::string::npos);
+  text.replace(from, to - from, "  file: " + msh + "\n");
+  text.replace(text.find("trajectory: trajectories/"), 25, "trajectory: " + std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/");
+  std::ofstream(yaml) << text;
+  const Scene scene = load_scene(yaml);
+  try {
+    LiverOrgan organ(scene, SURGSIM_TEST_CACHE_DIR, nullptr, false);
+    FAIL() << "a surface of more than msg::kMaxBodyPoints nodes was accepted";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    std::cout << "[refused] " << what << "\n";
+    EXPECT_NE(what.find("multirate_big_surface.yaml"), std::string::npos);
+    EXPECT_NE(what.find("2282"), std::string::npos);
+    EXPECT_NE(what.find("target_nodes"), std::string::npos);
+  }
 }
 
 TEST(LiverMultirateNode, TrackerSleepsWhenNothingChanges) {
