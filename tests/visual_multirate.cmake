@@ -2,8 +2,6 @@
 # views/liver_view with liver.deformation multirate, the shared BodyState listener, the real visual node over Fast DDS.
 if(SURGSIM_BUILD_VISUAL)
   surgsim_test(visual_liver_view_test SOURCES visual_node/views/liver_view_test.cpp ${ALLOC} LIBS surgsim_visual)
-endif()
-if(SURGSIM_BUILD_VISUAL)
   # The real visual node over Fast DDS: this test's BodyStates (drawn, or ignored by reason), then both real nodes on
   # config/liver_multirate.yaml (the drawn VTK is the haptic node's last published shape).
   surgsim_test(integration_visual_multirate_test SOURCES integration/visual_multirate_test.cpp
