@@ -113,7 +113,8 @@ bool LiverView::take_body_state(const double* xyz, int count, std::uint64_t scen
 }
 
 double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
-  // Deformation of the visible mesh from the newest contacts: u_n = sum_k G_nk lambda_k over the visible rows.
+  // Deformation of the visible mesh from the newest contacts: u_n = sum_k G_nk lambda_k over the visible rows; with
+  // multirate, once a BodyState was drawn, the tracker's shape instead.
   contacts_ = frame != nullptr ? std::min<int>(static_cast<int>(frame->contacts().size()), kMaxContacts) : 0;
   double deform_us = -1;
   // Multirate: the newest BodyState, when one arrived since the last frame.
@@ -139,11 +140,13 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
     }
     take_instruments(frame->instruments(), tools_, instruments_);  // absent instruments get a zero direction
     // Once the tracker's shape is drawn (multirate) the contacts only place the markers.
-    if (!body_shown_ && deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), contact_instrument_.data(), contacts_,
-                         instruments_.direction.data(), std::min(tools_, kMaxInstruments)) != ContactStatus::kOk) {
-      ++deform_errors_;  // a frame naming nodes this scene does not have: keep the last good shape
+    if (!body_shown_) {
+      if (deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), contact_instrument_.data(), contacts_,
+                           instruments_.direction.data(), std::min(tools_, kMaxInstruments)) != ContactStatus::kOk) {
+        ++deform_errors_;  // a frame naming nodes this scene does not have: keep the last good shape
+      }
+      deform_us = static_cast<double>(monotonic_ns() - d0) * 1e-3;
     }
-    if (!body_shown_) deform_us = static_cast<double>(monotonic_ns() - d0) * 1e-3;
   }
   // The shape's age at draw (the same host's CLOCK_MONOTONIC as the publisher's stamp).
   if (body_shown_) {
