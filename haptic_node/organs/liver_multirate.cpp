@@ -1,6 +1,8 @@
 #include "organs/liver_multirate.h"
 
 #include <dlfcn.h>
+#include <pthread.h>
+#include <sched.h>
 
 #include <algorithm>
 #include <cmath>
@@ -67,6 +69,11 @@ void numerics_on_this_thread_only() noexcept {
 }  // namespace
 
 void LiverMultirate::run() noexcept {
+  // Normal scheduling whatever the starting thread had (a thread inherits its creator's policy): the tracker must
+  // never compete with the loop or the DDS threads.
+  sched_param normal{};
+  normal.sched_priority = 0;
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
   numerics_on_this_thread_only();
   while (!stop_.load(std::memory_order_relaxed)) {
     bool cycled = false;
@@ -269,7 +276,9 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
   // --- statistics: the snapshot's age (sim time since its targets) and the extrapolation ---
   // This tick's index is tick_ (hand_over() follows apply()).
   const std::uint64_t t_snap = cycle_tick_[static_cast<std::size_t>(s.cycle % kCycleTicks)].load(std::memory_order_relaxed);
-  age_ms_.add(1e3 * dt_ * static_cast<double>(tick_ >= t_snap ? tick_ - t_snap : 0));
+  const double age = 1e3 * dt_ * static_cast<double>(tick_ >= t_snap ? tick_ - t_snap : 0);
+  age_ms_.add(age);
+  if (largest > kMinPrediction) moving_age_ms_.add(age);  // the tool has moved since the snapshot's targets
   extrapolation_mm_.add(1e3 * largest);
   if (w < 1) ++blended_;
   const bool all = matched == m && matched == n;

@@ -150,6 +150,8 @@ class LiverMultirate {
   /// snapshot's targets) percentiles, and the extrapolation |u_now - u_snapshot| (mm, largest node of a tick).
   double cycle_ms(double q) const { return cycle_ms_.percentile(q); }
   double age_ms(double q) const { return age_ms_.percentile(q); }
+  /// The same over the ticks whose contact nodes are not where the snapshot has them (not a held, converged tool).
+  double moving_age_ms(double q) const { return moving_age_ms_.percentile(q); }
   double extrapolation_mm(double q) const { return extrapolation_mm_.percentile(q); }
   const NonlinearTracker& tracker() const { return *tracker_; }
   /// The snapshot apply() used last (loop thread; tests).
@@ -193,6 +195,7 @@ class LiverMultirate {
   std::uint64_t blended_ = 0;
   double weight_ = 0;                           // the local model's weight (trust region, rate-limited)
   SampleRing age_ms_{1 << 16};
+  SampleRing moving_age_ms_{1 << 16};
   SampleRing extrapolation_mm_{1 << 16};
 
   // --- tracker thread ---
