@@ -116,20 +116,25 @@ bool LiverMultirate::cycle_if_needed() {
   // The prediction: the snapshot becomes visible about one cycle later, so ask for where each node will be then
   // (its velocity times the last cycle's time, at most kMaxPrediction).
   const double horizon = fixed_horizon_s_ > 0 ? fixed_horizon_s_ : last_cycle_s_;
+  bool predicted = false;
   if (predict_ && horizon > 0) {
     for (int k = 0; k < predicted_.count; ++k) {
       const auto sk = static_cast<std::size_t>(k);
       Eigen::Vector3d d = in.velocity[sk] * horizon;
       const double len = d.norm();
       if (!(len <= kMaxPrediction)) d *= std::isfinite(len) ? kMaxPrediction / len : 0.0;
-      if (len >= kMinPrediction) predicted_.u[sk] += d;  // a held tool's decaying velocity moves nothing
+      if (len >= kMinPrediction) {  // a held tool's decaying velocity moves nothing
+        predicted_.u[sk] += d;
+        predicted = true;
+      }
     }
   }
   const std::uint64_t cycle = tracker_->cycles() + 1;
   cycle_tick_[static_cast<std::size_t>(cycle % kCycleTicks)].store(in.tick, std::memory_order_relaxed);
   const TrackerCycle cy = tracker_->cycle(predicted_);
   have_cycled_ = true;
-  last_converged_ = cy.converged && cy.published;
+  // Converged at the targets themselves (not at predicted ones): only then may the tracker sleep on them.
+  last_converged_ = cy.converged && cy.published && !predicted;
   last_cycle_s_ = cy.total_ms * 1e-3;
   cycle_ms_.add(cy.total_ms);
   cycles_.fetch_add(1, std::memory_order_relaxed);
