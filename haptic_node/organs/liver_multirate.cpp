@@ -281,9 +281,19 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
   // --- statistics: the snapshot's age (sim time since its targets) and the extrapolation ---
   // This tick's index is tick_ (hand_over() follows apply()).
   const std::uint64_t t_snap = cycle_tick_[static_cast<std::size_t>(s.cycle % kCycleTicks)].load(std::memory_order_relaxed);
-  const double age = 1e3 * dt_ * static_cast<double>(tick_ >= t_snap ? tick_ - t_snap : 0);
-  age_ms_.add(age);
-  if (largest > kMinPrediction) moving_age_ms_.add(age);  // the tool has moved since the snapshot's targets
+  age_ms_.add(1e3 * dt_ * static_cast<double>(tick_ >= t_snap ? tick_ - t_snap : 0));
+  // Staleness: since the snapshot's targets, or since the last tick the contact nodes were where it has them (a held
+  // tool's converged snapshot is exact however old; the release after a hold is stale from the release on).
+  if (s.cycle != stale_cycle_) {
+    stale_cycle_ = s.cycle;
+    exact_tick_ = t_snap;
+  }
+  if (largest <= kMinPrediction) {
+    exact_tick_ = tick_;
+  } else {
+    const std::uint64_t since = std::max(t_snap, exact_tick_);
+    stale_ms_.add(1e3 * dt_ * static_cast<double>(tick_ >= since ? tick_ - since : 0));
+  }
   extrapolation_mm_.add(1e3 * largest);
   if (w < 1) ++blended_;
   const bool all = matched == m && matched == n;

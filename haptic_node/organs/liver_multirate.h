@@ -150,8 +150,9 @@ class LiverMultirate {
   /// snapshot's targets) percentiles, and the extrapolation |u_now - u_snapshot| (mm, largest node of a tick).
   double cycle_ms(double q) const { return cycle_ms_.percentile(q); }
   double age_ms(double q) const { return age_ms_.percentile(q); }
-  /// The same over the ticks whose contact nodes are not where the snapshot has them (not a held, converged tool).
-  double moving_age_ms(double q) const { return moving_age_ms_.percentile(q); }
+  /// Over the ticks whose contact nodes are not where the snapshot has them: the time since its targets or since the
+  /// last tick they were (ms; a held tool's converged snapshot ages without being stale).
+  double stale_ms(double q) const { return stale_ms_.percentile(q); }
   double extrapolation_mm(double q) const { return extrapolation_mm_.percentile(q); }
   const NonlinearTracker& tracker() const { return *tracker_; }
   /// The snapshot apply() used last (loop thread; tests).
@@ -195,7 +196,8 @@ class LiverMultirate {
   std::uint64_t blended_ = 0;
   double weight_ = 0;                           // the local model's weight (trust region, rate-limited)
   SampleRing age_ms_{1 << 16};
-  SampleRing moving_age_ms_{1 << 16};
+  SampleRing stale_ms_{1 << 16};
+  std::uint64_t stale_cycle_ = 0, exact_tick_ = 0;
   SampleRing extrapolation_mm_{1 << 16};
 
   // --- tracker thread ---

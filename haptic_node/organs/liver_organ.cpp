@@ -123,8 +123,8 @@ void LiverOrgan::add_stats(nlohmann::json& j) const {
                     {"ticks_blended", m.ticks_blended()},
                     {"snapshot_age_ms_p50", m.age_ms(0.5)},
                     {"snapshot_age_ms_p99", m.age_ms(0.99)},
-                    {"snapshot_age_moving_ms_p50", m.moving_age_ms(0.5)},
-                    {"snapshot_age_moving_ms_p99", m.moving_age_ms(0.99)},
+                    {"snapshot_stale_ms_p50", m.stale_ms(0.5)},
+                    {"snapshot_stale_ms_p99", m.stale_ms(0.99)},
                     {"extrapolation_mm_p99", m.extrapolation_mm(0.99)},
                     {"body_states_published", body_published_.load(std::memory_order_relaxed)}};
 }
@@ -140,7 +140,7 @@ void LiverOrgan::print_summary(std::ostream& out) const {
       << m["ticks_nonlinear"].get<std::uint64_t>() << ", partial " << m["ticks_partial"].get<std::uint64_t>()
       << ", linear fallback " << m["ticks_linear_fallback"].get<std::uint64_t>() << " (blended with linear "
       << m["ticks_blended"].get<std::uint64_t>() << "); snapshot age p99 "
-      << m["snapshot_age_ms_p99"].get<double>() << " ms (tool moving: " << m["snapshot_age_moving_ms_p99"].get<double>()
+      << m["snapshot_age_ms_p99"].get<double>() << " ms (stale p99 " << m["snapshot_stale_ms_p99"].get<double>()
       << " ms); " << m["body_states_published"].get<std::uint64_t>()
       << " body states published\n";
 }
