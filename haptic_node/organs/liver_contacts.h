@@ -39,6 +39,8 @@
 // its tracker's targets, and the forces applied come from its newest snapshot's local model f_c + S du (nodes the
 // snapshot does not hold keep the linear lambda); each instrument's force is the sum over its own nodes, through the
 // device clamp (no quasi non-linear law: refused in this mode). Without an attached LiverMultirate the tick is linear.
+// The solution keeps the applied lambdas, so the ContactFrame carries them and deformed() (the onset gap, the triangle
+// model's detection) sees their linear response G lambda.
 //
 // step() allocates nothing and never returns a non-finite force.
 #pragma once
