@@ -11,20 +11,21 @@
 //     u_now - u_snapshot, clamped to max_extrapolation per node, as local_contact_forces);
 //   - a node the snapshot does not hold (it just entered the contact): the linear solve's lambda;
 //   - a node of the snapshot no longer in contact: dropped (its force and its column of S).
+// So a patch whose edge nodes enter and leave while the tool slides does not fall back to the linear model as a
+// whole: the nodes that change are at the patch edge, where the Wendland weights and hence the reactions go to 0,
+// and the force changes by about their reaction only. The tick is counted nonlinear (the sets are equal), partial
+// (some nodes matched) or linear fallback (no valid snapshot, no node matched, a non-finite result, or a trust weight
+// of 0: then every lambda stays the linear one). No allocation; O(m^2) with m <= kMaxContacts.
 // Trust region: with the largest |du| of the common nodes above kTrustFraction of max_extrapolation, the local
 // model's lambdas are blended with the linear solve's, the linear weight growing linearly to 1 at max_extrapolation;
 // the weight moves by at most kBlendRate a tick (20 ticks from one model to the other, also when a contact's first
 // snapshot arrives), then linear fallback. The tracker lags a tool faster than it (and a released grasp's hold fades
 // in 50 ms): the force then goes over to the linear model, which follows the motion, over 20 ticks instead of
 // jumping when the contact ends (a grasp released after a 60 degree lift dropped 3 N in one tick without it).
-// So a patch whose edge nodes enter and leave while the tool slides does not fall back to the linear model as a
-// whole: the nodes that change are at the patch edge, where the Wendland weights and hence the reactions go to 0,
-// and the force changes by about their reaction only. The tick is counted nonlinear (the sets are equal), partial
-// (some nodes matched) or linear fallback (no valid snapshot, no node matched, or a non-finite result: then every
-// lambda stays the linear one). No allocation; O(m^2) with m <= kMaxContacts.
 //
-// The tracker thread (start()): normal priority, started by the caller's thread so it inherits that thread's CPU set
-// (the haptic node builds its organ after --cpu N moved every thread but the loop off CPU N). Each cycle reads the
+// The tracker thread (start()): normal scheduling (it sets SCHED_OTHER itself), CHOLMOD's OpenMP and OpenBLAS on one
+// thread, started by the caller's thread so it inherits that thread's CPU set (the haptic node builds its organ after
+// --cpu N moved every thread but the loop off CPU N). Each cycle reads the
 // newest targets, predicts them by the last cycle's time (each node moved along its velocity; off with
 // set_prediction(false)), runs one tracker cycle and publishes the tracker's surface displacement (for the organ's
 // BodyState) through another TripleBuffer. It sleeps kIdleSleep instead of cycling when nothing is left to do: the
