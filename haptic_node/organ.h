@@ -48,7 +48,8 @@ struct ContactEntry {
   int node = 0;
   int instrument = 0;                                 // whose contact holds the node (the first, when shared)
   Eigen::Vector3d lambda = Eigen::Vector3d::Zero();   // N, contact force on the node
-  Eigen::Vector3d u_tilde = Eigen::Vector3d::Zero();  // m, corrected constraint displacement
+  Eigen::Vector3d u_tilde = Eigen::Vector3d::Zero();  // m, corrected constraint displacement (liver multirate:
+                                                      // the node's imposed displacement this tick)
 };
 
 /// Contact entries a tick carries at most (msg::kMaxContacts; haptic_dds.cpp checks they agree).

@@ -156,7 +156,9 @@ ContactEntry LiverOrgan::contact_entry(int l) const noexcept {
   e.node = s.nodes[static_cast<std::size_t>(l)];
   e.instrument = contacts_->node_instrument(l);
   e.lambda = s.lambda[static_cast<std::size_t>(l)];
-  e.u_tilde = contacts_->corrected(l);
+  // Multirate: the node's imposed displacement this tick (the tracker's target), which the visual node needs to carry
+  // the tracker's last shape to where the tool is now; otherwise the paper's corrected constraint.
+  e.u_tilde = multirate_ != nullptr ? s.displacement[static_cast<std::size_t>(l)] : contacts_->corrected(l);
   return e;
 }
 

@@ -234,10 +234,18 @@ TEST_F(VisualMultirate, RealNodeDrawsTheBodyStatesItIsSent) {
   nan_state.positions()[7].y(std::numeric_limits<double>::quiet_NaN());
   EXPECT_TRUE(refused(nan_state, view.scene_hash(), "a position is not finite")) << log("visual.log");
 
-  // 3. The valid state, until a VTK the node wrote holds it.
+  // 3. The valid state, until a VTK the node wrote holds it. The node carries the state to each frame's contacts (their
+  //    u_tilde, the imposed displacement in this mode): the frame's contact node is imposed where the state has it.
+  const int pressed = count / 2;
+  frame.contacts()[0].u_tilde().x(good[3 * static_cast<std::size_t>(pressed)] - rest(pressed, 0));
+  frame.contacts()[0].u_tilde().y(good[3 * static_cast<std::size_t>(pressed) + 1] - rest(pressed, 1));
+  frame.contacts()[0].u_tilde().z(good[3 * static_cast<std::size_t>(pressed) + 2] - rest(pressed, 2));
   double error = std::numeric_limits<double>::infinity();
   const bool drawn = wait_until(
       [&] {
+        frame.seq(++seq);
+        frame.stamp_ns(monotonic_ns());
+        frame_writer->write(&frame);
         send(state, view.scene_hash());
         const std::string vtk = newest_vtk(frames_);
         if (!vtk.empty()) error = max_difference(read_vtk_points(vtk), good);

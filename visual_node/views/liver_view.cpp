@@ -54,7 +54,10 @@ LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
   scene_hash_ = visual_scene_hash(scene, mesh_hash_);
   scene_name_ = scene.name;
   scene_file_ = scene.file;
-  if (multirate_) body_xyz_.assign(3 * static_cast<std::size_t>(msg::kMaxBodyPoints), 0.0);
+  if (multirate_) {
+    body_xyz_.assign(3 * static_cast<std::size_t>(msg::kMaxBodyPoints), 0.0);
+    snapshot_xyz_.assign(3 * surface_.nodes.size(), 0.0);
+  }
 }
 
 LiverView::~LiverView() = default;
@@ -104,6 +107,7 @@ bool LiverView::take_body_state(const double* xyz, int count, std::uint64_t scen
     say_rejection(BodyRejection::kNonFinite, seq, count, scene_hash);
     return false;
   }
+  std::copy(xyz, xyz + 3 * count, snapshot_xyz_.begin());  // carried to the contacts of every later frame
   body_shown_ = true;
   body_stamp_ns_ = stamp_ns;
   body_seq_ = seq;
@@ -114,7 +118,7 @@ bool LiverView::take_body_state(const double* xyz, int count, std::uint64_t scen
 
 double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
   // Deformation of the visible mesh from the newest contacts: u_n = sum_k G_nk lambda_k over the visible rows; with
-  // multirate, once a BodyState was drawn, the tracker's shape instead.
+  // multirate, once a BodyState was drawn, the tracker's shape carried to the frame's contacts instead.
   contacts_ = frame != nullptr ? std::min<int>(static_cast<int>(frame->contacts().size()), kMaxContacts) : 0;
   double deform_us = -1;
   // Multirate: the newest BodyState, when one arrived since the last frame.
@@ -133,13 +137,16 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
       const auto& e = frame->contacts()[static_cast<std::size_t>(l)];
       contact_nodes_[static_cast<std::size_t>(l)] = static_cast<int>(e.node());
       contact_lambda_[static_cast<std::size_t>(l)] = from_msg(e.lambda());
+      // Multirate: u_tilde is the node's imposed displacement this tick (the tracker's target).
+      carry_contacts_[static_cast<std::size_t>(l)].node = static_cast<int>(e.node());
+      carry_contacts_[static_cast<std::size_t>(l)].displacement = from_msg(e.u_tilde());
       // An instrument the scene does not have (or without a state in the frame): its contact is superposed linearly.
       const std::uint32_t i = e.instrument();
       contact_instrument_[static_cast<std::size_t>(l)] =
           i < static_cast<std::uint32_t>(kMaxInstruments) ? static_cast<int>(i) : -1;
     }
     take_instruments(frame->instruments(), tools_, instruments_);  // absent instruments get a zero direction
-    // Once the tracker's shape is drawn (multirate) the contacts only place the markers.
+    // Once the tracker's shape is drawn (multirate) the contacts carry it (below) and place the markers.
     if (!body_shown_) {
       if (deformer_->apply(contact_nodes_.data(), contact_lambda_.data(), contact_instrument_.data(), contacts_,
                            instruments_.direction.data(), std::min(tools_, kMaxInstruments)) != ContactStatus::kOk) {
@@ -147,6 +154,18 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
       }
       deform_us = static_cast<double>(monotonic_ns() - d0) * 1e-3;
     }
+  }
+  // Multirate: the tracker's last shape carried to this frame's contacts (the tracker publishes a few times a second;
+  // between two of its states the contact nodes follow the tool and the rest follows them linearly).
+  if (body_shown_ && (body_new_ || fresh)) {
+    const std::uint64_t c0 = monotonic_ns();
+    const int count = static_cast<int>(surface_.nodes.size());
+    const int m = frame != nullptr ? contacts_ : 0;
+    if (deformer_->carry_positions(snapshot_xyz_.data(), count, carry_contacts_.data(), m) != ContactStatus::kOk) {
+      ++carry_failures_;  // the tracker's shape as it came
+      deformer_->set_positions(snapshot_xyz_.data(), count);
+    }
+    deform_us = static_cast<double>(monotonic_ns() - c0) * 1e-3;
   }
   // The shape's age at draw (the same host's CLOCK_MONOTONIC as the publisher's stamp).
   if (body_shown_) {
@@ -207,6 +226,7 @@ void LiverView::add_stats(nlohmann::json& j) const {
   m["shape_age_first_draw_ms"] = to_json(body_first_age_ms_.summary());  // each state's age at its first frame
   m["shape_age_unknown_frames"] = age_unknown_;
   m["body_apply_us"] = to_json(body_apply_us_.summary());
+  m["carry_failures"] = carry_failures_;  // frames drawn with the tracker's shape as it came (contacts not solvable)
   j["multirate"] = m;
 }
 

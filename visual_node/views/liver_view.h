@@ -14,7 +14,11 @@
 // renderer as for every surface. A state of another scene, with another position count than the boundary's node
 // count, or with a non-finite position is ignored and counted by reason (one stderr line per reason, the first time,
 // naming what was expected). Until the first valid state the linear deformer draws the ContactFrame's contacts, so
-// the picture is never empty; the contact markers always come from the ContactFrame. Stats: key "multirate".
+// the picture is never empty; the contact markers always come from the ContactFrame. The tracker publishes a few
+// states a second, so each frame carries the last one to the frame's contacts (SurfaceDeformer::carry_positions: the
+// ContactFrame's u_tilde is each contact node's imposed displacement in this mode; the linear response that takes
+// those nodes from the state to there is added to the whole shape): the contact nodes stay under the tool and the
+// rest follows linearly until the next state. Stats: key "multirate".
 #pragma once
 #include <Eigen/Core>
 #include <array>
@@ -109,6 +113,9 @@ class LiverView : public OrganView {
   std::string scene_name_, scene_file_;  // for the rejection lines
   std::unique_ptr<BodyStateListener> listener_;
   std::vector<double> body_xyz_;  // 3 x kMaxBodyPoints, the listener's newest copied out
+  std::vector<double> snapshot_xyz_;  // 3 x surface nodes: the last state taken (carried to each frame's contacts)
+  std::array<Contact, kMaxContacts> carry_contacts_{};  // the last fresh frame's nodes and imposed displacements
+  std::uint64_t carry_failures_ = 0;
   InstrumentPoses body_instruments_;
   bool body_shown_ = false;
   std::uint64_t body_stamp_ns_ = 0;  // of the shape drawn

@@ -200,6 +200,41 @@ bool SurfaceDeformer::set_positions(const double* xyz, int count) noexcept {
   return true;
 }
 
+ContactStatus SurfaceDeformer::carry_positions(const double* xyz, int count, const Contact* contacts, int m) noexcept {
+  if (count != rest_.rows()) return ContactStatus::kInvalidNode;
+  if (m == 0) return set_positions(xyz, count) ? ContactStatus::kOk : ContactStatus::kNonFinite;
+  if (superposition_ == nullptr) return ContactStatus::kNotContactable;
+  if (m < 0 || m > kMaxContacts) return ContactStatus::kOverCapacity;
+  for (int l = 0; l < m; ++l) {
+    const int v = vertex_of(contacts[l].node);
+    if (v < 0) return ContactStatus::kNotInBlock;
+    const Eigen::Vector3d at(xyz[3 * v], xyz[3 * v + 1], xyz[3 * v + 2]);
+    carry_[static_cast<std::size_t>(l)].node = contacts[l].node;
+    carry_[static_cast<std::size_t>(l)].displacement =
+        contacts[l].displacement - (at - rest_.row(v).transpose().cast<double>());
+  }
+  const ContactStatus solved = superposition_->solve(carry_.data(), m, carry_solution_);
+  if (solved != ContactStatus::kOk) return solved;
+  const ContactStatus status = superposition_->displacements(carry_solution_.nodes.data(), carry_solution_.lambda.data(),
+                                                             carry_solution_.count, u_);
+  if (status != ContactStatus::kOk) return status;
+  if (!u_.allFinite()) return ContactStatus::kNonFinite;
+  for (int i = 0; i < 3 * count; ++i) {
+    if (!std::isfinite(xyz[i])) return ContactStatus::kNonFinite;
+  }
+  double max2 = 0;
+  for (Eigen::Index v = 0; v < rest_.rows(); ++v) {
+    Eigen::Vector3d p(xyz[3 * v], xyz[3 * v + 1], xyz[3 * v + 2]);
+    const int r = block_row_[static_cast<std::size_t>(v)];
+    if (r >= 0) p += u_.segment<3>(3 * r);
+    positions_.row(v) = p.cast<float>().transpose();
+    max2 = std::max(max2, (p - rest_.row(v).transpose().cast<double>()).squaredNorm());
+  }
+  max_displacement_ = std::sqrt(max2);
+  update_fine();
+  return ContactStatus::kOk;
+}
+
 void SurfaceDeformer::set_shape(const Eigen::VectorXd& u_all) noexcept {
   double max2 = 0;
   for (Eigen::Index v = 0; v < rest_.rows(); ++v) {

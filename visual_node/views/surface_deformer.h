@@ -3,6 +3,7 @@
 // surface that the renderer draws. apply() allocates nothing.
 #pragma once
 #include <Eigen/Core>
+#include <array>
 #include <memory>
 #include <vector>
 
@@ -46,6 +47,12 @@ class SurfaceDeformer {
   /// `count` of them; the embedded surface follows. False, and the previous shape kept, when `count` is not the
   /// visible vertex count or a value is not finite. No allocation.
   bool set_positions(const double* xyz, int count) noexcept;
+  /// A shape carried to where the contacts are now (multirate: the tracker's last shape `xyz`, as set_positions, and
+  /// the contact nodes' imposed displacements `contacts` of this frame): the linear response that takes each contact
+  /// node from its place in `xyz` to rest + its displacement, lambda = G_CC^-1 (u* - u_xyz), added to the whole
+  /// shape, so the contact nodes land exactly where the tool holds them and the rest follows linearly between two
+  /// tracker states. m = 0 is set_positions. kOk, or why not (then the previous shape is kept). No allocation.
+  ContactStatus carry_positions(const double* xyz, int count, const Contact* contacts, int m) noexcept;
 
   /// Embeds a finer visual surface: each of its vertices is tied to the closest point of the mechanical boundary
   /// (triangle, barycentric coordinates, offset along the triangle's normal) and follows it. Only boundary rows are
@@ -92,6 +99,9 @@ class SurfaceDeformer {
   void set_shape(const Eigen::VectorXd& u) noexcept;
   Eigen::VectorXd u_;
   Eigen::VectorXd u_sum_;  // apply() with several instruments: the sum of their shares
+  // carry_positions(): the contacts' displacements from the given shape and their linear solution.
+  std::array<Contact, kMaxContacts> carry_{};
+  ContactSolution carry_solution_;
   // One instrument's contacts, gathered (kMaxContacts each).
   std::vector<int> group_nodes_;
   std::vector<Eigen::Vector3d> group_lambda_;

@@ -132,6 +132,29 @@ TEST(LiverMultirateNode, HeldDeepPressIsLinearBeforeASnapshotThenNewtons) {
   EXPECT_TRUE(t_mr.device_force.allFinite());
 }
 
+// The ContactFrame's u_tilde of a multirate liver is each contact node's imposed displacement this tick (the
+// tracker's target, which the visual node carries the tracker's last shape to); a linear liver keeps the paper's
+// corrected constraint G_kk lambda_k.
+TEST(LiverMultirateNode, ContactEntriesCarryTheImposedDisplacement) {
+  Pair p;
+  ContactTick t_mr, t_lin;
+  press(p, 0.008, t_mr, t_lin);
+  hold_until_converged(p, Eigen::Vector3d(0.03, 0.0, kTopZ - 0.008), t_mr, t_lin);
+  const ContactSolution& s = p.mr.liver_contacts().solution();
+  ASSERT_GT(s.count, 0);
+  ASSERT_EQ(p.mr.contact_entries(), s.count);
+  double deepest = 0;
+  for (int l = 0; l < s.count; ++l) {
+    const ContactEntry e = p.mr.contact_entry(l);
+    EXPECT_EQ(e.node, s.nodes[static_cast<std::size_t>(l)]);
+    EXPECT_EQ(e.u_tilde, s.displacement[static_cast<std::size_t>(l)]) << "entry " << l;
+    deepest = std::min(deepest, e.u_tilde.z());
+  }
+  EXPECT_LT(deepest, -0.004) << "the patch's nodes are pressed down by about the tool's 8 mm";
+  const ContactEntry lin = p.lin.contact_entry(0);
+  EXPECT_EQ(lin.u_tilde, p.lin.liver_contacts().corrected(0));
+}
+
 // The largest |u_now - u_snapshot| over the solution's nodes the snapshot holds (m): how far the local model is
 // evaluated from its expansion point.
 double extrapolation(const LiverOrgan& organ, const TrackerSnapshot& s) {

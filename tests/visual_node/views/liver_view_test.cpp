@@ -93,9 +93,16 @@ TEST(LiverViewMultirate, DrawsTheBodyStatesShapeOnTheBoundary) {
     max_u = std::max(max_u, field(view.deformer().rest().row(v).transpose().cast<double>()).norm());
   EXPECT_NEAR(view.max_displacement(), max_u, 1e-6);
 
-  // A contact frame arriving now places its marker on the drawn shape but does not deform it.
-  const int node = view.deformer().visible_nodes()[view.deformer().visible_nodes().size() / 2];
-  const msg::ContactFrame frame = testing::press_frame(node, -0.2);
+  // A contact frame whose contact node is imposed where the state has it (u_tilde, multirate) leaves the state as it is
+  // and places its marker on it.
+  const int vertex = static_cast<int>(view.deformer().visible_nodes().size() / 2);
+  const int node = view.deformer().visible_nodes()[static_cast<std::size_t>(vertex)];
+  const Eigen::Vector3d rest_v = view.deformer().rest().row(vertex).transpose().cast<double>();
+  msg::ContactFrame frame = testing::press_frame(node, -0.2);
+  const Eigen::Vector3d in_state = field(rest_v);
+  frame.contacts()[0].u_tilde().x(in_state.x());
+  frame.contacts()[0].u_tilde().y(in_state.y());
+  frame.contacts()[0].u_tilde().z(in_state.z());
   view.update(&frame, true);
   EXPECT_LT(drawn_error(view, xyz), 1e-8) << "the linear deformer ran over the tracker's shape";
   EXPECT_EQ(view.contacts_shown(), 1);
@@ -114,6 +121,7 @@ TEST(LiverViewMultirate, DrawsTheBodyStatesShapeOnTheBoundary) {
   EXPECT_EQ(m["last_seq_shown"].get<int>(), 7);
   EXPECT_EQ(m["surface_nodes"].get<int>(), count);
   EXPECT_EQ(m["frames_body_state"].get<int>(), 2);
+  EXPECT_EQ(m["carry_failures"].get<int>(), 0);
   EXPECT_EQ(m["frames_linear_fallback"].get<int>(), 0);
   EXPECT_EQ(m["shape_age_ms"]["count"].get<int>(), 2);
   EXPECT_EQ(m["shape_age_first_draw_ms"]["count"].get<int>(), 1);  // one state, drawn in two frames
@@ -126,6 +134,58 @@ TEST(LiverViewMultirate, DrawsTheBodyStatesShapeOnTheBoundary) {
                                "scene, 0 wrong count, 0 non-finite)"),
             std::string::npos)
       << summary.str();
+}
+
+// The tracker publishes a few states a second; every frame carries the last one to its contacts: a contact node
+// imposed 3 mm below its place in the state is drawn exactly there (u_tilde), the shape around it follows, the far
+// side of the organ barely moves, and the next frame with the node back where the state has it draws the state again.
+TEST(LiverViewMultirate, EachFrameCarriesTheLastStateToItsContacts) {
+  const Scene scene = plate(LiverDeformation::kMultirate);
+  LiverView view(scene, test_options());
+  const std::vector<double> xyz = body_positions(view);
+  const int count = static_cast<int>(xyz.size() / 3);
+  ASSERT_TRUE(view.take_body_state(xyz.data(), count, view.scene_hash(), monotonic_ns(), 1));
+  const SurfaceDeformer& d = view.deformer();
+  const int vertex = static_cast<int>(d.visible_nodes().size() / 2);
+  const int node = d.visible_nodes()[static_cast<std::size_t>(vertex)];
+  const Eigen::Vector3d rest_v = d.rest().row(vertex).transpose().cast<double>();
+  const Eigen::Vector3d shift(0, 0, -0.003);
+  const Eigen::Vector3d imposed = field(rest_v) + shift;
+  msg::ContactFrame frame = testing::press_frame(node, -0.2);
+  frame.contacts()[0].u_tilde().x(imposed.x());
+  frame.contacts()[0].u_tilde().y(imposed.y());
+  frame.contacts()[0].u_tilde().z(imposed.z());
+  view.update(&frame, true);
+
+  EXPECT_LT((d.positions().row(vertex).transpose().cast<double>() - (rest_v + imposed)).norm(), 1e-7)
+      << "the contact node is not where the tool holds it";
+  // Every other node moved by the linear response to that 3 mm: about 3 mm at most (a neighbour of a point
+  // constraint may move a little more than the node itself), some of them visibly, the furthest node least.
+  double largest = 0, furthest = -1, furthest_move = 0;
+  for (Eigen::Index v = 0; v < d.positions().rows(); ++v) {
+    if (v == vertex) continue;
+    const Eigen::Vector3d want(xyz[3 * v], xyz[3 * v + 1], xyz[3 * v + 2]);
+    const double move = (d.positions().row(v).transpose().cast<double>() - want).norm();
+    largest = std::max(largest, move);
+    const double dist = (d.rest().row(v).transpose().cast<double>() - rest_v).norm();
+    if (dist > furthest) {
+      furthest = dist;
+      furthest_move = move;
+    }
+  }
+  EXPECT_LT(largest, 1.5 * shift.norm());
+  EXPECT_GT(largest, 0.3 * shift.norm()) << "the shape around the contact did not follow it";
+  EXPECT_LT(furthest_move, 0.2 * largest);
+  EXPECT_EQ(multirate_stats(view)["carry_failures"].get<int>(), 0);
+
+  // Back where the state has it: the state itself.
+  frame.contacts()[0].u_tilde().z(field(rest_v).z());
+  view.update(&frame, true);
+  EXPECT_LT(drawn_error(view, xyz), 1e-8);
+  // No contact: the state itself.
+  const msg::ContactFrame none;
+  view.update(&none, true);
+  EXPECT_LT(drawn_error(view, xyz), 1e-8);
 }
 
 // Until the first body state the multirate liver is drawn by the linear deformer from the contact frame, exactly as a
@@ -146,7 +206,7 @@ TEST(LiverViewMultirate, LinearDeformerDrawsTheContactFrameUntilTheFirstBodyStat
   const std::vector<double> xyz = body_positions(multirate);
   ASSERT_TRUE(multirate.take_body_state(xyz.data(), static_cast<int>(xyz.size() / 3), multirate.scene_hash(),
                                         monotonic_ns(), 1));
-  multirate.update(&frame, false);
+  multirate.update(nullptr, false);  // no contact to carry it to (EachFrameCarriesTheLastStateToItsContacts)
   EXPECT_LT(drawn_error(multirate, xyz), 1e-8);
 }
 
