@@ -135,7 +135,6 @@ class LiverMultirate {
   /// The newest surface the tracker published since the last call (true), readable through surface().
   bool take_surface() noexcept { return surfaces_.take(); }
   const TrackerSurface& surface() const { return surfaces_.front(); }
-  const std::vector<int>& surface_nodes() const { return surface_nodes_; }
 
   // --- counters (the loop's are exact once the loop stopped; the tracker's once stop() returned) ---
   std::uint64_t ticks_nonlinear() const { return ticks_[1]; }
@@ -155,10 +154,8 @@ class LiverMultirate {
   /// last tick they were (ms; a held tool's converged snapshot ages without being stale).
   double stale_ms(double q) const { return stale_ms_.percentile(q); }
   double extrapolation_mm(double q) const { return extrapolation_mm_.percentile(q); }
-  const NonlinearTracker& tracker() const { return *tracker_; }
   /// The snapshot apply() used last (loop thread; tests).
   const TrackerSnapshot& snapshot() const { return tracker_->snapshots().front(); }
-  double max_extrapolation() const { return tracker_->options().max_extrapolation; }
 
  private:
   void run() noexcept;
