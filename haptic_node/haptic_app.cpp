@@ -38,8 +38,8 @@ std::uint64_t thread_cpu_ns() {
 HapticApp::HapticApp(const HapticOptions& options)
     : options_(options), tick_us_(1), tick_cpu_us_(1), wake_late_us_(1) {
   // --- init: CPU placement. With --cpu N the loop thread runs on CPU N (run()) and every thread this node starts
-  // from here on (DDS, publisher, log writers) inherits the other CPUs (os/cpu_affinity.h); the model is built there
-  // too. ---
+  // from here on (DDS, publisher, log writers, the multirate tracker) inherits the other CPUs (os/cpu_affinity.h);
+  // the model is built there too. ---
   if (options_.cpu >= 0) {
     const std::vector<int> allowed = allowed_cpus();
     if (std::find(allowed.begin(), allowed.end(), options_.cpu) == allowed.end()) {

@@ -45,7 +45,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   cli.add_flag("!--no-mlock", o.lock_memory, "Do not lock memory");
   cli.add_option("--cpu", o.cpu, "Pin the loop thread to this CPU and keep the node's other threads (DDS, publisher, "
-                 "log writers) off it (default -1: not pinned; scripts/run_local.sh gives $SURGSIM_HAPTIC_CPU)");
+                 "log writers, the multirate liver's tracker) off it (default -1: not pinned; scripts/run_local.sh gives "
+                 "$SURGSIM_HAPTIC_CPU)");
   cli.add_option("--cpu-latency-us", o.cpu_latency_us,
                  "While the paced loop runs, ask the kernel to keep every CPU's wake-up latency at most this (PM QoS, "
                  "/dev/cpu_dma_latency; 0: idle CPUs poll instead of halting, so a virtual machine's CPU is awake when "
