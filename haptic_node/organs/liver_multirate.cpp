@@ -194,8 +194,9 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
   tracker.snapshots().take();
   const TrackerSnapshot& s = tracker.snapshots().front();
   const int n = std::clamp(s.count, 0, kMaxContacts);
-  // The node -> snapshot index map of the newest snapshot (rebuilt only when the snapshot changed).
-  if (!indexed_ || s.cycle != indexed_cycle_) {
+  // The node -> snapshot index map of the newest snapshot (rebuilt only when the snapshot changed; published
+  // snapshots have cycle >= 1, the never-published one 0 and no nodes).
+  if (s.cycle != indexed_cycle_) {
     for (int i = 0; i < indexed_count_; ++i) snapshot_index_[static_cast<std::size_t>(indexed_nodes_[static_cast<std::size_t>(i)])] = -1;
     indexed_count_ = 0;
     if (s.valid) {
@@ -207,7 +208,6 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
       }
     }
     indexed_cycle_ = s.cycle;
-    indexed_ = true;
   }
   const auto fallback = [&] {
     weight_ = 0;

@@ -179,8 +179,7 @@ class LiverMultirate {
   std::vector<int> snapshot_index_;             // #V: index of the node in the loop's snapshot, or -1
   std::array<int, kMaxContacts> indexed_nodes_{};
   int indexed_count_ = 0;
-  std::uint64_t indexed_cycle_ = 0;
-  bool indexed_ = false;
+  std::uint64_t indexed_cycle_ = 0;             // the snapshot it maps (0: none yet)
   std::array<int, kMaxContacts> at_{};          // per solution node: its snapshot index or -1
   std::array<unsigned char, kMaxContacts> common_{};  // per snapshot node: also in the solution
   std::array<double, 3 * kMaxContacts> du_{};   // per snapshot dof (common nodes only; 0 otherwise)
