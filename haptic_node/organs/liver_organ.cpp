@@ -72,6 +72,7 @@ void LiverOrgan::create_writers(dds::Participant& participant, std::uint64_t sce
   sample_.scene_hash(scene_hash);
   // The only allocations of the sample: write() changes values only.
   sample_.positions().resize(surface_.nodes.size());
+  sample_.instruments().resize(static_cast<std::size_t>(contacts_->instruments()));
 }
 
 void LiverOrgan::write(const TickRecord& r, std::uint64_t stamp_ns) noexcept {

@@ -343,6 +343,7 @@ TEST_F(VisualMultirate, BothNodesDrawTheTrackersShape) {
   EXPECT_GT(vm["body_states_shown"].get<long>(), 0) << vm.dump();
   EXPECT_EQ(vm["body_states_rejected"]["total"].get<long>(), 0) << vm.dump() << "\n" << log("visual.log");
   EXPECT_EQ(vm["last_seq_shown"].get<long>(), published) << "the last state drawn is the last published";
+  EXPECT_EQ(vm["last_state_instruments"].get<int>(), 1) << "a BodyState carries every instrument's state";
 
   // The last VTK the node wrote against the last BodyState published (as this test received it).
   ASSERT_GT(last_count, 0) << "the test received no BodyState";

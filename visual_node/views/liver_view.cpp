@@ -127,6 +127,7 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
     BodyStateHeader header;
     const int count = listener_->take(body_xyz_.data(), tools_, body_instruments_, header, body_states_received_);
     if (count >= 0 && take_body_state(body_xyz_.data(), count, header.scene_hash, header.stamp_ns, header.seq)) {
+      body_state_instruments_ = body_instruments_.count();
       deform_us = static_cast<double>(monotonic_ns() - b0) * 1e-3;
       body_apply_us_.add(deform_us);
     }
@@ -220,6 +221,7 @@ void LiverView::add_stats(nlohmann::json& j) const {
                                {"wrong_count", body_rejected_[static_cast<std::size_t>(BodyRejection::kWrongCount)]},
                                {"non_finite", body_rejected_[static_cast<std::size_t>(BodyRejection::kNonFinite)]}};
   m["last_seq_shown"] = body_seq_;
+  m["last_state_instruments"] = body_state_instruments_;  // instruments of the scene the last state drawn carried
   m["frames_linear_fallback"] = frames_linear_;
   m["frames_body_state"] = frames_body_;
   m["shape_age_ms"] = to_json(body_age_ms_.summary());  // draw time - BodyState stamp_ns, per frame drawn

@@ -117,6 +117,7 @@ class LiverView : public OrganView {
   std::array<Contact, kMaxContacts> carry_contacts_{};  // the last fresh frame's nodes and imposed displacements
   std::uint64_t carry_failures_ = 0;
   InstrumentPoses body_instruments_;
+  int body_state_instruments_ = 0;  // instruments the last state drawn carried (the wire protocol: all of them)
   bool body_shown_ = false;
   std::uint64_t body_stamp_ns_ = 0;  // of the shape drawn
   std::uint64_t body_seq_ = 0;
