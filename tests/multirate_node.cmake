@@ -5,3 +5,7 @@ surgsim_test(haptic_liver_multirate_test SOURCES haptic_node/organs/liver_multir
 surgsim_test(integration_haptic_multirate_test SOURCES integration/haptic_multirate_test.cpp
   LIBS nlohmann_json::nlohmann_json Eigen3::Eigen)
 add_dependencies(integration_haptic_multirate_test haptic_node)
+if(SURGSIM_BUILD_BENCHMARKS)
+  # The node's multirate force along the scene's grasp-and-lift in real time against Newton on the same targets.
+  surgsim_bench(multirate_node_bench SOURCES bench/multirate_node_bench.cpp LIBS surgsim_haptic)
+endif()

@@ -290,6 +290,52 @@ void NonlinearTracker::publish(const ContactTargets& targets, const Eigen::Matri
   snapshots_.publish();
 }
 
+int snapshot_forces(const TrackerSnapshot& snapshot, const int* nodes, const Eigen::Vector3d* displacement, int m,
+                    double max_extrapolation, Eigen::Vector3d* lambda, bool* held, double& largest) noexcept {
+  largest = 0;
+  for (int l = 0; l < m; ++l) held[l] = false;
+  const int n = snapshot.count;
+  if (!snapshot.valid || m < 0 || m > kMaxContacts || n < 0 || n > kMaxContacts) return 0;
+  if (snapshot.stiffness.rows() < 3 * n || snapshot.stiffness.cols() < 3 * n) return 0;
+  // Each contact's place in the snapshot (each snapshot node matched once) and du there (0 at the snapshot's nodes no
+  // contact names: they contribute nothing).
+  std::array<double, 3 * kMaxContacts> du{};
+  std::array<bool, kMaxContacts> used{};
+  std::array<int, kMaxContacts> at{};
+  int matched = 0;
+  for (int l = 0; l < m; ++l) {
+    int j = 0;
+    while (j < n && (snapshot.nodes[static_cast<std::size_t>(j)] != nodes[l] || used[static_cast<std::size_t>(j)])) ++j;
+    at[static_cast<std::size_t>(l)] = j < n ? j : -1;
+    if (j == n) continue;
+    used[static_cast<std::size_t>(j)] = true;
+    Eigen::Vector3d d = displacement[l] - snapshot.u[static_cast<std::size_t>(j)];
+    if (!d.allFinite()) return 0;
+    const double len = d.norm();
+    largest = std::max(largest, len);
+    if (len > max_extrapolation) d *= max_extrapolation / len;
+    for (int c = 0; c < 3; ++c) du[static_cast<std::size_t>(3 * j + c)] = d[c];
+    ++matched;
+  }
+  for (int l = 0; l < m; ++l) {
+    const int j = at[static_cast<std::size_t>(l)];
+    if (j < 0) continue;
+    Eigen::Vector3d f = snapshot.reaction[static_cast<std::size_t>(j)];
+    for (int r = 0; r < 3; ++r) {
+      double acc = 0;
+      for (int col = 0; col < 3 * n; ++col) acc += snapshot.stiffness(3 * j + r, col) * du[static_cast<std::size_t>(col)];
+      f[r] += acc;
+    }
+    if (!f.allFinite()) {
+      for (int k = 0; k < m; ++k) held[k] = false;
+      return 0;
+    }
+    lambda[l] = f;
+    held[l] = true;
+  }
+  return matched;
+}
+
 bool local_contact_forces(const TrackerSnapshot& snapshot, const Contact* contacts, int m, double max_extrapolation,
                           ContactSolution& out) noexcept {
   out.count = 0;
@@ -297,38 +343,25 @@ bool local_contact_forces(const TrackerSnapshot& snapshot, const Contact* contac
   out.merged_duplicates = 0;
   out.duplicate_spread = 0;
   out.bad_input = -1;
-  if (!snapshot.valid || m != snapshot.count || m < 0 || m > kMaxContacts) return false;
-  if (snapshot.stiffness.rows() < 3 * m || snapshot.stiffness.cols() < 3 * m) return false;
-  // du in the snapshot's order; each snapshot node matched once.
-  std::array<double, 3 * kMaxContacts> du{};
-  std::array<bool, kMaxContacts> used{};
-  std::array<int, kMaxContacts> at{};
+  if (m < 0 || m > kMaxContacts || m != snapshot.count) return false;
+  std::array<int, kMaxContacts> nodes{};
+  std::array<Eigen::Vector3d, kMaxContacts> displacement{};
+  std::array<bool, kMaxContacts> held{};
+  displacement.fill(Eigen::Vector3d::Zero());
   for (int i = 0; i < m; ++i) {
-    int j = 0;
-    while (j < m && (snapshot.nodes[static_cast<std::size_t>(j)] != contacts[i].node || used[static_cast<std::size_t>(j)])) ++j;
-    if (j == m) return false;
-    used[static_cast<std::size_t>(j)] = true;
-    at[static_cast<std::size_t>(i)] = j;
-    Eigen::Vector3d d = contacts[i].displacement - snapshot.u[static_cast<std::size_t>(j)];
-    if (!d.allFinite()) return false;
-    const double len = d.norm();
-    if (len > max_extrapolation) d *= max_extrapolation / len;
-    for (int c = 0; c < 3; ++c) du[static_cast<std::size_t>(3 * j + c)] = d[c];
+    nodes[static_cast<std::size_t>(i)] = contacts[i].node;
+    displacement[static_cast<std::size_t>(i)] = contacts[i].displacement;
   }
+  double largest = 0;
+  if (snapshot_forces(snapshot, nodes.data(), displacement.data(), m, max_extrapolation, out.lambda.data(), held.data(),
+                      largest) != m)
+    return false;
   Eigen::Vector3d total = Eigen::Vector3d::Zero();
   for (int i = 0; i < m; ++i) {
-    const int j = at[static_cast<std::size_t>(i)];
-    Eigen::Vector3d lambda = snapshot.reaction[static_cast<std::size_t>(j)];
-    for (int r = 0; r < 3; ++r) {
-      double acc = 0;
-      for (int col = 0; col < 3 * m; ++col) acc += snapshot.stiffness(3 * j + r, col) * du[static_cast<std::size_t>(col)];
-      lambda[r] += acc;
-    }
     out.nodes[static_cast<std::size_t>(i)] = contacts[i].node;
     out.displacement[static_cast<std::size_t>(i)] = contacts[i].displacement;
     out.corrected[static_cast<std::size_t>(i)] = contacts[i].displacement;
-    out.lambda[static_cast<std::size_t>(i)] = lambda;
-    total += lambda;
+    total += out.lambda[static_cast<std::size_t>(i)];
   }
   if (!total.allFinite()) return false;
   out.count = m;

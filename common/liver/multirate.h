@@ -20,7 +20,8 @@
 // (u_c, f_c, S, the surface displacement) goes through a TripleBuffer (liver/corotation.h).
 // Allocates: the slow side only (a new contact set rebuilds the reduced system and the analysis).
 //
-// Fast side, local_contact_forces(): lambda = f_c + S (u_c(now) - u_c(snapshot)) per node, no allocation, O(m^2).
+// Fast side, snapshot_forces() / local_contact_forces(): lambda = f_c + S (u_c(now) - u_c(snapshot)) per node, no
+// allocation, O(m^2).
 // MultirateForce takes the newest snapshot and falls back to the linear precomputed model (Superposition::solve)
 // when no valid snapshot covers the current contact set or the result is not finite.
 #pragma once
@@ -134,8 +135,17 @@ class NonlinearTracker {
   Eigen::VectorXd u_keep_, f_keep_;  // the state before the predictor (restored when its step is rejected)
 };
 
+/// The local model at contacts the snapshot may hold only in part (a patch whose edge nodes enter and leave), no
+/// allocation: for each contact l (nodes[l], displacement[l] now) whose node the snapshot holds, lambda[l] = f_c + S du
+/// over the contacts both hold (du = displacement - u_snapshot, clamped to `max_extrapolation` per node; the
+/// snapshot's nodes no contact names contribute nothing) and held[l] = true; the other lambda[l] are left as they are,
+/// held[l] = false. Returns the contacts matched: 0 (every held[l] false) for an invalid snapshot or a non-finite du
+/// or result. `largest`: the largest |du| before the clamp (m).
+int snapshot_forces(const TrackerSnapshot& snapshot, const int* nodes, const Eigen::Vector3d* displacement, int m,
+                    double max_extrapolation, Eigen::Vector3d* lambda, bool* held, double& largest) noexcept;
+
 /// The local model, no allocation: for each contact (node, u now) the snapshot's node, lambda = f_c + S du with du
-/// clamped to `max_extrapolation` per node; out.lambda (force on the organ), out.tool_force = -sum, out.nodes and
+/// clamped to `max_extrapolation` per node (snapshot_forces with every contact held); out.lambda (force on the organ), out.tool_force = -sum, out.nodes and
 /// out.displacement filled as Superposition::solve does. False (out.count = 0) when the snapshot is not valid, its
 /// node set differs from the contacts', or the result is not finite.
 bool local_contact_forces(const TrackerSnapshot& snapshot, const Contact* contacts, int m, double max_extrapolation,

@@ -36,7 +36,6 @@ LiverMultirate::LiverMultirate(const TetMesh& mesh, const Material& material, co
       surface_nodes_(std::move(surface_nodes)),
       tracker_(std::make_unique<NonlinearTracker>(*solver_, surface_nodes_, options)) {
   const auto nv = static_cast<std::size_t>(mesh.nodes.rows());
-  snapshot_index_.assign(nv, -1);
   last_u_.assign(nv, Eigen::Vector3d::Zero());
   velocity_.assign(nv, Eigen::Vector3d::Zero());
   last_tick_.assign(nv, 0);
@@ -193,54 +192,17 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
   NonlinearTracker& tracker = *tracker_;
   tracker.snapshots().take();
   const TrackerSnapshot& s = tracker.snapshots().front();
-  const int n = std::clamp(s.count, 0, kMaxContacts);
-  // The node -> snapshot index map of the newest snapshot (rebuilt only when the snapshot changed; published
-  // snapshots have cycle >= 1, the never-published one 0 and no nodes).
-  if (s.cycle != indexed_cycle_) {
-    for (int i = 0; i < indexed_count_; ++i) snapshot_index_[static_cast<std::size_t>(indexed_nodes_[static_cast<std::size_t>(i)])] = -1;
-    indexed_count_ = 0;
-    if (s.valid) {
-      for (int j = 0; j < n; ++j) {
-        const int node = s.nodes[static_cast<std::size_t>(j)];
-        if (node < 0 || static_cast<std::size_t>(node) >= snapshot_index_.size()) continue;
-        snapshot_index_[static_cast<std::size_t>(node)] = j;
-        indexed_nodes_[static_cast<std::size_t>(indexed_count_++)] = node;
-      }
-    }
-    indexed_cycle_ = s.cycle;
-  }
   const auto fallback = [&] {
     weight_ = 0;
     ++ticks_[3];
     return MultirateUse::kLinearFallback;
   };
-  if (!s.valid || s.stiffness.rows() < 3 * n || s.stiffness.cols() < 3 * n) return fallback();
-
-  // --- the common nodes and their clamped du (snapshot order) ---
+  // The local model at the nodes the snapshot holds (f_c + S du over the common nodes, du clamped); the others keep
+  // the linear solve's lambda.
   const double max_d = tracker.options().max_extrapolation;
-  std::fill(common_.begin(), common_.begin() + n, 0);
-  std::fill(du_.begin(), du_.begin() + 3 * n, 0.0);
-  int matched = 0;
   double largest = 0;
-  for (int l = 0; l < m; ++l) {
-    const auto sl = static_cast<std::size_t>(l);
-    const int node = solution.nodes[sl];
-    const int j = node >= 0 && static_cast<std::size_t>(node) < snapshot_index_.size()
-                      ? snapshot_index_[static_cast<std::size_t>(node)] : -1;
-    at_[sl] = j;
-    if (j < 0 || common_[static_cast<std::size_t>(j)]) {
-      at_[sl] = -1;
-      continue;
-    }
-    Eigen::Vector3d d = solution.displacement[sl] - s.u[static_cast<std::size_t>(j)];
-    if (!d.allFinite()) return fallback();
-    const double len = d.norm();
-    largest = std::max(largest, len);
-    if (len > max_d) d *= max_d / len;
-    common_[static_cast<std::size_t>(j)] = 1;
-    for (int c = 0; c < 3; ++c) du_[static_cast<std::size_t>(3 * j + c)] = d[c];
-    ++matched;
-  }
+  const int matched = snapshot_forces(s, solution.nodes.data(), solution.displacement.data(), m, max_d, lambda_.data(),
+                                      held_.data(), largest);
   if (matched == 0) return fallback();
   // Trust: a local model evaluated far from its state (a tool faster than the tracker, a released grasp fading in
   // 50 ms) hands over to the linear solve continuously: full weight up to half the extrapolation limit, none at it.
@@ -251,27 +213,11 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
   weight_ = std::clamp(target, weight_ - kBlendRate, weight_ + kBlendRate);
   const double w = weight_;
   if (!(w > 0)) return fallback();
-
-  // --- lambda = f_c + S du over the common nodes; the linear lambda for the others ---
   Eigen::Vector3d total = Eigen::Vector3d::Zero();
   for (int l = 0; l < m; ++l) {
     const auto sl = static_cast<std::size_t>(l);
-    const int j = at_[sl];
-    if (j < 0) {
-      lambda_[sl] = solution.lambda[sl];
-    } else {
-      Eigen::Vector3d f = s.reaction[static_cast<std::size_t>(j)];
-      for (int r = 0; r < 3; ++r) {
-        double acc = 0;
-        for (int q = 0; q < n; ++q) {
-          if (!common_[static_cast<std::size_t>(q)]) continue;
-          for (int c = 0; c < 3; ++c)
-            acc += s.stiffness(3 * j + r, 3 * q + c) * du_[static_cast<std::size_t>(3 * q + c)];
-        }
-        f[r] += acc;
-      }
-      lambda_[sl] = w * f + (1 - w) * solution.lambda[sl];
-    }
+    if (held_[sl]) lambda_[sl] = w * lambda_[sl] + (1 - w) * solution.lambda[sl];
+    else lambda_[sl] = solution.lambda[sl];
     total += lambda_[sl];
   }
   if (!total.allFinite()) return fallback();
@@ -296,7 +242,7 @@ MultirateUse LiverMultirate::apply(ContactSolution& solution) noexcept {
   }
   extrapolation_mm_.add(1e3 * largest);
   if (w < 1) ++blended_;
-  const bool all = matched == m && matched == n;
+  const bool all = matched == m && matched == s.count;
   ++ticks_[all ? 1 : 2];
   return all ? MultirateUse::kNonlinear : MultirateUse::kPartial;
 }

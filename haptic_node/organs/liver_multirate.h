@@ -176,14 +176,8 @@ class LiverMultirate {
   std::array<std::atomic<std::uint64_t>, kCycleTicks> cycle_tick_{};
 
   // --- loop thread ---
-  std::vector<int> snapshot_index_;             // #V: index of the node in the loop's snapshot, or -1
-  std::array<int, kMaxContacts> indexed_nodes_{};
-  int indexed_count_ = 0;
-  std::uint64_t indexed_cycle_ = 0;             // the snapshot it maps (0: none yet)
-  std::array<int, kMaxContacts> at_{};          // per solution node: its snapshot index or -1
-  std::array<unsigned char, kMaxContacts> common_{};  // per snapshot node: also in the solution
-  std::array<double, 3 * kMaxContacts> du_{};   // per snapshot dof (common nodes only; 0 otherwise)
-  std::array<Eigen::Vector3d, kMaxContacts> lambda_{};
+  std::array<Eigen::Vector3d, kMaxContacts> lambda_{};  // this tick's local model, then the blended lambdas
+  std::array<bool, kMaxContacts> held_{};                // per solution node: the snapshot holds it
   std::vector<Eigen::Vector3d> last_u_;         // #V: each node's displacement at the tick last_tick_
   std::vector<Eigen::Vector3d> velocity_;       // #V: m/s, filtered
   std::vector<std::uint64_t> last_tick_;        // #V: the tick a node was last in contact (+1; 0: never)

@@ -248,5 +248,46 @@ TEST(Multirate, ContactSetChangesAndReleaseReturnToRest) {
   EXPECT_THROW(tracker.cycle(t), Error);
 }
 
+// A snapshot that holds only some of the contacts (a patch whose edge nodes changed since): the nodes both hold get
+// f_c + S du over the common nodes only (the snapshot's node no contact names counts with du = 0, the contact the
+// snapshot lacks is left alone), du clamped to the extrapolation limit; an invalid snapshot matches nothing.
+TEST(Multirate, SnapshotForcesOfAPartlyHeldContactSet) {
+  TrackerSnapshot s;
+  s.valid = true;
+  s.count = 2;
+  s.nodes[0] = 10;
+  s.nodes[1] = 20;
+  s.u[0] = Eigen::Vector3d(0, 0, -0.001);
+  s.u[1] = Eigen::Vector3d(0, 0, -0.002);
+  s.reaction[0] = Eigen::Vector3d(0, 0, 1);
+  s.reaction[1] = Eigen::Vector3d(0, 0, 2);
+  s.stiffness = Eigen::MatrixXd::Zero(3 * kMaxContacts, 3 * kMaxContacts);
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) s.stiffness(i, j) = i == j ? 100.0 : 10.0 + i + j;
+  // Contacts: node 20 (held, moved 1 mm down from the snapshot) and node 30 (not held); node 10 not in contact.
+  const int nodes[2] = {20, 30};
+  const Eigen::Vector3d u[2] = {Eigen::Vector3d(0, 0, -0.003), Eigen::Vector3d(0, 0, -0.004)};
+  Eigen::Vector3d lambda[2] = {Eigen::Vector3d::Constant(7), Eigen::Vector3d::Constant(7)};
+  bool held[2] = {false, true};
+  double largest = 0;
+  EXPECT_EQ(snapshot_forces(s, nodes, u, 2, 0.01, lambda, held, largest), 1);
+  EXPECT_TRUE(held[0]);
+  EXPECT_FALSE(held[1]);
+  EXPECT_NEAR(largest, 0.001, 1e-15);
+  // Row of node 20 (snapshot index 1: rows 3..5) times du = (0, 0, -0.001) at its own column 5 only.
+  for (int r = 0; r < 3; ++r)
+    EXPECT_NEAR(lambda[0][r], s.reaction[1][r] + s.stiffness(3 + r, 5) * -0.001, 1e-15) << r;
+  EXPECT_EQ(lambda[1], Eigen::Vector3d::Constant(7)) << "a contact the snapshot lacks is left to the caller";
+  // Far from the snapshot: du clamped to the limit (largest reports the distance itself).
+  const Eigen::Vector3d far[2] = {Eigen::Vector3d(0, 0, -0.052), u[1]};
+  EXPECT_EQ(snapshot_forces(s, nodes, far, 2, 0.01, lambda, held, largest), 1);
+  EXPECT_NEAR(largest, 0.05, 1e-12);
+  EXPECT_NEAR(lambda[0].z(), 2 + 100 * -0.01, 1e-12);
+  // Invalid: nothing matched, nothing held.
+  s.valid = false;
+  EXPECT_EQ(snapshot_forces(s, nodes, u, 2, 0.01, lambda, held, largest), 0);
+  EXPECT_FALSE(held[0]);
+}
+
 }  // namespace
 }  // namespace surgsim
