@@ -42,6 +42,7 @@ struct HapticOptions {
   int dds_rt_priority = 20;         // SCHED_FIFO priority of the DDS threads (below the loop); 0 = normal scheduling
   bool lock_memory = true;
   int cpu = -1;                     // pin the loop thread to this CPU, the node's other threads off it (-1: don't)
+  int tracker_threads = 1;          // the multirate liver's tracker: numeric threads (OrganBuildOptions)
   int cpu_latency_us = 0;           // CPU wake-up latency asked while the paced loop runs (os/cpu_latency.h); -1: none
   double wait_for_visual = 0;       // s to wait for a visual node to match before starting (0 = don't wait)
   bool quiet = false;

@@ -52,6 +52,12 @@ int main(int argc, char** argv) {
                  "/dev/cpu_dma_latency; 0: idle CPUs poll instead of halting, so a virtual machine's CPU is awake when "
                  "the loop's timer fires); -1: ask nothing")
       ->capture_default_str();
+  cli.add_option("--tracker-threads", o.tracker_threads,
+                 "Threads of the multirate liver's tracker (liver.deformation multirate; CHOLMOD's OpenMP and "
+                 "OpenBLAS). 1 beside the visual node on 2 CPUs (a second thread waits for the renderer); more where "
+                 "CPUs are spare")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
   cli.add_option("--wait-for-visual", o.wait_for_visual, "Wait up to S seconds for a visual node before starting");
   cli.add_flag("--quiet", o.quiet, "Print nothing but errors");
   CLI11_PARSE(cli, argc, argv);

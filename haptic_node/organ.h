@@ -123,10 +123,17 @@ class HapticOrgan {
   virtual void print_summary(std::ostream& out) const {}
 };
 
+/// How the node builds its organ beyond the scene (command-line settings that change no physics).
+struct OrganBuildOptions {
+  int tracker_threads = 1;  // the multirate liver's tracker: CHOLMOD's OpenMP and OpenBLAS threads (haptic_node
+                            // --tracker-threads)
+};
+
 /// Builds the organ the scene names. `cache_dir` holds generated meshes and tensors, `ticks` the run's length (for
 /// per-tick storage), `progress` receives mesh and precompute progress (null: silent). Throws surgsim::Error naming
 /// the scene file for a model this node does not build.
 std::unique_ptr<HapticOrgan> make_haptic_organ(const Scene& scene, const std::string& cache_dir, std::uint64_t ticks,
-                                               std::ostream* progress);
+                                               std::ostream* progress,
+                                               const OrganBuildOptions& build = OrganBuildOptions());
 
 }  // namespace surgsim

@@ -9,6 +9,8 @@
 #include <exception>
 #include <utility>
 
+#include "core/error.h"
+
 namespace surgsim {
 
 double SampleRing::percentile(double q) const {
@@ -45,6 +47,11 @@ LiverMultirate::LiverMultirate(const TetMesh& mesh, const Material& material, co
 
 LiverMultirate::~LiverMultirate() { stop(); }
 
+void LiverMultirate::set_numeric_threads(int n) {
+  if (n < 1) throw_error("multirate tracker: ", n, " numeric threads; give 1 or more");
+  numeric_threads_ = n;
+}
+
 void LiverMultirate::start() {
   if (thread_.joinable()) return;
   stop_.store(false);
@@ -57,13 +64,13 @@ void LiverMultirate::stop() {
 }
 
 namespace {
-// The tracker's factorizations and solves on its own thread only: CHOLMOD's OpenMP regions started from this thread
-// (a per-thread setting) and OpenBLAS (process-wide; the haptic node calls no BLAS after init) on one thread. Beside
-// the visual node on 2 CPUs a 2-thread factorization waited for the renderer: cycle p50 102 ms, against 72 ms with
-// OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 (scripts/run_local.sh liver_multirate, one run each). A no-op without them.
-void numerics_on_this_thread_only() noexcept {
+// The tracker's factorizations and solves on `n` threads: CHOLMOD's OpenMP regions started from this thread (a
+// per-thread setting) and OpenBLAS (process-wide; the haptic node calls no BLAS after init). Default 1: beside the
+// visual node on 2 CPUs a 2-thread factorization waited for the renderer (cycle p50 91-99 ms against 65-66 ms; README,
+// haptic_node --tracker-threads). A no-op without them (another BLAS).
+void numerics_on_threads(int n) noexcept {
   for (const char* name : {"omp_set_num_threads", "openblas_set_num_threads"})
-    if (auto set = reinterpret_cast<void (*)(int)>(dlsym(RTLD_DEFAULT, name))) set(1);
+    if (auto set = reinterpret_cast<void (*)(int)>(dlsym(RTLD_DEFAULT, name))) set(n);
 }
 }  // namespace
 
@@ -73,7 +80,7 @@ void LiverMultirate::run() noexcept {
   sched_param normal{};
   normal.sched_priority = 0;
   pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
-  numerics_on_this_thread_only();
+  numerics_on_threads(numeric_threads_);
   while (!stop_.load(std::memory_order_relaxed)) {
     bool cycled = false;
     try {

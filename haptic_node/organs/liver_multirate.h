@@ -111,6 +111,10 @@ class LiverMultirate {
   LiverMultirate(const LiverMultirate&) = delete;
   LiverMultirate& operator=(const LiverMultirate&) = delete;
 
+  /// Threads of CHOLMOD's OpenMP and of OpenBLAS for the tracker's factorizations and solves (>= 1; default 1), set
+  /// by the tracker thread when it starts. Before start(). Throws surgsim::Error for n < 1.
+  void set_numeric_threads(int n);
+  int numeric_threads() const { return numeric_threads_; }
   /// Starts the tracker thread (once). stop() joins it; the destructor calls stop().
   void start();
   void stop();
@@ -192,6 +196,7 @@ class LiverMultirate {
   SampleRing extrapolation_mm_{1 << 16};
 
   // --- tracker thread ---
+  int numeric_threads_ = 1;
   bool predict_ = true;
   double fixed_horizon_s_ = 0;
   ContactTargets cycled_;          // the targets of the last cycle (before prediction)

@@ -13,7 +13,9 @@
 
 namespace surgsim {
 
-LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread) {
+LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread,
+                       int tracker_threads)
+    {
   mesh_ = load_scene_mesh(scene, cache_dir, progress);
   surface_ = boundary_surface(mesh_);
   const bool multirate = scene.liver.deformation == LiverDeformation::kMultirate;
@@ -39,6 +41,7 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
     contacts_->attach_multirate(multirate_.get());
     instruments_at_.resize(kInstrumentTicks);
     min_period_ns_ = scene.visual.rate_hz > 0 ? static_cast<std::uint64_t>(1e9 / scene.visual.rate_hz) : 0;
+    multirate_->set_numeric_threads(tracker_threads);
     if (tracker_thread) multirate_->start();
   }
   if (scene.liver.deformation == LiverDeformation::kCorotational) {

@@ -28,8 +28,10 @@ class LiverOrgan final : public HapticOrgan {
  public:
   /// Init (allocates; may precompute the tensors, with progress on `progress`). Throws surgsim::Error (multirate:
   /// also for a surface of more than msg::kMaxBodyPoints nodes). `tracker_thread` false (tests): a multirate scene's
-  /// tracker is not started; the test cycles it with multirate()->cycle_once().
-  LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread = true);
+  /// tracker is not started; the test cycles it with multirate()->cycle_once(). `tracker_threads`: the tracker's
+  /// numeric threads (LiverMultirate::set_numeric_threads).
+  LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread = true,
+             int tracker_threads = 1);
   /// Stops the rotation thread (corotational) and the tracker thread (multirate).
   ~LiverOrgan() override;
   LiverOrgan(const LiverOrgan&) = delete;

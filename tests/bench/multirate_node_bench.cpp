@@ -59,6 +59,7 @@ const char* phase_of(double t, double lift0, double lift1, double release) {
 int main(int argc, char** argv) {
   std::string scene_name = "liver_multirate", trajectory_path, cache, out_dir;
   double sample_ms = 50, lift0 = 1.45, lift1 = 2.95, release = 3.95;
+  int tracker_threads = 1;
   CLI::App app{"multirate_node_bench: the multirate liver's force in the haptic node against the neo-Hookean Newton "
                "force of the same contact targets, along a trajectory in real time (the tracker thread running), "
                "with the linear model on the same poses; per-sample table, phase summary, --out DIR writes "
@@ -71,6 +72,8 @@ int main(int argc, char** argv) {
   app.add_option("--lift", lift0, "Start of the lift in the trajectory, s (phase table)")->capture_default_str();
   app.add_option("--hold", lift1, "Start of the hold, s")->capture_default_str();
   app.add_option("--release", release, "Start of the release, s")->capture_default_str();
+  app.add_option("--tracker-threads", tracker_threads, "The tracker's numeric threads (haptic_node --tracker-threads)")
+      ->capture_default_str()->check(CLI::Range(1, 64));
   app.add_option("--out", out_dir, "Write multirate_node.csv to this folder (created if missing)");
   CLI11_PARSE(app, argc, argv);
 
@@ -86,7 +89,7 @@ int main(int argc, char** argv) {
     linear_scene.liver.deformation = LiverDeformation::kLinear;
 
     std::fprintf(stderr, "multirate_node_bench: building the organs (%s)\n", scene.file.c_str());
-    LiverOrgan organ(scene, cache, &std::cerr, true);
+    LiverOrgan organ(scene, cache, &std::cerr, true, tracker_threads);
     LiverOrgan linear(linear_scene, cache, &std::cerr, false);
     LiverMultirate& mr = *organ.multirate();
 

@@ -11,14 +11,17 @@
 // Figures are printed: ctest -R haptic_liver_multirate -V.
 #include "organs/liver_multirate.h"
 
+#include <dlfcn.h>
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <iostream>
 #include <memory>
 #include <sstream>
 #include <string>
+#include <thread>
 
 #include "core/error.h"
 #include "mesh/box_mesh.h"
@@ -343,6 +346,28 @@ TEST(LiverMultirateNode, TrackerSleepsWhenNothingChanges) {
   p.step(Eigen::Vector3d(0.03, 0.0, kTopZ - 0.006), t_mr, t_lin);
   EXPECT_TRUE(p.m.cycle_once());
   EXPECT_EQ(p.m.tracker_cycles(), cycles + 1);
+}
+
+// haptic_node --tracker-threads: the tracker thread sets CHOLMOD's OpenMP and OpenBLAS to the threads asked (read
+// back from OpenBLAS, process-wide) when it starts; fewer than one is refused.
+TEST(LiverMultirateNode, TrackerThreadSetsTheNumericThreadsAsked) {
+  using GetThreads = int (*)();
+  const auto get = reinterpret_cast<GetThreads>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads"));
+  if (get == nullptr) GTEST_SKIP() << "the BLAS in use is not OpenBLAS";
+  const Scene scene = test_scene(LiverDeformation::kMultirate);
+  {
+    LiverOrgan organ(scene, SURGSIM_TEST_CACHE_DIR, nullptr, false, 2);
+    EXPECT_EQ(organ.multirate()->numeric_threads(), 2);
+    EXPECT_THROW(organ.multirate()->set_numeric_threads(0), Error);
+    reinterpret_cast<void (*)(int)>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))(1);
+    organ.multirate()->start();
+    // The thread sets it first thing; a bounded wait for the thread to be scheduled, not a timing.
+    for (int k = 0; k < 2000 && get() != 2; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    EXPECT_EQ(get(), 2);
+  }
+  LiverOrgan organ(scene, SURGSIM_TEST_CACHE_DIR, nullptr, true);
+  for (int k = 0; k < 2000 && get() != 1; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_EQ(get(), 1) << "the default is one thread";
 }
 
 }  // namespace
