@@ -39,7 +39,8 @@ fi
   echo "report: /usr/bin/python3 lacks numpy/matplotlib: run SURGSIM_WITH_REPORT=1 scripts/setup.sh" >&2; exit 1; }
 for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench \
          bench/liver_error_bench bench/intestine_error_bench bench/tube_skinning_bench bench/stability_report \
-         bench/rt_bench bench/two_hands_bench bench/large_deformation_bench bench/frame_bench bin/surgsim-web; do
+         bench/rt_bench bench/two_hands_bench bench/large_deformation_bench bench/multirate_node_bench bench/frame_bench \
+         bin/surgsim-web; do
   [ -x "$build/$p" ] || { echo "report: $build/$p not found: run scripts/build.sh first" >&2; exit 1; }
 done
 build_s=$(( $(date +%s) - start_all ))
@@ -196,6 +197,8 @@ done
 # against the neo-Hookean Newton reference at 5-30 % indentation, a lobe lifted 45 and 90 degrees and a rigid turn,
 # with the tick p99 of each (csv/liver_large_deformation.csv; the organ curves are computed, not cached, in this run).
 step large_deformation "$bench/large_deformation_bench" "${quick_flag[@]}" --out "$csv"
+# The multirate liver in the haptic node along its grasp-and-lift, against Newton on the same targets (csv/multirate_node.csv).
+step multirate_node "$bench/multirate_node_bench" --out "$csv"
 # Issue 17: patient-size livers. Precompute time and peak memory, haptic tick, visual deformation and render at 1.5k,
 # 5k and (not with --quick) 20k nodes, the tensors stored as the scenes store them (raw/scale/*.csv).
 scale_sizes=1500,5000,20000

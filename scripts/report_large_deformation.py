@@ -11,6 +11,11 @@ rest to each target in duration_s: p99 and max of the force error over the motio
 motion_markdown(csv_dir) gives it as a markdown table (report section 9), [] when the CSV is missing. The plot draws
 the motion's p99 dashed beside the static errors.
 
+node_markdown(csv_dir) reads CSV_DIR/multirate_node.csv (multirate_node_bench: the haptic node's multirate liver along
+the scene's grasp-and-lift in real time, each sample's force error against Newton on the same targets, and the linear
+model's on the same poses) and gives per phase the p50 / p99 / max of both with a budget and a verdict; [] when the
+CSV is missing.
+
 Command line: /usr/bin/python3 scripts/report_large_deformation.py CSV_DIR OUT_DIR
 """
 import csv
@@ -20,6 +25,9 @@ import sys
 
 METHODS = ["linear", "quasi_cylinder", "quasi_organ", "corotational", "corotational_organ", "multirate"]
 MOTION = "liver_large_deformation_motion.csv"
+NODE = "multirate_node.csv"
+# The shipped grasp-and-lift turns the lobe 60 degrees: the issue's 90-degree budget covers it (45 degrees: 5 %).
+NODE_BUDGET = 0.10
 
 
 def _num(text):
@@ -86,6 +94,37 @@ def motion_markdown(csv_dir):
         lines.append("| %s | %s | %g | %.2f %% | %.2f %% | %.1f / %.1f | <= %g %% | %s |" % (
             case, r["method"], dur, 100 * r["p99"], 100 * r["max"], r["cycle_p50"], r["cycle_p99"], 100 * b,
             "within" if ok else "over"))
+    return lines
+
+
+def _quantile(values, q):
+    # Nearest rank below, as the benches' bench::percentile.
+    v = sorted(values)
+    return v[int(q * (len(v) - 1))] if v else math.nan
+
+
+def node_markdown(csv_dir):
+    """Markdown lines of the node's multirate force error per phase (multirate_node.csv); [] without the CSV."""
+    path = os.path.join(csv_dir, NODE)
+    if not os.path.exists(path):
+        return []
+    phases = {}
+    for r in _rows(path):
+        for name in (r["phase"], "all"):
+            p = phases.setdefault(name, {"multirate": [], "linear": []})
+            p["multirate"].append(_num(r["multirate_rel_error"]))
+            p["linear"].append(_num(r["linear_rel_error"]))
+    lines = ["| phase | samples | multirate p50 / p99 / max | linear p50 / p99 / max | budget (p99) | verdict |",
+             "|---|---|---|---|---|---|"]
+    for name in ["grasp", "lift", "hold", "release", "all"]:
+        if name not in phases:
+            continue
+        m, lin = phases[name]["multirate"], phases[name]["linear"]
+        p99 = _quantile(m, 0.99)
+        lines.append("| %s | %d | %.2f / %.2f / %.2f %% | %.2f / %.2f / %.2f %% | <= %g %% | %s |" % (
+            name, len(m), 100 * _quantile(m, 0.5), 100 * p99, 100 * _quantile(m, 1.0), 100 * _quantile(lin, 0.5),
+            100 * _quantile(lin, 0.99), 100 * _quantile(lin, 1.0), 100 * NODE_BUDGET,
+            "within" if p99 <= NODE_BUDGET else "over"))
     return lines
 
 

@@ -74,6 +74,24 @@ class ReportLargeDeformation(unittest.TestCase):
             os.remove(os.path.join(d, rld.MOTION))
             self.assertEqual(rld.motion_markdown(d), [])
 
+    def test_node_table_per_phase_with_verdicts(self):
+        # multirate_node_bench's CSV: per phase p50 / p99 / max of both models, the 10 % budget on the p99.
+        with tempfile.TemporaryDirectory() as d:
+            self.assertEqual(rld.node_markdown(d), [])
+            with open(os.path.join(d, rld.NODE), "w") as f:
+                f.write("# stamped\n")
+                f.write("t_s,phase,nodes,f_ref_n,f_multirate_n,f_linear_n,multirate_rel_error,linear_rel_error,model\n")
+                f.write("1.0,grasp,23,0.1,0.1,0.1,0.001,0.005,nonlinear\n")
+                f.write("2.0,lift,23,1.0,1.1,0.8,0.02,0.2,nonlinear\n")
+                f.write("2.1,lift,23,2.0,2.4,1.5,0.2,0.25,partial\n")
+                f.write("3.0,hold,23,4.0,4.6,2.5,0.15,0.48,nonlinear\n")
+            md = rld.node_markdown(d)
+            self.assertEqual(len(md), 6)  # header, rule, grasp, lift, hold, all
+            self.assertEqual(md[2], "| grasp | 1 | 0.10 / 0.10 / 0.10 % | 0.50 / 0.50 / 0.50 % | <= 10 % | within |")
+            self.assertEqual(md[3], "| lift | 2 | 2.00 / 2.00 / 20.00 % | 20.00 / 20.00 / 25.00 % | <= 10 % | within |")
+            self.assertTrue(md[5].startswith("| all | 4 | "), md[5])
+            self.assertTrue(md[5].endswith("| over |"), md[5])
+
     def test_missing_csv_gives_none(self):
         with tempfile.TemporaryDirectory() as d:
             self.assertIsNone(rld.plot(d, d))
