@@ -1170,28 +1170,26 @@ def large_deformation_section(rep):
     if path:
         rep.md("![error against depth and angle](plots/%s)" % os.path.basename(path))
         rep.md()
-    motion = report_large_deformation.motion_markdown(os.path.join(rep.root, "csv"))
-    rep.md("multirate with the tool moving from rest to each target (`csv/%s`): force error against the Newton "
-           "quasi-static force at the same tool position over the motion, the 1 kHz loop on the newest snapshot "
-           "of the slow Newton thread. The static errors above are Newton's tolerance by construction; these are "
-           "the honest ones." % report_large_deformation.MOTION if motion else
-           "**Missing**: `csv/%s` (multirate in motion) was not written." % report_large_deformation.MOTION)
-    rep.md()
-    for line in motion:
-        rep.md(line)
-    if motion:
+    csv_dir = os.path.join(rep.root, "csv")
+    tables = [
+        (report_large_deformation.motion_markdown(csv_dir), report_large_deformation.MOTION,
+         "multirate with the tool moving from rest to each target (`csv/%s`): force error against the Newton "
+         "quasi-static force at the same tool position over the motion, the 1 kHz loop on the newest snapshot "
+         "of the slow Newton thread. The static errors above are Newton's tolerance by construction; these are "
+         "the honest ones.", "multirate in motion"),
+        (report_large_deformation.node_markdown(csv_dir), report_large_deformation.NODE,
+         "The multirate liver in the haptic node (`csv/%s`, `multirate_node_bench`): its LiverOrgan with the "
+         "tracker thread along config/liver_multirate.yaml's grasp-and-lift (60 degrees in 1.5 s) at 1 kHz in real "
+         "time, the force of every 50 ms of contact against Newton on the same contact targets, the linear model on "
+         "the same poses beside it.", "the multirate liver in the node"),
+    ]
+    for lines, name, intro, what in tables:
+        rep.md(intro % name if lines else "**Missing**: `csv/%s` (%s) was not written." % (name, what))
         rep.md()
-    node = report_large_deformation.node_markdown(os.path.join(rep.root, "csv"))
-    rep.md("The multirate liver in the haptic node (`csv/%s`, `multirate_node_bench`): its LiverOrgan with the "
-           "tracker thread along config/liver_multirate.yaml's grasp-and-lift (60 degrees in 1.5 s) at 1 kHz in real "
-           "time, the force of every 50 ms of contact against Newton on the same contact targets, the linear model on "
-           "the same poses beside it." % report_large_deformation.NODE if node else
-           "**Missing**: `csv/%s` (the multirate liver in the node) was not written." % report_large_deformation.NODE)
-    rep.md()
-    for line in node:
-        rep.md(line)
-    if node:
-        rep.md()
+        for line in lines:
+            rep.md(line)
+        if lines:
+            rep.md()
 
 
 def scale_section(rep):
