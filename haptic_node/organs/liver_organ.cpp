@@ -14,8 +14,7 @@
 namespace surgsim {
 
 LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread,
-                       int tracker_threads)
-    {
+                       int tracker_threads) {
   mesh_ = load_scene_mesh(scene, cache_dir, progress);
   surface_ = boundary_surface(mesh_);
   const bool multirate = scene.liver.deformation == LiverDeformation::kMultirate;
