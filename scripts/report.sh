@@ -218,7 +218,7 @@ echo "{\"load_at_end\": \"$(cut -d' ' -f1-3 /proc/loadavg)\", \"total_s\": $(( $
   >"$out/raw/end.json"
 
 # 6. Tables and plots.
-step render /usr/bin/python3 "$root/scripts/report.py" "$out"
+step render /usr/bin/python3 "$root/scripts/report/build.py" "$out"
 
 echo
 echo "report: $out/README.md ($(( $(date +%s) - start_all )) s in all)"

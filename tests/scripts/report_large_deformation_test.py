@@ -14,7 +14,7 @@ import unittest
 
 SOURCE = sys.argv.pop(1) if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", "..")
 spec = importlib.util.spec_from_file_location(
-    "report_large_deformation", os.path.join(SOURCE, "scripts", "report_large_deformation.py"))
+    "report_large_deformation", os.path.join(SOURCE, "scripts", "report", "large_deformation.py"))
 rld = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(rld)
 

@@ -15,7 +15,7 @@ import tempfile
 import unittest
 
 SOURCE = sys.argv.pop(1) if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", "..")
-REPORT_PY = os.path.join(SOURCE, "scripts", "report.py")
+REPORT_PY = os.path.join(SOURCE, "scripts", "report", "build.py")
 
 
 def write(path, text):

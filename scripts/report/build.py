@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Turns the measurements of scripts/report.sh into report/README.md (Markdown tables) and report/plots/*.png.
 
-    /usr/bin/python3 scripts/report.py REPORT_DIR
+    /usr/bin/python3 scripts/report/build.py REPORT_DIR
 
 Reads REPORT_DIR/meta.json (machine, commit, command), REPORT_DIR/csv/*.csv (written by the bench programs with
 --out), REPORT_DIR/raw/ (haptic logs at several rates, live-run stats JSON, step times) and REPORT_DIR/logs/. Every
@@ -1157,7 +1157,7 @@ def intestine_live_plot(rep, traces):
 
 def large_deformation_section(rep):
     """Issue 16: every method against the Newton reference (large_deformation_bench), table and plot."""
-    import report_large_deformation
+    import large_deformation as report_large_deformation
     rows = rep.csv_section(
         "liver_large_deformation", "9. Large deformation: error and tick per method (issue 16)",
         "Force and visible-surface displacement error against the neo-Hookean Newton reference on the shipped liver, "
@@ -1194,7 +1194,7 @@ def large_deformation_section(rep):
 
 def scale_section(rep):
     """Issue 17: precompute, memory, tick and render at 1.5k-20k nodes (report_scale.py over raw/scale)."""
-    import report_scale
+    import scale as report_scale
     lines = report_scale.scale_section(os.path.join(rep.root, "raw", "scale"))
     rep.md("## 10. " + lines[0][3:])  # its own heading, numbered here
     for line in lines[1:]:
@@ -1204,7 +1204,7 @@ def scale_section(rep):
 
 def web_section(rep):
     """Issue 18: the web view's encode cost, missed deadlines with and without it, delay (report_web.py)."""
-    import report_web
+    import web as report_web
     lines = report_web.web_section(os.path.join(rep.root, "raw", "web")).split("\n")
     rep.md("## 11. " + lines[0][3:])  # its own heading, numbered here
     for line in lines[1:]:

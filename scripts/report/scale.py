@@ -17,7 +17,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from report_web import _table, _verdict  # noqa: E402  (the same Markdown helpers)
+from web import _table, _verdict  # noqa: E402  (the same Markdown helpers)
 
 MIB_PER_GB = 1e9 / (1024.0 * 1024.0)   # the budget's 2 GB in MiB (1907.3)
 PRECOMPUTE_BUDGET_S = [(2000, 0.5), (8000, 5.0), (10 ** 9, 60.0)]  # (up to this many nodes, seconds)
