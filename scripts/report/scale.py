@@ -6,18 +6,23 @@
                                                                                        node_deform.csv, node_render.csv
     build/bench/liver_error_bench --out OUT (optional)                              -> the float column's error
 
-scale_section(OUT) returns the Markdown; run as a program it prints it. Budgets (issue 17): precompute <= 0.5 s at
-~1.4k nodes, <= 5 s at ~5k, <= 60 s at ~21k; peak resident memory <= 2 GB (2000 MB) at ~21k in the precompute and in
-each node; haptic tick p99 <= 100 us with 10 contacts at ~21k; visual >= 50 fps at 640x480 at ~21k; float storage
-within 1e-6 relative. A missing file is named, never invented.
+markdown(OUT) returns its Markdown lines (write(rep) puts them in the report, under its number); run as a program
+it prints them under the title. Budgets (issue 17): precompute <= 0.5 s at ~1.4k nodes, <= 5 s at ~5k, <= 60 s at
+~21k; peak resident memory <= 2 GB (2000 MB) at ~21k in the precompute and in each node; haptic tick p99 <= 100 us
+with 10 contacts at ~21k; visual >= 50 fps at 640x480 at ~21k; float storage within 1e-6 relative. A missing file is
+named, never invented.
 
-Usage: report_scale.py OUT"""
+Usage: /usr/bin/python3 scripts/report/scale.py OUT"""
 import csv
 import os
 import sys
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from web import _table, _verdict  # noqa: E402  (the same Markdown helpers)
+if __name__ == '__main__' and not __package__:
+    # Run as a file: import the package from scripts/ (this folder's modules are not top-level modules).
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from report.web import _table, _verdict  # noqa: E402  (the same Markdown helpers)
+
+TITLE = 'Patient-size livers (issue 17)'
 
 MIB_PER_GB = 1e9 / (1024.0 * 1024.0)   # the budget's 2 GB in MiB (1907.3)
 PRECOMPUTE_BUDGET_S = [(2000, 0.5), (8000, 5.0), (10 ** 9, 60.0)]  # (up to this many nodes, seconds)
@@ -42,10 +47,9 @@ def _missing(what, command):
     return [f'*{what}: missing (run `{command}`).*', '']
 
 
-def scale_section(out_dir):
-    """Markdown of the issue-17 figures found in out_dir."""
-    md = ['## Patient-size livers (issue 17)', '',
-          'The haptic block is stored as one packed half of the symmetric contacts x contacts matrix, the visual block '
+def markdown(out_dir):
+    """Markdown lines of the patient-size figures found in out_dir (no heading)."""
+    md = ['The haptic block is stored as one packed half of the symmetric contacts x contacts matrix, the visual block '
           'keeps the boundary nodes that can move, both in float once double would pass 1 GiB; the precompute solves '
           'the unit right-hand sides in the factor\'s order on every core (CholmodSolver::solve_unit_columns).', '']
     pre = _rows(out_dir, 'liver_precompute')
@@ -120,11 +124,18 @@ def scale_section(out_dir):
     return md
 
 
+def write(rep):
+    """The section in the report, from the benches' CSV files in raw/scale/."""
+    for line in markdown(os.path.join(rep.root, 'raw', 'scale')):
+        rep.md(line)
+    rep.md()
+
+
 def main(argv):
     if len(argv) != 2:
         print(__doc__, file=sys.stderr)
         return 2
-    print('\n'.join(scale_section(argv[1])))
+    print('\n'.join(['## ' + TITLE, ''] + markdown(argv[1])))
     return 0
 
 

@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """The report's section on the web view (issue 18), from the CSV files scripts/web_figures.sh writes into OUT:
 frame_encode.csv, frame_render_loop.csv (frame_bench), rt_floor.csv (rt_bench), web_live.csv and web_delay.csv
-(web_figures.py). web_section(OUT) returns the Markdown; run as a program it prints it.
+(web_figures.py). markdown(OUT) returns its Markdown lines (write(rep) puts them in the report, under its number);
+run as a program it prints them under the title.
 
 Budgets (DESIGN.md section 8 where it has one): the haptic node's 1 kHz missed deadlines within 0.1 percentage points
 of the machine's floor (rt_bench just before); the visual frame rate unchanged by the stream (>= 99 % of the rate
@@ -9,11 +10,12 @@ without it); every JPEG within the topic's bound (512 KiB, else it is dropped); 
 below the stream period); the render loop's share of a streamed frame (read-back + hand-off, p99) within 10 % of a
 50 Hz frame (2 ms). The render -> page delay has no budget (shown beside the stream period).
 
-Usage: report_web.py OUT"""
+Usage: /usr/bin/python3 scripts/report/web.py OUT"""
 import csv
 import os
 import sys
 
+TITLE = 'The web view (issue 18)'
 BOUND_KIB = 512.0
 FRAME_MS_50HZ = 20.0
 
@@ -39,9 +41,9 @@ def _table(headers, rows):
     return out + ['']
 
 
-def web_section(out_dir, stream_fps=20.0):
-    """Markdown of the web view's figures in out_dir (missing files are named, not fatal)."""
-    md = ['## The web view (issue 18)', '']
+def markdown(out_dir, stream_fps=20.0):
+    """Markdown lines of the web view's figures in out_dir, no heading (missing files are named, not fatal)."""
+    md = []
     prov = os.path.join(out_dir, 'provenance.txt')
     if os.path.exists(prov):
         md += ['`' + line.strip() + '`  ' for line in open(prov) if line.strip()] + ['']
@@ -115,10 +117,17 @@ def web_section(out_dir, stream_fps=20.0):
                'over the loopback WebSocket). No budget; the stream period is ' + f'{period_us / 1e3:.0f} ms.', '']
         md += _table(['path', 'frames', 'p50 (ms)', 'p99 (ms)', 'max (ms)'],
                      [[r['path'], r['count'], _f(r['p50_ms']), _f(r['p99_ms']), _f(r['max_ms'])] for r in delay])
-    return '\n'.join(md)
+    return md
+
+
+def write(rep):
+    """The section in the report, from scripts/web_figures.sh's files in raw/web/."""
+    for line in markdown(os.path.join(rep.root, 'raw', 'web')):
+        rep.md(line)
+    rep.md()
 
 
 if __name__ == '__main__':
     if len(sys.argv) != 2:
         sys.exit(__doc__)
-    print(web_section(sys.argv[1]))
+    print('\n'.join(['## ' + TITLE, ''] + markdown(sys.argv[1])))

@@ -1,11 +1,10 @@
 #!/usr/bin/python3
-"""Tests scripts/report_large_deformation.py (issue 16) on a synthetic liver_large_deformation.csv: the plot is
+"""Tests scripts/report/large_deformation.py (issue 16) on a synthetic liver_large_deformation.csv: the plot is
 written from every case and method, a cell the bench left as nan is skipped, and a missing CSV gives None (no plot
 invented).
 
     /usr/bin/python3 tests/scripts/report_large_deformation_test.py SOURCE_DIR
 """
-import importlib.util
 import math
 import os
 import sys
@@ -13,10 +12,8 @@ import tempfile
 import unittest
 
 SOURCE = sys.argv.pop(1) if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", "..")
-spec = importlib.util.spec_from_file_location(
-    "report_large_deformation", os.path.join(SOURCE, "scripts", "report", "large_deformation.py"))
-rld = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(rld)
+sys.path.insert(0, os.path.join(SOURCE, "scripts"))
+from report import large_deformation as rld  # noqa: E402
 
 CASES = ["indent_%d" % d for d in (5, 10, 15, 20, 25, 30)] + ["lift_45", "lift_90", "rigid_90"]
 
@@ -38,7 +35,7 @@ class ReportLargeDeformation(unittest.TestCase):
             self.assertTrue(os.path.getsize(out) > 10000, out)
 
     def test_reads_a_csv_stamped_by_report_py(self):
-        # scripts/report.py puts a '# machine, commit, command' line on top of every CSV before its sections read them.
+        # scripts/report/build.py puts a '# machine, commit, command' line on top of every CSV before its sections read them.
         with tempfile.TemporaryDirectory() as d:
             with open(os.path.join(d, "liver_large_deformation.csv"), "w") as f:
                 f.write("# cpu, 2 cores; commit abc; scripts/report.sh; date\n")

@@ -1,7 +1,8 @@
 #!/usr/bin/python3
-"""Tests scripts/report.py on a synthetic report folder (no benches run): the haptic-rate error it computes against
-an analytic value, the tables and plots it writes, the stamp on every CSV, and that a missing input is reported as
-missing rather than invented.
+"""Tests the report's writer (the package scripts/report/, run as scripts/report/build.py) on a synthetic report
+folder (no benches run): the haptic-rate error it computes against an analytic value, the tables and plots it writes,
+the stamp on every CSV, that a missing input is reported as missing rather than invented, and that the sections are
+numbered by their place in report/sections.py.
 
     /usr/bin/python3 tests/scripts/report_test.py SOURCE_DIR
 """
@@ -16,6 +17,8 @@ import unittest
 
 SOURCE = sys.argv.pop(1) if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", "..")
 REPORT_PY = os.path.join(SOURCE, "scripts", "report", "build.py")
+sys.path.insert(0, os.path.join(SOURCE, "scripts"))
+from report import haptic_signal, intestine_live, sections  # noqa: E402  (the headings' numbers come from the list of sections)
 
 
 def write(path, text):
@@ -69,7 +72,7 @@ class ReportTest(unittest.TestCase):
         return subprocess.run(["/usr/bin/python3", REPORT_PY, self.dir], capture_output=True, text=True)
 
     def report_text(self):
-        """Runs report.py (it must succeed) and returns README.md."""
+        """Runs build.py (it must succeed) and returns README.md."""
         r = self.run_report()
         self.assertEqual(r.returncode, 0, r.stderr)
         with open(os.path.join(self.dir, "README.md")) as f:
@@ -166,8 +169,8 @@ class ReportTest(unittest.TestCase):
         write(os.path.join(self.dir, "raw", "steps.csv"), "step,seconds,status,log\n"
               "live_intestine_lift,9.0,failed,logs/live_intestine_lift.log\n")
         text = self.report_text()
-        self.assertIn("## 8. The intestine live at 1 kHz (issue 15)", text)
-        self.assertNotIn("intestine_live_section failed", text)
+        self.assertIn("## %d. The intestine live at 1 kHz (issue 15)" % sections.number(intestine_live), text)
+        self.assertNotIn("intestine_live.py failed", text)
         self.assertIn("| push: machine floor just before (rt_bench, 6500 ticks) | 10 missed (0.154 %) |", text)
         # 12 / 6500 = 0.185 %, 0.031 points over the floor's 0.154 %: within 0.1.
         self.assertIn("| push: missed deadlines, 6500 ticks at 1000 Hz | 12 (0.185 %), +0.031 points from the floor | "
@@ -193,11 +196,26 @@ class ReportTest(unittest.TestCase):
 
     def test_intestine_live_section_with_nothing(self):
         text = self.report_text()
-        self.assertNotIn("intestine_live_section failed", text)
+        self.assertNotIn("intestine_live.py failed", text)
         self.assertIn("| push: machine floor just before (rt_bench) | missing: no `before_live_intestine_push` row in "
                       "`csv/rt_floor.csv` (the rt_floor_intestine_push step did not run) |", text)
         self.assertIn("| lift: haptic node at 1 kHz | missing: `raw/live_intestine_lift/haptic_stats.json` (the "
                       "live_intestine_lift step did not run) |", text)
+
+    def test_sections_numbered_by_the_list(self):
+        text = self.report_text()
+        headings = [line for line in text.split("\n") if line.startswith("## ") and line != "## Headline"]
+        self.assertEqual(headings, ["## %d. %s" % (i + 1, s.TITLE) for i, s in enumerate(sections.SECTIONS)])
+
+    def test_a_failing_section_is_named_and_the_rest_written(self):
+        # haptic_signal.csv without its columns: that section raises; the report names it, writes the others, fails.
+        write(os.path.join(self.dir, "csv", "haptic_signal.csv"), "nothing\n1\n")
+        r = self.run_report()
+        self.assertEqual(r.returncode, 1, r.stdout + r.stderr)
+        with open(os.path.join(self.dir, "README.md")) as f:
+            text = f.read()
+        self.assertIn("**section %d, haptic_signal.py failed**: KeyError" % sections.number(haptic_signal), text)
+        self.assertIn(sections.heading(sections.SECTIONS[-1]), text)
 
     def test_refuses_a_folder_without_meta(self):
         os.remove(os.path.join(self.dir, "meta.json"))

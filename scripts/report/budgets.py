@@ -1,0 +1,18 @@
+"""The budgets behind the report's verdicts: DESIGN.md section 8, and what the hand feels (issue 14)."""
+
+BUDGETS = {
+    "precompute_1k4_s": 2.0,
+    "tick_p99_us": 100.0,
+    "missed_fraction": 0.001,
+    "latency_p50_us": 150.0,
+    "latency_p99_us": 1000.0,
+    "deform_ms": 1.0,
+    "fps": 50.0,
+    "intestine_step_hz": 1000.0,
+    # Issue 14 (what the hand feels)
+    "ripple_pct": 5.0,              # peak-to-peak of the detrended normal force at constant depth, % of its mean
+    "tangential_pct": 2.0,          # frictionless slide: |F_t| / F_n
+    "step_pct": 5.0,                # largest one-tick change at onset (0.1 m/s) or grasp release, % of the held force
+    "tick_vs_bench_us": 15.0,       # live tick p99 within this of the benchmark's p99 for the same work
+    "device_force_pct": 10.0,       # closed loop: resting force within this of the hand's
+}
