@@ -47,6 +47,11 @@
 #include "tool/tool.h"
 #include "tool/trajectory.h"
 
+using namespace surgsim::core;
+using namespace surgsim::os;
+using namespace surgsim::tool;
+using namespace surgsim::scene;
+
 namespace {
 
 std::atomic<bool> g_stop{false};

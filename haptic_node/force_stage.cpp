@@ -4,6 +4,11 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+
 namespace surgsim {
 
 namespace {

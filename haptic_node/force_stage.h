@@ -40,12 +40,12 @@ class ForceStage {
  public:
   ForceStage() = default;
   /// Parameters from the scene (haptic.passivity, coupling_damping, passivity_max_damping) and the device limit.
-  ForceStage(const HapticSpec& haptic, double force_limit);
+  ForceStage(const scene::HapticSpec& haptic, double force_limit);
 
   /// Run phase: modifies out.device_force for the tool `tool` after a tick of dt (s). No allocation.
-  void apply(const ToolGeometry& tool, double dt, ContactTick& out) noexcept;
+  void apply(const tool::ToolGeometry& tool, double dt, contact::ContactTick& out) noexcept;
   /// The same; a null tool is a tick without a pose (input lost): nothing is observed and the next velocity is 0.
-  void apply(const ToolGeometry* tool, double dt, ContactTick& out) noexcept;
+  void apply(const tool::ToolGeometry* tool, double dt, contact::ContactTick& out) noexcept;
 
   double energy() const { return energy_; }                   // J, E_k (into the environment)
   double energy_min() const { return energy_min_; }           // J, lowest E_k after the controller

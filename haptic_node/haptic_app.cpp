@@ -14,7 +14,7 @@
 #include "core/clock.h"
 #include "core/error.h"
 #include "haptic_dds.h"
-#include "liver/tensor_cache.h"
+#include "compliance/tensor_cache.h"
 #include "mesher/scene_mesh.h"
 #include "publisher.h"
 #include "os/cpu_affinity.h"
@@ -22,6 +22,14 @@
 #include "os/thread_priority.h"
 #include "rt_loop.h"
 #include "tool/tool.h"
+
+using namespace surgsim::core;
+using namespace surgsim::os;
+using namespace surgsim::tool;
+using namespace surgsim::compliance;
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 namespace surgsim {
 namespace {

@@ -50,7 +50,7 @@ struct HapticOptions {
 
 class HapticApp {
  public:
-  explicit HapticApp(const HapticOptions& options);  // init: throws surgsim::Error / std::runtime_error
+  explicit HapticApp(const HapticOptions& options);  // init: throws surgsim::core::Error / std::runtime_error
   ~HapticApp();
   HapticApp(const HapticApp&) = delete;
   HapticApp& operator=(const HapticApp&) = delete;
@@ -74,13 +74,13 @@ class HapticApp {
 
   /// Instrument i's pose this tick: its trajectory sample, or its newest device command (held when lost). False when
   /// its input is lost (live: no command for input_timeout; replay: recorded lost).
-  bool input_pose(int i, double t, Pose5& pose);
+  bool input_pose(int i, double t, tool::Pose5& pose);
 
   /// Per-instrument state and statistics (preallocated; index = the scene's tools).
   struct Instrument {
     int track = 0;                          // replay: its column group in the trajectory
-    Pose5 held_pose;                        // last good pose (held while its input is lost)
-    Pose5 last_command;                     // newest device command, its arrival (monotonic ns), commands so far
+    tool::Pose5 held_pose;                        // last good pose (held while its input is lost)
+    tool::Pose5 last_command;                     // newest device command, its arrival (monotonic ns), commands so far
     std::uint64_t last_command_ns = 0;
     std::uint64_t commands_received = 0;
     ForceStage force_stage;                 // contact damper + passivity observer/controller on its force
@@ -94,9 +94,9 @@ class HapticApp {
   };
 
   HapticOptions options_;
-  Scene scene_;
-  MultiTrajectory trajectory_;
-  TrajectoryRecorder recorder_;
+  scene::Scene scene_;
+  tool::MultiTrajectory trajectory_;
+  tool::TrajectoryRecorder recorder_;
   std::FILE* log_ = nullptr;
   std::unique_ptr<AsyncLineWriter> log_writer_;     // --log lines, written off the loop thread
   std::unique_ptr<AsyncLineWriter> record_writer_;  // --record lines, written off the loop thread
@@ -106,7 +106,7 @@ class HapticApp {
   std::uint64_t tick_due_ns_ = 0;         // monotonic due time of the running tick, period (0: unpaced)
   std::uint64_t period_ns_ = 0;
   int instrument_count_ = 1;
-  std::array<Instrument, kMaxInstruments> instruments_{};
+  std::array<Instrument, tool::kMaxInstruments> instruments_{};
   bool live_ = false;
   std::atomic<bool> stop_requested_{false};
 
@@ -119,8 +119,8 @@ class HapticApp {
   std::string dds_threads_note_;   // how the DDS threads (and the publisher thread) are scheduled (stats "dds_threads")
 
   // Tick statistics (preallocated).
-  SampleRecorder tick_us_;
-  SampleRecorder tick_cpu_us_;             // the loop thread's CPU time per tick (tick_us_ is wall time)
+  core::SampleRecorder tick_us_;
+  core::SampleRecorder tick_cpu_us_;             // the loop thread's CPU time per tick (tick_us_ is wall time)
   /// --tick-trace: one row per tick, kept in memory during the loop (preallocated) and written after it.
   struct TickTrace {
     std::uint64_t due_ns = 0;   // the tick's deadline from the loop's start
@@ -132,7 +132,7 @@ class HapticApp {
   std::vector<TickTrace> tick_trace_;
   std::FILE* tick_trace_file_ = nullptr;
   void write_tick_trace();
-  SampleRecorder wake_late_us_;
+  core::SampleRecorder wake_late_us_;
   std::int64_t deadline_misses_ = 0;
   int contacts_max_ = 0;
   double force_max_n_ = 0;

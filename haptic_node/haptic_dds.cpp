@@ -10,6 +10,9 @@
 #include "core/clock.h"
 #include "publisher.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+
 namespace surgsim {
 
 static_assert(kFlagHeld == msg::kFlagHeld, "publisher.h and idl/Surgsim.idl disagree on the held-force flag");

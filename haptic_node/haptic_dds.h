@@ -47,7 +47,7 @@ class HapticDds final : public TickSink {
   /// Run phase, no allocation: instrument i's newest device command (ToolCommand.instrument == i), its arrival time
   /// (monotonic ns) and how many have arrived for it; keeps the previous ones when the listener holds the slot this
   /// instant. Commands for an instrument the scene does not have are counted (stray_commands()) and dropped.
-  void latest_command(int instrument, Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) noexcept;
+  void latest_command(int instrument, tool::Pose5& pose, std::uint64_t& receive_ns, std::uint64_t& received) noexcept;
   std::uint64_t stray_commands() const;
 
   /// Init: the organ whose own topics write_frame() writes after the ContactFrame (its write()).
@@ -60,7 +60,7 @@ class HapticDds final : public TickSink {
   void write_frame(const TickRecord& record, std::uint64_t stamp_ns) noexcept override;
 
   /// Shutdown: round trips measured from VisualStatus echoes (us), echoes received, the participant profile.
-  Percentiles round_trip() const;
+  core::Percentiles round_trip() const;
   std::uint64_t visual_status_received() const;
   std::string profile() const;
   std::string description() const;

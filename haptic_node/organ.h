@@ -16,6 +16,7 @@
 #include <string>
 
 #include "scene/scene.h"
+#include "contact/contact_types.h"
 #include "tool/tool.h"
 
 namespace surgsim {
@@ -24,24 +25,6 @@ namespace dds {
 class Participant;
 }
 struct TickRecord;
-
-/// What one tick of an organ gives the loop.
-struct ContactTick {
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();         // N, on the tool, after the organ's force law
-  Eigen::Vector3d device_force = Eigen::Vector3d::Zero();  // N, clamped to the device limit, always finite
-  Eigen::Vector3d direction = Eigen::Vector3d::Zero();     // unit mean imposed displacement (0 without contact)
-  bool saturated = false;
-  bool over_capacity = false;
-  bool nonfinite = false;      // a non-finite value was refused this tick (force zeroed)
-  bool grasp = false;
-  int points_in_contact = 0;   // tool points (liver) or body elements (intestine) the tool touches
-};
-
-/// One instrument's input for a tick (issue 19: an organ is stepped with every instrument of the scene at once).
-struct InstrumentInput {
-  const ToolGeometry* tool = nullptr;  // the instrument's geometry, or null while its device input is lost
-  double jaw = 0;                      // rad, jaw opening
-};
 
 /// One contact entry of a ContactFrame (what the visual node needs to deform the organ).
 struct ContactEntry {
@@ -76,10 +59,10 @@ class HapticOrgan {
   /// 1..kMaxInstruments). inputs[i].tool is instrument i's geometry, or null while its device input is lost (the
   /// organ drops that instrument's contacts and gives it zero force; the others go on; a dynamic body keeps moving).
   /// out[i] receives instrument i's force (from its own contacts, clamped to its own device limit) and flags.
-  virtual void step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept = 0;
+  virtual void step(const contact::InstrumentInput* inputs, int count, double dt, contact::ContactTick* out) noexcept = 0;
   /// One instrument: step(&{tool, jaw}, 1, dt, &out).
-  void step(const ToolGeometry* tool, double jaw, double dt, ContactTick& out) noexcept {
-    const InstrumentInput in{tool, jaw};
+  void step(const tool::ToolGeometry* tool, double jaw, double dt, contact::ContactTick& out) noexcept {
+    const contact::InstrumentInput in{tool, jaw};
     step(&in, 1, dt, &out);
   }
 
@@ -130,9 +113,9 @@ struct OrganBuildOptions {
 };
 
 /// Builds the organ the scene names. `cache_dir` holds generated meshes and tensors, `ticks` the run's length (for
-/// per-tick storage), `progress` receives mesh and precompute progress (null: silent). Throws surgsim::Error naming
+/// per-tick storage), `progress` receives mesh and precompute progress (null: silent). Throws surgsim::core::Error naming
 /// the scene file for a model this node does not build.
-std::unique_ptr<HapticOrgan> make_haptic_organ(const Scene& scene, const std::string& cache_dir, std::uint64_t ticks,
+std::unique_ptr<HapticOrgan> make_haptic_organ(const scene::Scene& scene, const std::string& cache_dir, std::uint64_t ticks,
                                                std::ostream* progress,
                                                const OrganBuildOptions& build = OrganBuildOptions());
 

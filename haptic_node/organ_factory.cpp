@@ -4,6 +4,9 @@
 #include "organs/intestine_organ.h"
 #include "organs/liver_organ.h"
 
+using namespace surgsim::core;
+using namespace surgsim::scene;
+
 namespace surgsim {
 
 std::unique_ptr<HapticOrgan> make_haptic_organ(const Scene& scene, const std::string& cache_dir, std::uint64_t ticks,

@@ -10,6 +10,9 @@
 
 #include "core/clock.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+
 namespace surgsim {
 
 namespace {

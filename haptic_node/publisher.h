@@ -48,7 +48,7 @@ inline constexpr std::uint32_t kFlagHeld = 32;
 
 /// One instrument's part of a tick record.
 struct InstrumentRecord {
-  Pose5 pose;
+  tool::Pose5 pose;
   Eigen::Vector3d tip = Eigen::Vector3d::Zero();
   Eigen::Vector3d force = Eigen::Vector3d::Zero();         // N, on the instrument (ContactFrame)
   Eigen::Vector3d device_force = Eigen::Vector3d::Zero();  // N, sent to its device (ForceFeedback)
@@ -66,7 +66,7 @@ struct TickRecord {
   std::uint64_t due_ns = 0;             // monotonic time the tick was due (0: unpaced, no overrun watchdog)
   std::uint64_t period_ns = 0;          // loop period (0: unpaced)
   int instrument_count = 1;             // the scene's instruments, 1..kMaxInstruments
-  std::array<InstrumentRecord, kMaxInstruments> instruments{};
+  std::array<InstrumentRecord, tool::kMaxInstruments> instruments{};
   std::uint32_t flags = 0;              // the union of the instruments' flags
   bool last_tick = false;               // the run's last tick: no overrun watchdog after it
   OrganOutputs organ;
@@ -134,8 +134,8 @@ class Publisher {
   double fade_ms() const { return static_cast<double>(options_.fade_ns) * 1e-6; }
   /// After finish(): time to write one record (ForceFeedback + ContactFrame + organ topics, us) and from commit to
   /// the ForceFeedback written (us).
-  Percentiles write_us() const { return write_us_.summary(); }
-  Percentiles force_latency_us() const { return latency_us_.summary(); }
+  core::Percentiles write_us() const { return write_us_.summary(); }
+  core::Percentiles force_latency_us() const { return latency_us_.summary(); }
 
  private:
   struct Slot {
@@ -165,8 +165,8 @@ class Publisher {
   std::atomic<std::uint64_t> written_{0}, skipped_{0}, forces_written_{0}, forces_skipped_{0}, hold_ticks_{0},
       faded_to_zero_{0};
   std::atomic<bool> final_zero_{false};
-  SampleRecorder write_us_;
-  SampleRecorder latency_us_;
+  core::SampleRecorder write_us_;
+  core::SampleRecorder latency_us_;
   std::thread thread_;
   bool finished_ = false;
   TickRecord inline_last_;  // inline_writes only

@@ -11,6 +11,9 @@
 #include "core/clock.h"
 #include "os/cpu_affinity.h"
 
+using namespace surgsim::core;
+using namespace surgsim::os;
+
 namespace surgsim {
 
 RealtimeStatus enter_realtime(int priority, bool lock_memory, int cpu) {

@@ -12,6 +12,8 @@
 #include "core/error.h"
 #include "organ_view.h"
 
+using namespace surgsim::core;
+
 namespace surgsim {
 
 namespace {

@@ -19,9 +19,12 @@
 
 #include "render/image.h"
 
+namespace surgsim::core {
+class Error;
+}  // namespace surgsim::core
+
 namespace surgsim {
 
-class Error;
 class OrganView;
 
 struct FrameOutputOptions {
@@ -36,7 +39,7 @@ struct FrameOutputOptions {
 
 class FrameOutput {
  public:
-  /// Init: when writing, creates the folder and frames.csv with its header. Throws surgsim::Error when it cannot.
+  /// Init: when writing, creates the folder and frames.csv with its header. Throws surgsim::core::Error when it cannot.
   explicit FrameOutput(const FrameOutputOptions& options);
   ~FrameOutput();
   FrameOutput(const FrameOutput&) = delete;
@@ -50,7 +53,7 @@ class FrameOutput {
   }
   /// Writes `image` as frame_NNNNNN.png (NNNNNN = `frame`), the organ's VTK beside it when asked, and the index row
   /// (contact frame `seq`, its `sim_time`, the organ's contacts and largest displacement, the `instruments` drawn).
-  /// A surgsim::Error on the way is counted (png_errors) and the frame skipped; the first is printed. Returns once the
+  /// A surgsim::core::Error on the way is counted (png_errors) and the frame skipped; the first is printed. Returns once the
   /// picture is copied (the PNG, its index row and the counters follow on the writer thread; flush() waits for them);
   /// the VTK is written before it returns.
   void write(const Image& image, std::uint64_t frame, std::uint64_t seq, double sim_time, const OrganView& organ,
@@ -85,7 +88,7 @@ class FrameOutput {
   };
   void writer_loop();
   void write_slot(const Slot& slot);  // on the writer thread
-  void count_error(const Error& e);   // png_errors (PNG or VTK), the first printed on stderr
+  void count_error(const core::Error& e);   // png_errors (PNG or VTK), the first printed on stderr
 
   FrameOutputOptions options_;
   int png_every_ = 0;

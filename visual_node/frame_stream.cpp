@@ -8,6 +8,8 @@
 
 #include "core/clock.h"
 
+using namespace surgsim::core;
+
 namespace surgsim {
 
 JpegCodec::JpegCodec() : compressor_(tjInitCompress()), decompressor_(tjInitDecompress()) {}

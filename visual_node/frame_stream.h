@@ -91,8 +91,8 @@ class FrameStream {
   std::uint64_t encode_errors() const { return encode_errors_.load(); }
   std::uint64_t sent() const { return sent_.load(); }
   /// Encode time (us) and JPEG size (bytes) of the pictures encoded so far.
-  Percentiles encode_us();
-  Percentiles jpeg_bytes();
+  core::Percentiles encode_us();
+  core::Percentiles jpeg_bytes();
   /// Adds "stream": {fps, quality, offered, sent, dropped_busy, dropped_oversize, encode_errors, encode_us, bytes}.
   void add_stats(nlohmann::json& j, double fps);
 
@@ -113,8 +113,8 @@ class FrameStream {
   std::condition_variable wake_;
   std::condition_variable idle_;
   std::mutex stats_mutex_;
-  SampleRecorder encode_us_{1 << 16};
-  SampleRecorder bytes_{1 << 16};
+  core::SampleRecorder encode_us_{1 << 16};
+  core::SampleRecorder bytes_{1 << 16};
   std::atomic<std::uint64_t> offered_{0}, dropped_busy_{0}, dropped_oversize_{0}, encode_errors_{0}, sent_{0};
   std::thread thread_;              // last: started once everything above exists
 };

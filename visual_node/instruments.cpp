@@ -5,6 +5,8 @@
 #include "render/renderer.h"
 #include "surgsim_types.h"
 
+using namespace surgsim::tool;
+
 namespace surgsim {
 
 void take_instruments(const std::vector<msg::InstrumentState>& states, int tools, InstrumentPoses& out) noexcept {

@@ -26,10 +26,10 @@ class Renderer;
 struct InstrumentPoses {
   InstrumentPoses() { direction.fill(Eigen::Vector3d::Zero()); }
 
-  std::array<bool, kMaxInstruments> present{};  // the frame carried a state for instrument i
-  std::array<Pose5, kMaxInstruments> pose{};
+  std::array<bool, tool::kMaxInstruments> present{};  // the frame carried a state for instrument i
+  std::array<tool::Pose5, tool::kMaxInstruments> pose{};
   /// Unit mean imposed displacement of its contacts (the non-linear law's axis; zero: none).
-  std::array<Eigen::Vector3d, kMaxInstruments> direction;
+  std::array<Eigen::Vector3d, tool::kMaxInstruments> direction;
   int ignored = 0;  // states of the frame naming no tool of the scene (index >= tools) or an instrument twice
 
   int count() const {
@@ -46,6 +46,6 @@ void take_instruments(const std::vector<msg::InstrumentState>& states, int tools
 
 /// Draws every present instrument i < tools.size() with tools[i]: tool_geometry(tools[i], pose[i]), its shaft radius,
 /// colour instrument_rgb(i). Returns the number of draw_tool calls.
-int draw_instruments(Renderer& renderer, const std::vector<ToolSpec>& tools, const InstrumentPoses& poses) noexcept;
+int draw_instruments(Renderer& renderer, const std::vector<tool::ToolSpec>& tools, const InstrumentPoses& poses) noexcept;
 
 }  // namespace surgsim

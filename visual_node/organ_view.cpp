@@ -3,6 +3,9 @@
 #include "views/intestine_view.h"
 #include "views/liver_view.h"
 
+using namespace surgsim::mesh;
+using namespace surgsim::scene;
+
 namespace surgsim {
 
 std::uint64_t visual_scene_hash(const Scene& scene, std::uint64_t mesh_hash) {

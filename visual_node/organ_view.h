@@ -8,7 +8,7 @@
 // (views/intestine_view.h: the newest BodyState as tube and mesentery, LOD by the frame-rate controller).
 //
 // Phases as in the app: construction and the init hooks (attach, subscribe, print_init) may allocate and throw
-// surgsim::Error; update, draw, draw_markers, frame_done run every frame and allocate nothing; the rest is for the
+// surgsim::core::Error; update, draw, draw_markers, frame_done run every frame and allocate nothing; the rest is for the
 // frame output (write_vtk, with a PNG) and shutdown (stats).
 #pragma once
 #include <cstdint>
@@ -73,7 +73,7 @@ class OrganView {
   /// Largest displacement of the shown shape from rest, m (frames.csv).
   virtual double max_displacement() const { return 0; }
   /// Writes the shown surface as VTK to `path` (with a PNG, when the scene asks); false when the organ has none.
-  /// Throws surgsim::Error when the file cannot be written.
+  /// Throws surgsim::core::Error when the file cannot be written.
   virtual bool write_vtk(const std::string& /*path*/) const { return false; }
   /// Contact frames that could not be applied (e.g. naming nodes this scene does not have).
   virtual std::uint64_t deform_errors() const { return 0; }
@@ -91,10 +91,10 @@ struct OrganViewOptions {
 };
 
 /// The scene identity both nodes compare: the scene's hash mixed with its mesh's (0 without a tetrahedral mesh).
-std::uint64_t visual_scene_hash(const Scene& scene, std::uint64_t mesh_hash);
+std::uint64_t visual_scene_hash(const scene::Scene& scene, std::uint64_t mesh_hash);
 
-/// The view of scene.model (the only switch on it in the visual node). Throws surgsim::Error when the organ cannot
+/// The view of scene.model (the only switch on it in the visual node). Throws surgsim::core::Error when the organ cannot
 /// be built (mesh, tensors, law, embedded surface).
-std::unique_ptr<OrganView> make_organ_view(const Scene& scene, const OrganViewOptions& options);
+std::unique_ptr<OrganView> make_organ_view(const scene::Scene& scene, const OrganViewOptions& options);
 
 }  // namespace surgsim

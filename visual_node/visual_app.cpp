@@ -25,6 +25,12 @@
 #include "render/renderer.h"
 #include "visual_dds.h"
 
+using namespace surgsim::core;
+using namespace surgsim::os;
+using namespace surgsim::tool;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
+
 namespace surgsim {
 
 namespace {

@@ -109,7 +109,7 @@ class VisualApp {
 
   VisualOptions options_;
   std::string dds_threads_note_;            // how the DDS threads are scheduled (stats "dds_threads")
-  Scene scene_;
+  scene::Scene scene_;
   std::unique_ptr<OrganView> organ_;        // the scene's organ (organ_view.h); the only organ-specific part
   std::uint64_t scene_hash_ = 0;
   std::unique_ptr<Renderer> renderer_;
@@ -135,9 +135,9 @@ class VisualApp {
   FrameRateMeter frame_rate_;                    // measured rate, sent as VisualStatus.fps
   Image image_;  // read-back buffer, reused every frame
   double wall_seconds_ = 0;
-  SampleRecorder deform_us_{1 << 18};
-  SampleRecorder render_ms_{1 << 18};
-  SampleRecorder interval_ms_{1 << 18};           // between frame ends
+  core::SampleRecorder deform_us_{1 << 18};
+  core::SampleRecorder render_ms_{1 << 18};
+  core::SampleRecorder interval_ms_{1 << 18};           // between frame ends
   std::uint64_t frames_late_ = 0;                 // ended after the next frame was due
   std::uint64_t schedule_restarts_ = 0;           // frames that ended more than a period late: schedule reset
   // Synthetic load (SURGSIM_VISUAL_LOAD_STEP) and the frame trace.

@@ -6,6 +6,8 @@
 #include "core/clock.h"
 #include "haptic_watch.h"
 
+using namespace surgsim::core;
+
 namespace surgsim {
 
 using eprosima::fastdds::dds::DataReader;

@@ -12,14 +12,14 @@
 
 #include "core/error.h"
 #include "core/text.h"
-#include "liver/fixed_set.h"
+#include "fem/fixed_set.h"
 #include "mesh/mesh.h"
-#include "liver/precompute.h"
+#include "compliance/precompute.h"
 #include "scene/scene.h"
-#include "liver/static_solver.h"
+#include "fem/static_solver.h"
 #include "mesher/organ_mesher.h"
 
-namespace surgsim::cli {
+namespace surgsim::apps::cli {
 
 inline std::vector<std::string> split(const std::string& s, char sep) {
   std::vector<std::string> out;
@@ -29,11 +29,11 @@ inline std::vector<std::string> split(const std::string& s, char sep) {
 
 inline std::string trim(const std::string& s) { return std::string(text::trim(s)); }
 
-/// A finite number, the whole string; throws surgsim::Error naming `what`.
+/// A finite number, the whole string; throws surgsim::core::Error naming `what`.
 inline double parse_number(const std::string& field, const std::string& what) {
   double v = 0;
   if (text::parse_double(field, v) == text::Number::kOk) return v;
-  throw_error(what, ": '", field, "' is not a finite number");
+  core::throw_error(what, ": '", field, "' is not a finite number");
 }
 
 /// A non-negative integer node index, the whole string.
@@ -61,12 +61,12 @@ inline std::vector<double> parse_numbers(const std::string& text, std::size_t n,
 }
 
 /// "NODE:ux,uy,uz" (m); an empty component is left free, e.g. "12:,,-0.002" imposes only z.
-inline ImposedDisplacement parse_impose(const std::string& text) {
+inline fem::ImposedDisplacement parse_impose(const std::string& text) {
   const std::string what = "--impose '" + text + "'";
   const auto colon = text.find(':');
   if (colon == std::string::npos)
     throw_error(what, ": expected NODE:ux,uy,uz (metres; leave a component empty to leave it free)");
-  ImposedDisplacement im;
+  fem::ImposedDisplacement im;
   im.node = parse_index(text.substr(0, colon), what);
   const auto comps = split(text.substr(colon + 1), ',');
   if (comps.size() != 3)
@@ -89,8 +89,8 @@ struct FixedOptions {
   bool any() const { return !nodes.empty() || !plane.empty() || !boxes.empty(); }
 };
 
-inline FixedRegion fixed_region(const FixedOptions& o) {
-  FixedRegion r;
+inline fem::FixedRegion fixed_region(const FixedOptions& o) {
+  fem::FixedRegion r;
   if (!o.nodes.empty()) r.nodes = parse_index_list(o.nodes, "--fixed");
   if (!o.plane.empty()) {
     const auto v = parse_numbers(o.plane, 6, "--fixed-plane");
@@ -109,23 +109,23 @@ inline FixedRegion fixed_region(const FixedOptions& o) {
 }
 
 /// Reads and validates a mesh file, or generates an organ (needs the mesher).
-inline TetMesh load_mesh(const std::string& file, const std::string& generate, int nodes, std::ostream* log) {
+inline mesh::TetMesh load_mesh(const std::string& file, const std::string& generate, int nodes, std::ostream* log) {
   if (!file.empty()) {
-    TetMesh m = read_mesh(file);
-    validate_mesh(m);
+    mesh::TetMesh m = mesh::read_mesh(file);
+    mesh::validate_mesh(m);
     return m;
   }
-  OrganSpec spec;
+  mesher::OrganSpec spec;
   spec.shape = generate;
   spec.target_nodes = nodes;
-  return generate_organ(spec, log);
+  return mesher::generate_organ(spec, log);
 }
 
 /// Prints precompute progress on stderr at most every `period` seconds, and the last one.
 class ProgressPrinter {
  public:
   explicit ProgressPrinter(bool quiet, double period = 0.5) : quiet_(quiet), period_(period) {}
-  void operator()(const PrecomputeProgress& p) {
+  void operator()(const compliance::PrecomputeProgress& p) {
     if (quiet_) return;
     const auto now = std::chrono::steady_clock::now();
     const bool last = p.columns_done == p.columns_total;
@@ -146,4 +146,4 @@ class ProgressPrinter {
   std::chrono::steady_clock::time_point last_{};
 };
 
-}  // namespace surgsim::cli
+}  // namespace surgsim::apps::cli

@@ -10,7 +10,10 @@
 #include <vector>
 
 #include "core/error.h"
-#include "liver/nonlinear_law.h"
+#include "nonlinear/nonlinear_law.h"
+
+using namespace surgsim::core;
+using namespace surgsim::nonlinear;
 
 namespace {
 

@@ -12,6 +12,10 @@
 #include "mesh/mesh.h"
 #include "mesher/organ_mesher.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::mesher;
+
 namespace {
 
 using namespace surgsim;

@@ -7,13 +7,23 @@
 #include <string>
 
 #include "core/error.h"
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
 #include "liver_cli.h"
 #include "liver/liver_setup.h"
-#include "liver/precompute.h"
-#include "liver/tensor_cache.h"
+#include "compliance/precompute.h"
+#include "compliance/tensor_cache.h"
 #include "mesher/scene_mesh.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::liver;
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 int main(int argc, char** argv) {
   using namespace surgsim;

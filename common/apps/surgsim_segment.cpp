@@ -17,6 +17,10 @@
 #include "imaging/segmentation.h"
 #include "imaging/volume_io.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesher;
+using namespace surgsim::imaging;
+
 namespace {
 
 using namespace surgsim;

@@ -9,12 +9,19 @@
 #include <string>
 
 #include "core/error.h"
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
 #include "liver_cli.h"
-#include "liver/precompute.h"
-#include "liver/static_solver.h"
-#include "liver/superposition.h"
+#include "compliance/precompute.h"
+#include "fem/static_solver.h"
+#include "compliance/superposition.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::intestine;
 
 namespace {
 

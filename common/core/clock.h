@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <ctime>
 
-namespace surgsim {
+namespace surgsim::core {
 
 inline std::uint64_t monotonic_ns() {
   timespec ts;
@@ -11,4 +11,4 @@ inline std::uint64_t monotonic_ns() {
   return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::core

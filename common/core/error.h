@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <string>
 
-namespace surgsim {
+namespace surgsim::core {
 
 /// An error a user can act on: the message names the file (and line or key) at fault and, where possible, the fix.
 class Error : public std::runtime_error {
@@ -20,4 +20,4 @@ template <typename... Args>
   throw Error(os.str());
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::core

@@ -5,7 +5,7 @@
 #include <cstring>
 #include <string>
 
-namespace surgsim {
+namespace surgsim::core {
 
 class Hasher {
  public:
@@ -29,4 +29,4 @@ class Hasher {
   std::uint64_t h_ = 1469598103934665603ull;
 };
 
-}  // namespace surgsim
+}  // namespace surgsim::core

@@ -7,7 +7,7 @@
 
 #include "core/error.h"
 
-namespace surgsim {
+namespace surgsim::core {
 
 SampleRecorder::SampleRecorder(std::size_t capacity) : samples_(capacity, 0.0) {}
 
@@ -57,4 +57,4 @@ void write_json_file(const std::string& path, const nlohmann::json& value) {
   if (std::rename(tmp.c_str(), path.c_str()) != 0) throw_error(path, ": cannot rename ", tmp, " into place");
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::core

@@ -6,7 +6,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
-namespace surgsim {
+namespace surgsim::core {
 
 struct Percentiles {
   double p50 = 0, p90 = 0, p99 = 0, max = 0, mean = 0;
@@ -33,7 +33,7 @@ class SampleRecorder {
 /// {"p50":..,"p99":..,"max":..} (+ p90, mean, count) for the stats JSON.
 nlohmann::json to_json(const Percentiles& p);
 
-/// Writes a JSON value to a file atomically (temp file + rename). Throws surgsim::Error on failure.
+/// Writes a JSON value to a file atomically (temp file + rename). Throws surgsim::core::Error on failure.
 void write_json_file(const std::string& path, const nlohmann::json& value);
 
-}  // namespace surgsim
+}  // namespace surgsim::core

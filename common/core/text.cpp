@@ -5,7 +5,7 @@
 #include <cmath>
 #include <system_error>
 
-namespace surgsim::text {
+namespace surgsim::core::text {
 
 namespace {
 bool blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n'; }
@@ -69,4 +69,4 @@ std::string quote(std::string_view s, std::size_t max) {
   return "'" + std::string(s.substr(0, max)) + (s.size() > max ? "...'" : "'");
 }
 
-}  // namespace surgsim::text
+}  // namespace surgsim::core::text

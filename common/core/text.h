@@ -9,7 +9,7 @@
 #include <string_view>
 #include <vector>
 
-namespace surgsim::text {
+namespace surgsim::core::text {
 
 /// `s` without leading and trailing blanks (space, tab, CR, LF). No allocation.
 std::string_view trim(std::string_view s) noexcept;
@@ -42,4 +42,4 @@ std::string lower(std::string_view s);
 /// `s` in single quotes for a message, cut to `max` characters with "..." (a long or binary line stays readable).
 std::string quote(std::string_view s, std::size_t max = 60);
 
-}  // namespace surgsim::text
+}  // namespace surgsim::core::text

@@ -4,7 +4,7 @@
 #include <cstddef>
 #include <vector>
 
-namespace surgsim {
+namespace surgsim::core {
 
 /// Root of i's set; halves the path on the way.
 inline int find_root(std::vector<int>& parent, int i) {
@@ -15,4 +15,4 @@ inline int find_root(std::vector<int>& parent, int i) {
   return i;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::core

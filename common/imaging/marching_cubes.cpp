@@ -7,7 +7,10 @@
 
 #include "core/error.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
+namespace surgsim::imaging {
 namespace {
 
 constexpr int kMaxCaseEntries = 16;  // up to 5 triangles (15 edge indices) and the -1 terminator
@@ -184,4 +187,4 @@ TriSurface marching_cubes(const VoxelMask& mask) {
   return mesh;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

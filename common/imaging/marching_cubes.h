@@ -17,13 +17,13 @@
 #include "mesh/tri_surface.h"
 #include "imaging/volume.h"
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 /// The surface between the mask's inside and outside voxels, in the grid frame (m; see VoxelGrid): closed,
 /// 2-manifold and counter-clockwise seen from outside (the mask is treated as padded with outside voxels, so an
 /// organ touching the volume's border is closed there). One surface per 6-connected component (run clean_mask first
 /// for a single one). Vertices are numbered in scan order: deterministic.
-TriSurface marching_cubes(const VoxelMask& mask);
+mesh::TriSurface marching_cubes(const VoxelMask& mask);
 
 /// The generated table, for tests: for configuration `config` (bit c set when corner c, at (c & 1, c >> 1 & 1,
 /// c >> 2 & 1), is inside), up to 5 triangles as cube-edge triples, terminated by -1 (16 entries).
@@ -32,4 +32,4 @@ const std::int8_t* marching_cubes_case(int config);
 /// Cube edge `edge` (0..11) joins corners edge_corner(edge, 0) and edge_corner(edge, 1).
 int marching_cubes_edge_corner(int edge, int end);
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

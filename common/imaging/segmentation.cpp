@@ -14,7 +14,12 @@
 #include "scene/scene.h"
 #include "imaging/voxel_boundary.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
+
+namespace surgsim::imaging {
 namespace {
 
 // The fixed region of the written scene: nodes in the lowest kFixedFraction of the mesh's height (the liver scene
@@ -280,4 +285,4 @@ SegmentationFiles write_segmentation(const Segmentation& segmentation, const std
   return files;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

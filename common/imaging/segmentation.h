@@ -11,7 +11,7 @@
 //     count (mesh_closed_surface in the mesher).
 // Stages 1-4 are this folder's own code (VTK is not available and CGAL is not installed; surface_decimation.h
 // says why Gmsh's surface remeshing was not used); Gmsh, the project's mesher already, does stage 5.
-// Init-time code: allocates and throws surgsim::Error with the file named.
+// Init-time code: allocates and throws surgsim::core::Error with the file named.
 #pragma once
 #include <cstdint>
 #include <iosfwd>
@@ -26,7 +26,7 @@
 #include "imaging/surface_smoothing.h"
 #include "imaging/volume.h"
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 struct SegmentOptions {
   std::optional<std::int32_t> label;  // organ label; empty: the only non-zero label
@@ -40,7 +40,7 @@ struct SegmentOptions {
   bool clean = true;                  // keep the largest component and fill cavities (clean_mask)
 };
 
-/// Throws surgsim::Error with a one-line reason when an option is out of range.
+/// Throws surgsim::core::Error with a one-line reason when an option is out of range.
 void check_segment_options(const SegmentOptions& options);
 
 /// Wall time of one stage.
@@ -61,7 +61,7 @@ struct SegmentReport {
   DecimationReport surface;              // error-driven reduction: the smooth, light surface
   DecimationReport boundary;             // further reduction to the node budget's surface vertex count
   int boundary_target = 0;               // that vertex count (closed_surface_nodes)
-  OrganMeshReport mesh;                  // tetrahedralization
+  mesher::OrganMeshReport mesh;                  // tetrahedralization
   double voxel_volume = 0.0;             // m^3, organ voxels x voxel volume
   double mc_volume = 0.0;                // m^3, enclosed by each surface / the tets
   double surface_volume = 0.0;
@@ -72,9 +72,9 @@ struct SegmentReport {
 
 /// Everything the pipeline made, in world coordinates (m).
 struct Segmentation {
-  TriSurface marching_cubes;  // plain marching cubes of the cleaned mask
-  TriSurface surface;         // smoothed and reduced (error-driven): the smooth, light surface
-  TetMesh mesh;            // the tetrahedral mesh (its boundary: `surface` reduced to the node budget)
+  mesh::TriSurface marching_cubes;  // plain marching cubes of the cleaned mask
+  mesh::TriSurface surface;         // smoothed and reduced (error-driven): the smooth, light surface
+  mesh::TetMesh mesh;            // the tetrahedral mesh (its boundary: `surface` reduced to the node budget)
   SegmentReport report;
   std::string source;      // the volume's file or folder
 };
@@ -93,11 +93,11 @@ struct SegmentationFiles {
 /// PREFIX.yaml: a liver-type scene (liver.yaml's structure) whose mesh is `file: <PREFIX name>.msh`, whose fixed
 /// region is the mesh's lowest 14 % (as the liver's underside), whose tool comes straight down onto the mesh's
 /// highest point, whose camera frames the mesh, and which uses liver.yaml's non-linear curves (absolute paths into
-/// config_dir()) when they exist. Throws surgsim::Error naming the file that cannot be written.
+/// config_dir()) when they exist. Throws surgsim::core::Error naming the file that cannot be written.
 SegmentationFiles write_segmentation(const Segmentation& segmentation, const std::string& prefix);
 
 /// The scene text write_segmentation writes (mesh file name as given).
-std::string segmentation_scene_yaml(const TetMesh& mesh, const std::string& name, const std::string& mesh_file,
+std::string segmentation_scene_yaml(const mesh::TetMesh& mesh, const std::string& name, const std::string& mesh_file,
                                     const std::string& source);
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

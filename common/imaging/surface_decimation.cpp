@@ -13,7 +13,11 @@
 
 #include "core/error.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::intestine;
+
+namespace surgsim::imaging {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -486,4 +490,4 @@ DecimationReport decimate_surface(TriSurface& mesh, const VoxelBoundaryDistance*
   return decimator.run();
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

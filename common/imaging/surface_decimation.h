@@ -24,7 +24,7 @@
 #include "mesh/tri_surface.h"
 #include "imaging/voxel_boundary.h"
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 struct DecimationOptions {
   int target_vertices = 0;          // stop at this many vertices; 0: no count target
@@ -65,13 +65,13 @@ struct ImprovementReport {
 };
 
 /// Improves the surface in place (grid frame, m). `boundary` may be null when max_distance is 0.
-ImprovementReport improve_surface(TriSurface& mesh, const VoxelBoundaryDistance* boundary,
+ImprovementReport improve_surface(mesh::TriSurface& mesh, const VoxelBoundaryDistance* boundary,
                                   const ImprovementOptions& options);
 
 /// Reduces the surface in place (grid frame, m); vertices are renumbered (compacted, order kept). `boundary` may be
 /// null when max_distance is 0. The input must be a closed 2-manifold (check_closed_surface). Deterministic.
-/// Throws surgsim::Error for bad options.
-DecimationReport decimate_surface(TriSurface& mesh, const VoxelBoundaryDistance* boundary,
+/// Throws surgsim::core::Error for bad options.
+DecimationReport decimate_surface(mesh::TriSurface& mesh, const VoxelBoundaryDistance* boundary,
                                   const DecimationOptions& options);
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

@@ -7,7 +7,10 @@
 
 #include "core/error.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
+namespace surgsim::imaging {
 
 Eigen::Vector3d closest_point_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
                                           const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
@@ -165,4 +168,4 @@ SurfaceDistance surface_distance(const TriSurface& a, const TriSurface& b, doubl
   return out;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

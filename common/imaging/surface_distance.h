@@ -6,12 +6,12 @@
 
 #include "mesh/tri_surface.h"
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 /// Closest points on a triangle surface. Copies what it needs; the surface may go away afterwards.
 class TriangleTree {
  public:
-  explicit TriangleTree(const TriSurface& mesh);
+  explicit TriangleTree(const mesh::TriSurface& mesh);
   /// Distance (m) from p (m) to the nearest point of the surface; `closest`, if given, receives that point.
   double distance(const Eigen::Vector3d& p, Eigen::Vector3d* closest = nullptr) const;
 
@@ -43,11 +43,11 @@ struct SurfaceDistance {
   double a_to_b_mean = 0.0; // m, area-weighted
   double b_to_a_mean = 0.0; // m, area-weighted
 };
-SurfaceDistance surface_distance(const TriSurface& a, const TriSurface& b, double sample_spacing);
+SurfaceDistance surface_distance(const mesh::TriSurface& a, const mesh::TriSurface& b, double sample_spacing);
 
 /// Sample points on a surface (vertices, then per triangle a barycentric grid whose spacing is at most `spacing`)
 /// with their area weights (the vertices weigh 0).
-void sample_surface(const TriSurface& mesh, double spacing, std::vector<Eigen::Vector3d>& points,
+void sample_surface(const mesh::TriSurface& mesh, double spacing, std::vector<Eigen::Vector3d>& points,
                     std::vector<double>& weights);
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

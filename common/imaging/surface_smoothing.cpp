@@ -7,7 +7,11 @@
 
 #include "core/error.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::intestine;
+
+namespace surgsim::imaging {
 
 std::vector<std::vector<int>> vertex_neighbours(const TriSurface& mesh) {
   std::vector<std::vector<int>> ring(static_cast<std::size_t>(mesh.vertices.rows()));
@@ -75,4 +79,4 @@ SmoothingReport smooth_surface(TriSurface& mesh, const VoxelBoundaryDistance& bo
   return report;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

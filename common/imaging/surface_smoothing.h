@@ -6,7 +6,7 @@
 #include "mesh/tri_surface.h"
 #include "imaging/voxel_boundary.h"
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 struct SmoothingOptions {
   int iterations = 30;         // lambda|mu pairs
@@ -23,10 +23,10 @@ struct SmoothingReport {
 };
 
 /// Smooths the surface in place (grid frame, m; topology unchanged). Uniform umbrella weights, which also evens
-/// out marching cubes' triangle shapes. Throws surgsim::Error for bad options.
-SmoothingReport smooth_surface(TriSurface& mesh, const VoxelBoundaryDistance& boundary, const SmoothingOptions& options);
+/// out marching cubes' triangle shapes. Throws surgsim::core::Error for bad options.
+SmoothingReport smooth_surface(mesh::TriSurface& mesh, const VoxelBoundaryDistance& boundary, const SmoothingOptions& options);
 
 /// Vertex neighbours (sorted, unique) of each vertex.
-std::vector<std::vector<int>> vertex_neighbours(const TriSurface& mesh);
+std::vector<std::vector<int>> vertex_neighbours(const mesh::TriSurface& mesh);
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

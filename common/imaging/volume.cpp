@@ -9,7 +9,9 @@
 
 #include "core/error.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+
+namespace surgsim::imaging {
 namespace {
 
 // Neighbour offsets: the 6 face neighbours first, then the 12 edge neighbours (together the 18-neighbourhood).
@@ -305,4 +307,4 @@ void add_label_noise(LabelVolume& volume, double probability, int speckles, std:
   }
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

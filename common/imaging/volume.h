@@ -9,7 +9,7 @@
 #include <utility>
 #include <vector>
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 /// Where the voxels are. Voxel (i, j, k) is the box of size `spacing` centred on
 /// world = origin + axes * (spacing .* (i, j, k)). The pipeline works in the "grid frame" X = spacing .* (i, j, k)
@@ -50,7 +50,7 @@ struct VoxelMask {
 std::vector<std::pair<std::int32_t, std::int64_t>> label_counts(const LabelVolume& volume);
 
 /// Selects one organ. With `label`, its voxels; without, the only non-zero label (any non-zero voxel of a binary
-/// image). Throws surgsim::Error naming volume.source when: the volume is empty or inconsistent (sizes vs labels);
+/// image). Throws surgsim::core::Error naming volume.source when: the volume is empty or inconsistent (sizes vs labels);
 /// it holds no foreground (every voxel 0); every voxel is foreground (nothing to separate the organ from);
 /// `label` is not present (the message lists the labels present with their counts); no label was given and
 /// several foreground labels are present (listed).
@@ -87,4 +87,4 @@ LabelVolume voxelize(const Eigen::MatrixX3d& vertices, const Eigen::MatrixX3i& t
 /// must remove). Seeded: the same seed gives the same volume.
 void add_label_noise(LabelVolume& volume, double probability, int speckles, std::uint32_t seed);
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

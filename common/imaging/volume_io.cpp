@@ -20,7 +20,9 @@
 #include "core/error.h"
 #include "core/text.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+
+namespace surgsim::imaging {
 namespace {
 
 namespace fs = std::filesystem;
@@ -600,4 +602,4 @@ void write_nrrd(const LabelVolume& volume, const std::string& path, const NrrdWr
   }
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

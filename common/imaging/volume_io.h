@@ -6,13 +6,13 @@
 
 #include "imaging/volume.h"
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 /// Reads every *.png in `folder` as one slice; slices are ordered by the last number in their file name
 /// (slice_007.png), which must run without gaps. Pixel values are labels: 1-, 2-, 4-, 8- or 16-bit grey (a binary
 /// image's white is 1 at 1 bit, 255 at 8 bits), a palette image's indices, or grey stored as RGB(A) with equal
 /// channels (alpha is ignored). Column -> i, row -> j, slice -> k. `spacing` (m) along i, j, k; the origin is 0.
-/// Throws surgsim::Error naming the file for: no PNG in the folder, a name without a number, two slices with the
+/// Throws surgsim::core::Error naming the file for: no PNG in the folder, a name without a number, two slices with the
 /// same number, a missing slice number, a slice whose size differs from the first's, an unreadable or colour PNG.
 LabelVolume read_png_slices(const std::string& folder, const Eigen::Vector3d& spacing);
 
@@ -22,7 +22,7 @@ LabelVolume read_png_slices(const std::string& folder, const Eigen::Vector3d& sp
 /// spacings, or space directions (orthogonal axes) with space origin; space units mm (the default), cm, m or um;
 /// line skip and byte skip (-1: the data ends the file). Other informational fields (content, kinds, centers,
 /// labels, units, thicknesses, axis mins/maxs, min/max, old min/max, measurement frame, space, sample units,
-/// key:=value pairs) are accepted and ignored. Throws surgsim::Error "FILE:LINE: ..." for an unknown field or an
+/// key:=value pairs) are accepted and ignored. Throws surgsim::core::Error "FILE:LINE: ..." for an unknown field or an
 /// unsupported value (listing what is supported), and "FILE: ..." for truncated or missing data.
 LabelVolume read_nrrd(const std::string& path);
 
@@ -41,4 +41,4 @@ struct NrrdWriteOptions {
 /// Writes the volume as NRRD (raw encoding, spacing in mm). Throws for labels the type cannot hold.
 void write_nrrd(const LabelVolume& volume, const std::string& path, const NrrdWriteOptions& options = {});
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

@@ -4,7 +4,7 @@
 #include <array>
 #include <cmath>
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 VoxelBoundaryDistance::VoxelBoundaryDistance(const VoxelMask& mask) : size_(mask.grid.size), spacing_(mask.grid.spacing) {
   const Eigen::Vector3i n = size_;
@@ -97,4 +97,4 @@ bool VoxelBoundaryDistance::within(const Eigen::Vector3d& p, double d) const {
   return found;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

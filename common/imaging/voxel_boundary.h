@@ -8,7 +8,7 @@
 
 #include "imaging/volume.h"
 
-namespace surgsim {
+namespace surgsim::imaging {
 
 class VoxelBoundaryDistance {
  public:
@@ -38,4 +38,4 @@ class VoxelBoundaryDistance {
   std::int64_t face_count_ = 0;
 };
 
-}  // namespace surgsim
+}  // namespace surgsim::imaging

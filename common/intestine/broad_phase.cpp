@@ -7,6 +7,9 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
 namespace surgsim::intestine {
 
 namespace {

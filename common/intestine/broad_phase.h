@@ -38,7 +38,7 @@ class BroadPhaseDetector {
  public:
   static constexpr int kBlock = 4;  // elements per block of the hierarchy
 
-  /// Init phase (allocates; throws surgsim::Error on a bad topology).
+  /// Init phase (allocates; throws surgsim::core::Error on a bad topology).
   explicit BroadPhaseDetector(CollisionTopology topology);
 
   const CollisionTopology& topology() const { return topo_; }

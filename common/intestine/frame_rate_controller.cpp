@@ -5,6 +5,8 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+
 namespace surgsim::intestine {
 
 FrameRateController::FrameRateController(const FrameRateParams& params) : params_(params) {

@@ -54,7 +54,7 @@ struct FrameRateParams {
 
 class FrameRateController {
  public:
-  /// Throws surgsim::Error on target <= 0, alpha or beta <= 0, or an empty LOD range.
+  /// Throws surgsim::core::Error on target <= 0, alpha or beta <= 0, or an empty LOD range.
   explicit FrameRateController(const FrameRateParams& params);
 
   /// Feeds the measured frame rate (Hz) of the last frame; returns the LOD to draw next. A non-finite or

@@ -9,7 +9,7 @@
 // mesentery; node (r, c) has index r * columns + c, so the intestine's points are the first `columns` positions.
 //
 // Callers:
-//   haptic node (1 kHz): IntestineModel once (init; throws surgsim::Error on bad parameters), one IntestineState
+//   haptic node (1 kHz): IntestineModel once (init; throws surgsim::core::Error on bad parameters), one IntestineState
 //     (init; allocates everything), then per tick one probe per instrument (issue 19, at most kMaxProbes)
 //       Probe probes[n] = {{true, tip_i, radius, force_limit_i}, ...};   // active = false: instrument i's input lost
 //       intestine::step(model, state, probes, n, dt, report);    // noexcept, allocates nothing
@@ -117,7 +117,7 @@ int mesentery_taper_columns(const IntestineParams& params);
 /// The immutable model: parameters, rest shape, mass-spring system, collision topology.
 class IntestineModel {
  public:
-  /// Init phase: builds the rest shape and the springs. Throws surgsim::Error on parameters out of range.
+  /// Init phase: builds the rest shape and the springs. Throws surgsim::core::Error on parameters out of range.
   explicit IntestineModel(const IntestineParams& params);
 
   const IntestineParams& params() const { return params_; }

@@ -7,7 +7,7 @@
 
 #include "intestine/intestine_model.h"
 
-namespace surgsim {
+namespace surgsim::intestine {
 
 /// The intestine's body (model "intestine"; Raghupathi et al. 2004, DESIGN.md 4.3), YAML `intestine: {...}`.
 /// Every key is optional and defaults to intestine::IntestineParams (the paper's 4 m intestine on 4 x 100 masses):
@@ -20,8 +20,8 @@ namespace surgsim {
 ///   collisions: self_collisions, random_pairs (the paper's n), random_mesentery_pairs, seed, response_iterations,
 ///     contact_capacity.
 struct IntestineSpec {
-  intestine::IntestineParams params;  // ready for IntestineModel: probe_force_limit = tools[0].force_limit
+  IntestineParams params;  // ready for IntestineModel: probe_force_limit = tools[0].force_limit
   double probe_radius = 0.01;         // m
 };
 
-}  // namespace surgsim
+}  // namespace surgsim::intestine

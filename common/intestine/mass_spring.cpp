@@ -7,6 +7,8 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+
 namespace surgsim::intestine {
 
 const char* to_string(Integrator integrator) {

@@ -11,6 +11,9 @@
 #include "mesh/geometry.h"
 #include "core/error.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
 namespace surgsim::intestine {
 
 namespace {

@@ -125,7 +125,7 @@ double segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, co
 
 class StochasticDetector {
  public:
-  /// Init phase (allocates; throws surgsim::Error on a bad topology or parameters).
+  /// Init phase (allocates; throws surgsim::core::Error on a bad topology or parameters).
   StochasticDetector(CollisionTopology topology, const StochasticParams& params);
 
   const CollisionTopology& topology() const { return topo_; }

@@ -6,6 +6,8 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+
 namespace surgsim::intestine {
 
 namespace {

@@ -162,7 +162,7 @@ void rotation_minimizing_frames(const Eigen::Vector3d* centers, const Eigen::Vec
 
 class TubeBuilder {
  public:
-  /// Init phase (allocates): work arrays for up to `max_points` input points. Throws surgsim::Error on bad params.
+  /// Init phase (allocates): work arrays for up to `max_points` input points. Throws surgsim::core::Error on bad params.
   TubeBuilder(const TubeParams& params, int max_points);
 
   const TubeParams& params() const { return params_; }
@@ -252,7 +252,7 @@ struct MesenterySurface {
 };
 
 /// Allocates the surface for a rows x cols grid and writes the (fixed) triangles and coordinates. Throws
-/// surgsim::Error for rows or cols < 2 or steps outside 1..16.
+/// surgsim::core::Error for rows or cols < 2 or steps outside 1..16.
 MesenterySurface make_mesentery_surface(int rows, int cols, int row_steps, int col_steps);
 /// Run phase, no allocation: the refined positions and normals from `points` (3 rows cols doubles, the layout of
 /// IntestineState::positions()). False (the surface unchanged) if a point is not finite or the surface was not made

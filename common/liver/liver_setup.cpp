@@ -9,9 +9,15 @@
 #include <ostream>
 
 #include "core/error.h"
-#include "liver/fem.h"
+#include "fem/fem.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+
+namespace surgsim::liver {
 
 namespace {
 
@@ -131,4 +137,4 @@ Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, c
   return t;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::liver

@@ -6,40 +6,40 @@
 #include <string>
 #include <vector>
 
-#include "liver/fixed_set.h"
-#include "liver/precompute.h"
-#include "liver/liver_spec.h"
+#include "fem/fixed_set.h"
+#include "compliance/precompute.h"
+#include "fem/material.h"
 #include "mesh/mesh.h"
-#include "liver/tensor_cache.h"
+#include "compliance/tensor_cache.h"
 
-namespace surgsim {
+namespace surgsim::liver {
 
 /// Scenes store their tensors in float once double would take more than this (MiB; issue 17).
 constexpr double kFloatAboveMiB = 1024;
 
 /// The precompute options of a scene (issue 17): direct, the "haptic" block as one packed half, double unless the
 /// double tensors would pass kFloatAboveMiB, then float.
-PrecomputeOptions scene_precompute_options(int contact_count, const std::vector<RowSet>& rows);
+compliance::PrecomputeOptions scene_precompute_options(int contact_count, const std::vector<compliance::RowSet>& rows);
 
 struct LiverTensorSetup {
-  FixedSet fixed;
+  fem::FixedSet fixed;
   std::vector<int> contacts;     // contactable (free surface) nodes
-  std::vector<RowSet> rows;      // "haptic" (surface x surface) and "visual" (boundary x surface)
-  PrecomputeOptions options;     // direct, symmetric haptic block, double (float above kFloatAboveMiB)
-  TensorCacheKey key;
+  std::vector<compliance::RowSet> rows;      // "haptic" (surface x surface) and "visual" (boundary x surface)
+  compliance::PrecomputeOptions options;     // direct, symmetric haptic block, double (float above kFloatAboveMiB)
+  compliance::TensorCacheKey key;
   std::string cache_path;        // <cache_dir>/tensors-<combined key, hex>.bin
 };
 
 /// Resolves the fixed region on the mesh and derives everything the tensors depend on (the material enters the key).
-/// Throws surgsim::Error (e.g. a fixed set leaving a rigid mode free) naming `where` (the scene file).
-LiverTensorSetup liver_tensor_setup(const Material& material, const FixedRegion& fixed, const TetMesh& mesh,
+/// Throws surgsim::core::Error (e.g. a fixed set leaving a rigid mode free) naming `where` (the scene file).
+LiverTensorSetup liver_tensor_setup(const fem::Material& material, const fem::FixedRegion& fixed, const mesh::TetMesh& mesh,
                                     const std::string& cache_dir, const std::string& where);
 
 /// Loads the cached tensors keeping only `blocks` ("haptic", "visual"; empty = all), or, when the cache is missing,
 /// stale or corrupt, precomputes them (progress with ETA on `log`), saves the cache and keeps `blocks`. Concurrent
-/// callers on the same cache serialize on a lock file, so the work is done once. Throws surgsim::Error.
-Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, const Material& material,
-                           const std::vector<std::string>& blocks, std::ostream* log, CacheOutcome* outcome = nullptr,
+/// callers on the same cache serialize on a lock file, so the work is done once. Throws surgsim::core::Error.
+compliance::Tensors load_liver_tensors(const LiverTensorSetup& setup, const mesh::TetMesh& mesh, const fem::Material& material,
+                           const std::vector<std::string>& blocks, std::ostream* log, compliance::CacheOutcome* outcome = nullptr,
                            const std::string& where = "");
 
-}  // namespace surgsim
+}  // namespace surgsim::liver

@@ -9,7 +9,9 @@
 
 #include "core/error.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+
+namespace surgsim::mesh {
 namespace {
 
 using Tet = std::array<int, 4>;
@@ -151,4 +153,4 @@ TetMesh make_cylinder_mesh(double radius, double height, int rings, int layers) 
   return mesh;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

@@ -5,7 +5,7 @@
 
 #include "mesh/mesh.h"
 
-namespace surgsim {
+namespace surgsim::mesh {
 
 /// How each cube of a box mesh is cut into tetrahedra.
 enum class BoxSplit {
@@ -15,7 +15,7 @@ enum class BoxSplit {
 
 /// Box [origin, origin + size] (m) divided into nx x ny x nz cubes (each >= 1), cut by `split`.
 /// Node (i, j, k), 0 <= i <= nx etc., has index i + (nx + 1) * (j + (ny + 1) * k) and sits at
-/// origin + (i size.x / nx, j size.y / ny, k size.z / nz). Throws surgsim::Error on a bad count or size.
+/// origin + (i size.x / nx, j size.y / ny, k size.z / nz). Throws surgsim::core::Error on a bad count or size.
 TetMesh make_box_mesh(int nx, int ny, int nz, const Eigen::Vector3d& size,
                       const Eigen::Vector3d& origin = Eigen::Vector3d::Zero(), BoxSplit split = BoxSplit::kSix);
 
@@ -35,4 +35,4 @@ TetMesh make_cylinder_mesh(double radius, double height, int rings, int layers);
 /// Nodes per layer of make_cylinder_mesh(..., rings, ...): 1 + 3 rings (rings + 1).
 inline int cylinder_layer_nodes(int rings) { return 1 + 3 * rings * (rings + 1); }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

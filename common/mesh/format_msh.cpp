@@ -16,15 +16,17 @@
 #include "mesh/format_util.h"
 #include "mesh/mesh_internal.h"
 
-namespace surgsim {
+using namespace surgsim::core;
 
-using mesh_internal::append_number;
-using mesh_internal::check_indices;
-using mesh_internal::Cursor;
-using mesh_internal::iequals;
-using mesh_internal::printable;
-using mesh_internal::read_whole_file;
-using mesh_internal::write_whole_file;
+namespace surgsim::mesh {
+
+using internal::append_number;
+using internal::check_indices;
+using internal::Cursor;
+using internal::iequals;
+using internal::printable;
+using internal::read_whole_file;
+using internal::write_whole_file;
 
 namespace {
 
@@ -435,4 +437,4 @@ void write_msh(const std::string& path, const TetMesh& mesh) {
   write_whole_file(path, out);
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

@@ -11,7 +11,9 @@
 #include "core/error.h"
 #include "mesh/tri_surface.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+
+namespace surgsim::mesh {
 
 TriSurface read_obj(const std::string& path) {
   std::FILE* f = std::fopen(path.c_str(), "r");
@@ -66,4 +68,4 @@ TriSurface read_obj(const std::string& path) {
   return out;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

@@ -15,7 +15,7 @@
 
 #include "core/error.h"
 
-namespace surgsim::mesh_internal {
+namespace surgsim::mesh::internal {
 
 // ------------------------------------------------------------------------------------------------------------
 // Text helpers
@@ -133,12 +133,12 @@ class Cursor {
 
   template <typename... Args>
   [[noreturn]] void fail(const Args&... args) const {
-    throw_error(path_, ":", token_line_, ": ", args...);
+    core::throw_error(path_, ":", token_line_, ": ", args...);
   }
 
   template <typename... Args>
   [[noreturn]] void fail_at(int line, const Args&... args) const {
-    throw_error(path_, ":", line, ": ", args...);
+    core::throw_error(path_, ":", line, ": ", args...);
   }
 
   [[noreturn]] void fail_eof(std::string_view what) {
@@ -256,4 +256,4 @@ class Cursor {
   int token_line_ = 1;
 };
 
-}  // namespace surgsim::mesh_internal
+}  // namespace surgsim::mesh::internal

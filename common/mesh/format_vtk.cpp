@@ -17,16 +17,18 @@
 #include "mesh/format_util.h"
 #include "mesh/mesh_internal.h"
 
-namespace surgsim {
+using namespace surgsim::core;
 
-using mesh_internal::append_number;
-using mesh_internal::check_indices;
-using mesh_internal::Cursor;
-using mesh_internal::iequals;
-using mesh_internal::is_space;
-using mesh_internal::printable;
-using mesh_internal::read_whole_file;
-using mesh_internal::write_whole_file;
+namespace surgsim::mesh {
+
+using internal::append_number;
+using internal::check_indices;
+using internal::Cursor;
+using internal::iequals;
+using internal::is_space;
+using internal::printable;
+using internal::read_whole_file;
+using internal::write_whole_file;
 
 TetMesh read_vtk(const std::string& path) {
   const std::string text = read_whole_file(path);
@@ -265,4 +267,4 @@ void write_vtk_surface(const std::string& path, const Eigen::MatrixX3d& points, 
   if (std::fclose(f) != 0 || !ok) throw_error(path, ": write failed");
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

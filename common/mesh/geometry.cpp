@@ -4,7 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
-namespace surgsim {
+
+namespace surgsim::mesh {
 
 bool segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& a,
                       const Eigen::Vector3d& b, const Eigen::Vector3d& c, double& s, Eigen::Vector3d& bary) {
@@ -66,4 +67,4 @@ Eigen::Vector3d closest_point_triangle(const Eigen::Vector3d& p, const Eigen::Ve
   return a + ab * v + ac * w;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

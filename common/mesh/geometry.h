@@ -3,7 +3,7 @@
 #pragma once
 #include <Eigen/Core>
 
-namespace surgsim {
+namespace surgsim::mesh {
 
 /// Moller-Trumbore: segment [p0,p1] against triangle (a,b,c). Returns true with s in [0,1] and barycentric (k1..k3).
 bool segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& a,
@@ -13,4 +13,4 @@ bool segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, cons
 Eigen::Vector3d closest_point_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                                        const Eigen::Vector3d& c, Eigen::Vector3d& bary);
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

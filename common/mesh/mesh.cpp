@@ -17,7 +17,9 @@
 #include "core/text.h"
 #include "mesh/mesh_internal.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+
+namespace surgsim::mesh {
 namespace mesh_internal {
 
 std::string mesh_name(const TetMesh& mesh) { return mesh.source.empty() ? "<in-memory mesh>" : mesh.source; }
@@ -88,9 +90,9 @@ std::array<int, 3> outward_face(const Eigen::MatrixX3d& nodes, const Eigen::Matr
 
 }  // namespace
 
-using mesh_internal::check_indices;
-using mesh_internal::Face;
-using mesh_internal::sorted_faces;
+using internal::check_indices;
+using internal::Face;
+using internal::sorted_faces;
 
 TetMesh read_mesh(const std::string& path) {
   const std::size_t slash = path.find_last_of("/\\");
@@ -176,4 +178,4 @@ std::uint64_t mesh_hash(const TetMesh& mesh) {
   return h.digest();
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

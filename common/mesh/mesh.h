@@ -9,7 +9,7 @@
 
 #include "mesh/tri_surface.h"
 
-namespace surgsim {
+namespace surgsim::mesh {
 
 /// A linear (P1) tetrahedral mesh. Node indices are 0-based in file order (gaps in file ids are compacted).
 struct TetMesh {
@@ -30,7 +30,7 @@ struct SurfaceMesh {
 /// Reads .msh (v1, v2 or v4 ASCII) or .vtk (legacy ASCII unstructured grid), chosen by extension.
 /// Keeps tetrahedra only (other element types are skipped; a file with none is an error). Second-order tets
 /// (Gmsh type 11, VTK type 24) and binary files are refused. Does not validate: call validate_mesh next.
-/// Throws surgsim::Error naming the file and line on any malformed input ("FILE:LINE: what").
+/// Throws surgsim::core::Error naming the file and line on any malformed input ("FILE:LINE: what").
 TetMesh read_mesh(const std::string& path);
 TetMesh read_msh(const std::string& path);
 TetMesh read_vtk(const std::string& path);
@@ -39,10 +39,10 @@ TetMesh read_vtk(const std::string& path);
 void write_vtk(const std::string& path, const TetMesh& mesh, const Eigen::MatrixX3d* node_vectors = nullptr,
                const std::string& vector_name = "displacement");
 /// Writes a triangle surface (e.g. the deformed visible surface) as a VTK legacy ASCII unstructured grid of
-/// triangles. points: #P x 3 (m); tris: #F x 3 indices into points. Throws surgsim::Error naming the path.
+/// triangles. points: #P x 3 (m); tris: #F x 3 indices into points. Throws surgsim::core::Error naming the path.
 void write_vtk_surface(const std::string& path, const Eigen::MatrixX3d& points, const Eigen::MatrixX3i& tris);
 /// Reads a Wavefront .obj surface (v and f lines; polygons are fanned into triangles; vt/vn/other lines ignored;
-/// negative (relative) indices accepted). Throws surgsim::Error "FILE:LINE: ..." on a bad number, an index out of
+/// negative (relative) indices accepted). Throws surgsim::core::Error "FILE:LINE: ..." on a bad number, an index out of
 /// range, non-finite coordinates, or a file without faces.
 TriSurface read_obj(const std::string& path);
 
@@ -76,10 +76,10 @@ struct MeshValidation {
 /// Validates (and, if allowed, repairs orientation of) a mesh: non-finite coordinates, out-of-range indices,
 /// repeated nodes in a tet, zero-volume tets, inverted tets (when not fixing), unreferenced nodes,
 /// non-manifold boundary (an edge shared by other than two boundary faces; a face shared by more than two tets).
-/// Throws surgsim::Error naming the file and the element (file id) at fault; on error the mesh is left unchanged.
+/// Throws surgsim::core::Error naming the file and the element (file id) at fault; on error the mesh is left unchanged.
 void validate_mesh(TetMesh& mesh, const MeshValidation& opts = {});
 
 /// Content hash of nodes and tets (used by scenes, caches, SceneInfo).
 std::uint64_t mesh_hash(const TetMesh& mesh);
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

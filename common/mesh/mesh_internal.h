@@ -9,7 +9,7 @@
 
 #include "mesh/mesh.h"
 
-namespace surgsim::mesh_internal {
+namespace surgsim::mesh::internal {
 
 /// The mesh's source file, or "<in-memory mesh>".
 std::string mesh_name(const TetMesh& mesh);
@@ -18,7 +18,7 @@ std::string mesh_name(const TetMesh& mesh);
 std::string node_name(const TetMesh& mesh, int i);
 std::string tet_name(const TetMesh& mesh, int t);
 
-/// Throws surgsim::Error naming the mesh, the tet and `caller` when a tet references a node that does not exist.
+/// Throws surgsim::core::Error naming the mesh, the tet and `caller` when a tet references a node that does not exist.
 void check_indices(const TetMesh& mesh, const char* caller);
 
 struct Face {
@@ -30,4 +30,4 @@ struct Face {
 // All tet faces sorted by key, so that equal faces are adjacent.
 std::vector<Face> sorted_faces(const Eigen::MatrixX4i& tets);
 
-}  // namespace surgsim::mesh_internal
+}  // namespace surgsim::mesh::internal

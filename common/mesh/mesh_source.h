@@ -5,7 +5,7 @@
 #include <utility>
 #include <vector>
 
-namespace surgsim {
+namespace surgsim::mesh {
 
 /// Where the organ's tetrahedral mesh comes from: a file, or the project's own generator.
 struct MeshSource {
@@ -14,4 +14,4 @@ struct MeshSource {
   int target_nodes = 1500;   // approximate node count of a generated mesh, 100..100000
 };
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

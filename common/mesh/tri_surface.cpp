@@ -11,7 +11,9 @@
 #include "core/error.h"
 #include "core/union_find.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+
+namespace surgsim::mesh {
 
 TriSurfaceTopology tri_surface_topology(const TriSurface& mesh) {
   TriSurfaceTopology t;
@@ -140,4 +142,4 @@ void check_closed_surface(const TriSurface& mesh, const std::string& what) {
   if (!(tri_surface_volume(mesh) > 0.0)) throw_error(what, ": the surface encloses no positive volume (faces inward?)");
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

@@ -5,7 +5,7 @@
 #include <Eigen/Core>
 #include <string>
 
-namespace surgsim {
+namespace surgsim::mesh {
 
 /// A triangle surface with its own vertices.
 struct TriSurface {
@@ -37,8 +37,8 @@ double tri_surface_min_quality(const TriSurface& mesh);
 /// Drops vertices no triangle uses and renumbers (order kept).
 void compact_tri_surface(TriSurface& mesh);
 
-/// Throws surgsim::Error "<what>: ..." unless the surface is closed, 2-manifold, consistently oriented and
+/// Throws surgsim::core::Error "<what>: ..." unless the surface is closed, 2-manifold, consistently oriented and
 /// connected, with finite coordinates and a positive enclosed volume.
 void check_closed_surface(const TriSurface& mesh, const std::string& what);
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

@@ -13,13 +13,15 @@
 #include "core/error.h"
 #include "mesh/mesh_internal.h"
 
-namespace surgsim {
+using namespace surgsim::core;
 
-using mesh_internal::Face;
-using mesh_internal::mesh_name;
-using mesh_internal::node_name;
-using mesh_internal::sorted_faces;
-using mesh_internal::tet_name;
+namespace surgsim::mesh {
+
+using internal::Face;
+using internal::mesh_name;
+using internal::node_name;
+using internal::sorted_faces;
+using internal::tet_name;
 
 namespace {
 
@@ -163,4 +165,4 @@ void validate_mesh(TetMesh& mesh, const MeshValidation& opts) {
   mesh.tets = std::move(tets);
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesh

@@ -21,7 +21,10 @@
 #include "core/error.h"
 #include "mesh/tri_surface.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
+namespace surgsim::mesher {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -679,4 +682,4 @@ std::string ensure_organ_mesh(const OrganSpec& spec, const std::string& cache_di
   return path;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesher

@@ -12,7 +12,7 @@
 #include "mesh/mesh.h"
 #include "mesh/tri_surface.h"
 
-namespace surgsim {
+namespace surgsim::mesher {
 
 /// Node counts a spec may ask for (inclusive).
 inline constexpr int kMinOrganNodes = 100;
@@ -42,7 +42,7 @@ struct OrganMeshReport {
 /// The shapes generate_organ knows, in a stable order.
 const std::vector<std::string>& organ_shapes();
 
-/// Throws surgsim::Error with a one-line reason if the shape is unknown or target_nodes is out of range.
+/// Throws surgsim::core::Error with a one-line reason if the shape is unknown or target_nodes is out of range.
 void check_organ_spec(const OrganSpec& spec);
 
 /// Meshes the organ with linear tetrahedra, with about spec.target_nodes nodes (within +-20 % for targets from 500
@@ -51,8 +51,8 @@ void check_organ_spec(const OrganSpec& spec);
 /// Deterministic: the same spec gives a bit-identical mesh (one thread, fixed seed, no user Gmsh config files).
 /// The result has been through validate_mesh (positively oriented, no degenerate tets, manifold boundary).
 /// `progress`, if given, receives one line per meshing attempt and Gmsh's own log; otherwise Gmsh is silent.
-/// Throws surgsim::Error on a bad spec or when Gmsh fails. Takes a process-wide lock (see the file comment).
-TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress = nullptr, OrganMeshReport* report = nullptr);
+/// Throws surgsim::core::Error on a bad spec or when Gmsh fails. Takes a process-wide lock (see the file comment).
+mesh::TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress = nullptr, OrganMeshReport* report = nullptr);
 
 /// Tetrahedralizes the solid a closed triangle surface bounds, keeping the surface's triangles as the mesh boundary
 /// (Gmsh 3D Delaunay inside a discrete surface; no remeshing of the surface), with about `target_nodes` nodes: the
@@ -60,9 +60,9 @@ TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress = nullptr, 
 /// like generate_organ's. The surface's triangles face outward (counter-clockwise seen from outside); it must be
 /// closed, 2-manifold and free of self-intersections, and have fewer vertices than target_nodes
 /// (closed_surface_nodes gives a good vertex count to reduce it to). The result has been through validate_mesh and
-/// its boundary is exactly `surface.tris` (nodes renumbered). Deterministic. Throws surgsim::Error when Gmsh fails or
+/// its boundary is exactly `surface.tris` (nodes renumbered). Deterministic. Throws surgsim::core::Error when Gmsh fails or
 /// the input is unusable. Takes the process-wide Gmsh lock (see the file comment).
-TetMesh mesh_closed_surface(const TriSurface& surface, int target_nodes, std::ostream* progress = nullptr,
+mesh::TetMesh mesh_closed_surface(const mesh::TriSurface& surface, int target_nodes, std::ostream* progress = nullptr,
                             OrganMeshReport* report = nullptr);
 
 /// Surface vertices of a quasi-uniform tetrahedral mesh with `target_nodes` nodes of a solid with this volume (m^3)
@@ -77,8 +77,8 @@ std::string organ_mesh_path(const OrganSpec& spec, const std::string& cache_dir)
 /// .msh, with a VTK .vtk beside it). Files are written to a unique temporary name in cache_dir and renamed into
 /// place, so a concurrent reader or a second process generating the same spec never sees a partial file.
 /// `generated`, if given, is set to true when this call meshed and wrote the file, false when it was cached.
-/// Creates cache_dir if missing. Throws surgsim::Error on a bad spec or when the folder is not writable.
+/// Creates cache_dir if missing. Throws surgsim::core::Error on a bad spec or when the folder is not writable.
 std::string ensure_organ_mesh(const OrganSpec& spec, const std::string& cache_dir, std::ostream* progress = nullptr,
                               bool* generated = nullptr);
 
-}  // namespace surgsim
+}  // namespace surgsim::mesher

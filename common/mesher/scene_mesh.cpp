@@ -7,7 +7,11 @@
 #include "core/error.h"
 #include "mesher/organ_mesher.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::scene;
+
+namespace surgsim::mesher {
 
 std::string default_cache_dir() {
   std::string dir;
@@ -44,4 +48,4 @@ TetMesh load_scene_mesh(const Scene& scene, const std::string& cache_dir, std::o
   }
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::mesher

@@ -6,14 +6,14 @@
 #include "mesh/mesh.h"
 #include "scene/scene.h"
 
-namespace surgsim {
+namespace surgsim::mesher {
 
 /// Cache folder for generated meshes and tensors: $SURGSIM_CACHE_DIR, else $XDG_CACHE_HOME/surgsim,
 /// else ~/.cache/surgsim. Created if missing.
 std::string default_cache_dir();
 
 /// Loads (file) or generates-and-caches (generate) the scene's tetrahedral mesh and validates it.
-/// Throws surgsim::Error naming the scene file and the mesh at fault.
-TetMesh load_scene_mesh(const Scene& scene, const std::string& cache_dir, std::ostream* progress = nullptr);
+/// Throws surgsim::core::Error naming the scene file and the mesh at fault.
+mesh::TetMesh load_scene_mesh(const scene::Scene& scene, const std::string& cache_dir, std::ostream* progress = nullptr);
 
-}  // namespace surgsim
+}  // namespace surgsim::mesher

@@ -8,7 +8,7 @@
 #include <algorithm>
 #include <cstdlib>
 
-namespace surgsim {
+namespace surgsim::os {
 namespace {
 
 std::vector<int> cpus_of(const cpu_set_t& set) {
@@ -97,4 +97,4 @@ int other_threads_allowed_on(int cpu) {
   return read ? count : -1;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::os

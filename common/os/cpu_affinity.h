@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-namespace surgsim {
+namespace surgsim::os {
 
 /// The CPUs the calling thread may run on (sched_getaffinity), ascending.
 std::vector<int> allowed_cpus();
@@ -30,4 +30,4 @@ std::string keep_off_cpu(int cpu);
 /// not for real-time code). -1 when /proc cannot be read.
 int other_threads_allowed_on(int cpu);
 
-}  // namespace surgsim
+}  // namespace surgsim::os

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <cstring>
 
-namespace surgsim {
+namespace surgsim::os {
 namespace {
 constexpr const char* kDevice = "/dev/cpu_dma_latency";
 }
@@ -45,4 +45,4 @@ long CpuLatencyRequest::current_us() {
   return ok ? static_cast<long>(value) : -1;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::os

@@ -10,7 +10,7 @@
 #pragma once
 #include <string>
 
-namespace surgsim {
+namespace surgsim::os {
 
 class CpuLatencyRequest {
  public:
@@ -34,4 +34,4 @@ class CpuLatencyRequest {
   std::string note_;
 };
 
-}  // namespace surgsim
+}  // namespace surgsim::os

@@ -4,7 +4,7 @@
 
 #include <cstring>
 
-namespace surgsim {
+namespace surgsim::os {
 
 ScopedFifo::ScopedFifo(int priority) {
   // pthread_*schedparam, not sched_*: glibc caches a thread's scheduling and copies that cache into the threads it
@@ -30,4 +30,4 @@ ScopedFifo::~ScopedFifo() {
   if (raised_) pthread_setschedparam(pthread_self(), policy_, &param_);
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::os

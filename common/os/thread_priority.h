@@ -8,7 +8,7 @@
 
 #include <string>
 
-namespace surgsim {
+namespace surgsim::os {
 
 class ScopedFifo {
  public:
@@ -30,4 +30,4 @@ class ScopedFifo {
   std::string note_;
 };
 
-}  // namespace surgsim
+}  // namespace surgsim::os

@@ -22,11 +22,19 @@
 #include "core/error.h"
 #include "core/hash.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::tool;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::intestine;
+
 #ifndef SURGSIM_DEFAULT_CONFIG_DIR
 #define SURGSIM_DEFAULT_CONFIG_DIR "config"
 #endif
 
-namespace surgsim {
+namespace surgsim::scene {
 
 namespace fs = std::filesystem;
 
@@ -881,4 +889,4 @@ std::string resolve_scene_path(const std::string& name_or_path) {
               " (shipped scenes: ", shipped_list(), "; or give the path of a scene .yaml)");
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::scene

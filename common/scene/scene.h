@@ -8,12 +8,12 @@
 #include <vector>
 
 #include "intestine/intestine_spec.h"
-#include "liver/corotation.h"
-#include "liver/liver_spec.h"
+#include "compliance/corotation.h"
+#include "fem/material.h"
 #include "mesh/mesh_source.h"
 #include "tool/tool.h"
 
-namespace surgsim {
+namespace surgsim::scene {
 
 struct HapticSpec {
   double rate_hz = 300.0;  // 50..20000
@@ -47,10 +47,10 @@ struct VisualSpec {
 
 /// The liver's run-time model (issue 16), YAML `liver: {deformation: linear | corotational | multirate, curves: cylinder | organ}`.
 struct LiverOptions {
-  LiverDeformation deformation = LiverDeformation::kLinear;  // corotational: warped compliance (liver/corotation.h);
-                                                             // multirate: neo-Hookean tracker (liver/multirate.h)
+  compliance::LiverDeformation deformation = compliance::LiverDeformation::kLinear;  // corotational: warped compliance (compliance/corotation.h);
+                                                             // multirate: neo-Hookean tracker (nonlinear/multirate.h)
   bool organ_curves = false;  // curves: organ: P and Q fitted on the organ's own Newton indentations (cached)
-  bool defaults() const { return deformation == LiverDeformation::kLinear && !organ_curves; }
+  bool defaults() const { return deformation == compliance::LiverDeformation::kLinear && !organ_curves; }
 };
 
 struct Scene {
@@ -58,17 +58,17 @@ struct Scene {
   std::string file;        // absolute path of the YAML it came from
   std::string dir;         // folder of `file`, for resolving relative paths
   std::string model = "liver";  // "liver" (precomputed FEM) | "intestine" (mass-spring)
-  MeshSource mesh;
-  Material material;
-  FixedRegion fixed;
-  NonlinearSpec nonlinear;
+  mesh::MeshSource mesh;
+  fem::Material material;
+  fem::FixedRegion fixed;
+  nonlinear::NonlinearSpec nonlinear;
   LiverOptions liver;       // read for model "liver" only
   /// The instruments (issue 19): 1..kMaxInstruments, from the `tools:` list or the single `tool:` key (one
   /// instrument named "tool"). Never empty. Instrument i is ToolCommand/ForceFeedback instrument i.
-  std::vector<ToolSpec> tools = {ToolSpec{}};
+  std::vector<tool::ToolSpec> tools = {tool::ToolSpec{}};
   HapticSpec haptic;
   VisualSpec visual;
-  IntestineSpec intestine;  // read for model "intestine" only
+  intestine::IntestineSpec intestine;  // read for model "intestine" only
   std::string trajectory;  // absolute path of the default trajectory, may be empty
 
   /// Hash of everything both nodes must agree on: model, mesh source (file NAME, not path or content; or
@@ -78,7 +78,7 @@ struct Scene {
   std::uint64_t hash() const;
 };
 
-/// Loads and validates a scene. Throws surgsim::Error "FILE:LINE: key 'a.b': <what is wrong> (<fix>)".
+/// Loads and validates a scene. Throws surgsim::core::Error "FILE:LINE: key 'a.b': <what is wrong> (<fix>)".
 /// Every key is optional except `name` and `mesh` (`mesh` is optional for model "intestine"); unknown keys, wrong
 /// types, out-of-range values and referenced files (mesh, curves, surface, trajectory) that do not exist are
 /// errors. Relative paths are resolved against the scene file's folder; axes and normals are normalized.
@@ -89,7 +89,7 @@ Scene load_scene(const std::string& path);
 std::string config_dir();
 
 /// Resolves a scene argument: an existing path, or a shipped scene name ("liver" -> config/liver.yaml).
-/// Throws surgsim::Error listing the shipped scenes when neither exists.
+/// Throws surgsim::core::Error listing the shipped scenes when neither exists.
 std::string resolve_scene_path(const std::string& name_or_path);
 
-}  // namespace surgsim
+}  // namespace surgsim::scene

@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace surgsim {
+namespace surgsim::tool {
 
 namespace {
 // A fixed orthonormal frame (axis, e1, e2) from the base axis, independent of the pose.
@@ -48,4 +48,4 @@ ToolGeometry tool_geometry(const ToolSpec& spec, const Pose5& pose) {
   return g;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::tool

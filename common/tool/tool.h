@@ -6,7 +6,7 @@
 
 #include "tool/trajectory.h"
 
-namespace surgsim {
+namespace surgsim::tool {
 
 constexpr int kMaxShaftPoints = 32;
 
@@ -48,4 +48,4 @@ struct ToolGeometry {
 /// second normal; insertion is the tip's distance past the trocar; roll turns the jaw plane about the shaft.
 ToolGeometry tool_geometry(const ToolSpec& spec, const Pose5& pose);
 
-}  // namespace surgsim
+}  // namespace surgsim::tool

@@ -13,7 +13,9 @@
 #include "core/error.h"
 #include "core/text.h"
 
-namespace surgsim {
+using namespace surgsim::core;
+
+namespace surgsim::tool {
 
 namespace {
 
@@ -538,4 +540,4 @@ void TrajectoryRecorder::close() {
   since_flush_ = 0;
 }
 
-}  // namespace surgsim
+}  // namespace surgsim::tool

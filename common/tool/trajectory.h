@@ -24,7 +24,7 @@
 #include <string>
 #include <vector>
 
-namespace surgsim {
+namespace surgsim::tool {
 
 /// Instruments a scene may have (the scene's tools list; msg::kMaxInstruments of idl/Surgsim.idl).
 constexpr int kMaxInstruments = 4;
@@ -45,7 +45,7 @@ struct TrajectorySample {
 
 class Trajectory {
  public:
-  /// Reads and validates a trajectory file. Throws surgsim::Error "FILE:LINE: ..." on a bad header, a wrong
+  /// Reads and validates a trajectory file. Throws surgsim::core::Error "FILE:LINE: ..." on a bad header, a wrong
   /// column count, a non-numeric or non-finite value, non-increasing time, or a truncated last line.
   static Trajectory load(const std::string& path);
 
@@ -65,7 +65,7 @@ class Trajectory {
 /// Poses of one or more instruments over time (v1 or v2 file).
 class MultiTrajectory {
  public:
-  /// Reads and validates a v1 or v2 file. Throws surgsim::Error "FILE:LINE: ..." as Trajectory::load does, and for a
+  /// Reads and validates a v1 or v2 file. Throws surgsim::core::Error "FILE:LINE: ..." as Trajectory::load does, and for a
   /// v2 header whose groups are not NAME.pitch,NAME.yaw,NAME.insertion,NAME.roll,NAME.jaw, a repeated name, more than
   /// kMaxInstruments groups, or a group partly empty.
   static MultiTrajectory load(const std::string& path);
@@ -106,7 +106,7 @@ class TrajectoryRecorder {
   TrajectoryRecorder(const TrajectoryRecorder&) = delete;
   TrajectoryRecorder& operator=(const TrajectoryRecorder&) = delete;
   /// Creates (truncates) the file and writes and flushes the header. flush_every < 1 means 1.
-  /// Throws surgsim::Error if the file cannot be created. Closes a previously open file first.
+  /// Throws surgsim::core::Error if the file cannot be created. Closes a previously open file first.
   void open(const std::string& path, int flush_every = 10);
   /// The same for the named instruments: v1 when `names` is {"tool"}, else v2 with one column group per name
   /// (1..kMaxInstruments names). Then use format_multi().
@@ -147,4 +147,4 @@ class TrajectoryRecorder {
   double last_t_ = 0;  // s, t of the last sample written
 };
 
-}  // namespace surgsim
+}  // namespace surgsim::tool

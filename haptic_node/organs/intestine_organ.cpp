@@ -12,6 +12,11 @@
 #include "haptic_dds.h"
 #include "publisher.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+
 namespace surgsim {
 
 IntestineOrgan::IntestineOrgan(const Scene& scene, std::uint64_t ticks)

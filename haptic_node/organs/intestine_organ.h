@@ -28,9 +28,9 @@ namespace surgsim {
 
 class IntestineOrgan final : public HapticOrgan {
  public:
-  /// Init (allocates; throws surgsim::Error on bad parameters): the model and state of scene.intestine, room for
+  /// Init (allocates; throws surgsim::core::Error on bad parameters): the model and state of scene.intestine, room for
   /// `ticks` step times.
-  IntestineOrgan(const Scene& scene, std::uint64_t ticks);
+  IntestineOrgan(const scene::Scene& scene, std::uint64_t ticks);
 
   const char* model_name() const override { return "intestine"; }
 
@@ -39,13 +39,13 @@ class IntestineOrgan final : public HapticOrgan {
 
   /// Run phase, noexcept, no allocation: one step of dt (s) with probe i at instrument i's tool tip (i < count, at
   /// most kMaxInstruments; no probe for an instrument whose tool is null, e.g. its device input lost: the body keeps
-  /// moving under the others, its force is zero). Fills out[i] as LiverContacts::step does: force (N, on instrument
+  /// moving under the others, its force is zero). Fills out[i] as ToolContacts::step does: force (N, on instrument
   /// i, before its device clamp), device_force (clamped to scene.tools[i].force_limit, always finite), saturated,
   /// over_capacity (its probe's or the body's self-contact capacity exceeded), nonfinite (the step was refused and the
   /// state restored, every force zero: a fault; or its probe was not finite), points_in_contact (elements its probe
   /// touches). direction stays zero (no force law).
   using HapticOrgan::step;
-  void step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept override;
+  void step(const contact::InstrumentInput* inputs, int count, double dt, contact::ContactTick* out) noexcept override;
   /// Elements the probes touched in the last step: all of them, and instrument i's.
   int contacts() const noexcept override;
   int instrument_contacts(int i) const noexcept override;
@@ -95,7 +95,7 @@ class IntestineOrgan final : public HapticOrgan {
   std::array<double, intestine::kMaxProbes> force_limits_{};  // N, each instrument's device limit
   std::array<intestine::Probe, intestine::kMaxProbes> probes_{};  // this tick's probes
   std::array<ProbeStats, intestine::kMaxProbes> probe_stats_{};
-  SampleRecorder step_us_;
+  core::SampleRecorder step_us_;
   std::uint64_t steps_ = 0;
   std::uint64_t faults_ = 0;
   std::uint64_t status_counts_[4] = {0, 0, 0, 0};  // by intestine::StepStatus

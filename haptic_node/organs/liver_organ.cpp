@@ -8,8 +8,19 @@
 #include "core/error.h"
 #include "haptic_dds.h"
 #include "liver/liver_setup.h"
-#include "liver/organ_curves.h"
+#include "nonlinear/organ_curves.h"
 #include "mesher/scene_mesh.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::contact;
+using namespace surgsim::liver;
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 namespace surgsim {
 
@@ -23,7 +34,7 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
                 " nodes, a BodyState carries at most ", msg::kMaxBodyPoints,
                 ": use a coarser mesh (mesh.target_nodes) or liver.deformation linear");
   }
-  mesh_hash_ = surgsim::mesh_hash(mesh_);
+  mesh_hash_ = surgsim::mesh::mesh_hash(mesh_);
   const LiverTensorSetup setup = liver_tensor_setup(scene.material, scene.fixed, mesh_, cache_dir, scene.file);
   tensors_ = load_liver_tensors(setup, mesh_, scene.material, {"haptic"}, progress, nullptr, scene.file);
   tensor_hash_ = setup.key.combined();
@@ -31,12 +42,12 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
       scene.liver.organ_curves
           ? load_organ_law(mesh_, scene.material, setup.fixed, tensor_hash_, cache_dir, progress)
           : load_nonlinear_law(scene.nonlinear, scene.material));
-  contacts_ = std::make_unique<LiverContacts>(mesh_, surface_, tensors_, scene.tools,
+  contacts_ = std::make_unique<ToolContacts>(mesh_, surface_, tensors_, scene.tools,
                                               law_->identity() ? nullptr : law_.get(), scene.liver.deformation);
   if (multirate) {
     // The neo-Hookean organ on the tensors' own mesh, material and fixed set; its tracker thread is started from
     // this (the main) thread, so with --cpu N it inherits the CPUs the haptic app left to everything but the loop.
-    multirate_ = std::make_unique<LiverMultirate>(mesh_, scene.material, setup.fixed, surface_.nodes, scene.file);
+    multirate_ = std::make_unique<MultirateContacts>(mesh_, scene.material, setup.fixed, surface_.nodes, scene.file);
     contacts_->attach_multirate(multirate_.get());
     instruments_at_.resize(kInstrumentTicks);
     min_period_ns_ = scene.visual.rate_hz > 0 ? static_cast<std::uint64_t>(1e9 / scene.visual.rate_hz) : 0;
@@ -112,7 +123,7 @@ void LiverOrgan::write(const TickRecord& r, std::uint64_t stamp_ns) noexcept {
 
 void LiverOrgan::add_stats(nlohmann::json& j) const {
   if (multirate_ == nullptr) return;
-  LiverMultirate& m = *multirate_;
+  MultirateContacts& m = *multirate_;
   m.stop();  // shutdown: its counters and cycle times are final
   j["multirate"] = {{"tracker_cycles", m.tracker_cycles()},
                     {"snapshots_published", m.snapshots_published()},

@@ -1,8 +1,8 @@
 // The liver in the haptic node (Cotin 1998, DESIGN.md 4.1-4.2): the scene's tetrahedral mesh, the "haptic" block of
 // the precomputed tensors (from the cache both nodes share), the quasi non-linear law and the contact model
-// (LiverContacts: bucket grid, unilateral contacts and grasps, mutual-influence correction, device clamp).
+// (ToolContacts: bucket grid, unilateral contacts and grasps, mutual-influence correction, device clamp).
 // With liver.deformation multirate (issue 16) it also owns the scene's liver as a neo-Hookean organ tracked on a
-// thread of its own (organs/liver_multirate.h), whose snapshots give the contact forces, and publishes the tracker's
+// thread of its own (nonlinear/multirate_contacts.h), whose snapshots give the contact forces, and publishes the tracker's
 // surface as BodyState (the wire protocol: one sample per new surface, at most the scene's visual rate; positions[k]
 // = rest + displacement of surface node k; sim_time of the targets it was computed for; the instruments of that
 // tick), written by the publisher thread, never the loop.
@@ -12,12 +12,12 @@
 #include <memory>
 #include <thread>
 
-#include "liver/nonlinear_law.h"
-#include "liver/precompute.h"
+#include "nonlinear/nonlinear_law.h"
+#include "compliance/precompute.h"
 #include "mesh/mesh.h"
 #include "organ.h"
-#include "organs/liver_contacts.h"
-#include "organs/liver_multirate.h"
+#include "contact/tool_contacts.h"
+#include "nonlinear/multirate_contacts.h"
 #include "publisher.h"
 #include "surgsim_types.h"
 #include "dds_support.h"
@@ -26,11 +26,11 @@ namespace surgsim {
 
 class LiverOrgan final : public HapticOrgan {
  public:
-  /// Init (allocates; may precompute the tensors, with progress on `progress`). Throws surgsim::Error (multirate:
+  /// Init (allocates; may precompute the tensors, with progress on `progress`). Throws surgsim::core::Error (multirate:
   /// also for a surface of more than msg::kMaxBodyPoints nodes). `tracker_thread` false (tests): a multirate scene's
   /// tracker is not started; the test cycles it with multirate()->cycle_once(). `tracker_threads`: the tracker's
-  /// numeric threads (LiverMultirate::set_numeric_threads).
-  LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread = true,
+  /// numeric threads (MultirateContacts::set_numeric_threads).
+  LiverOrgan(const scene::Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread = true,
              int tracker_threads = 1);
   /// Stops the rotation thread (corotational) and the tracker thread (multirate).
   ~LiverOrgan() override;
@@ -39,7 +39,7 @@ class LiverOrgan final : public HapticOrgan {
 
   const char* model_name() const override { return "liver"; }
   using HapticOrgan::step;
-  void step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept override;
+  void step(const contact::InstrumentInput* inputs, int count, double dt, contact::ContactTick* out) noexcept override;
   int contacts() const noexcept override { return contacts_->solution().count; }
   int instrument_contacts(int i) const noexcept override { return contacts_->instrument_nodes(i); }
   int contact_entries() const noexcept override { return contacts_->solution().count; }
@@ -60,22 +60,22 @@ class LiverOrgan final : public HapticOrgan {
   void add_stats(nlohmann::json& stats) const override;
   void print_summary(std::ostream& out) const override;
 
-  const TetMesh& mesh() const { return mesh_; }
-  const SurfaceMesh& surface() const { return surface_; }
+  const mesh::TetMesh& mesh() const { return mesh_; }
+  const mesh::SurfaceMesh& surface() const { return surface_; }
   /// Multirate (null otherwise).
-  LiverMultirate* multirate() const { return multirate_.get(); }
+  nonlinear::MultirateContacts* multirate() const { return multirate_.get(); }
   std::uint64_t body_states_published() const { return body_published_.load(std::memory_order_relaxed); }
-  const LiverContacts& liver_contacts() const { return *contacts_; }
+  const contact::ToolContacts& liver_contacts() const { return *contacts_; }
 
  private:
-  TetMesh mesh_;
-  SurfaceMesh surface_;
+  mesh::TetMesh mesh_;
+  mesh::SurfaceMesh surface_;
   std::uint64_t mesh_hash_ = 0;
-  Tensors tensors_;                        // "haptic" block only
+  compliance::Tensors tensors_;                        // "haptic" block only
   std::uint64_t tensor_hash_ = 0;
-  std::unique_ptr<NonlinearLaw> law_;      // identity when the scene has no curves
-  std::unique_ptr<LiverMultirate> multirate_;  // multirate only (before contacts_: it outlives the pointer there)
-  std::unique_ptr<LiverContacts> contacts_;
+  std::unique_ptr<nonlinear::NonlinearLaw> law_;      // identity when the scene has no curves
+  std::unique_ptr<nonlinear::MultirateContacts> multirate_;  // multirate only (before contacts_: it outlives the pointer there)
+  std::unique_ptr<contact::ToolContacts> contacts_;
   // Corotational (issue 16): every surface node's rotation refreshed off the loop thread.
   static constexpr double kRotationRefreshHz = 200;
   std::atomic<bool> stop_rotations_{false};
@@ -84,7 +84,7 @@ class LiverOrgan final : public HapticOrgan {
   struct InstrumentsAt {  // the instruments of one tick
     std::uint64_t seq = ~0ull;
     int count = 0;
-    std::array<InstrumentRecord, kMaxInstruments> instruments{};
+    std::array<InstrumentRecord, tool::kMaxInstruments> instruments{};
   };
   static constexpr std::size_t kInstrumentTicks = 512;  // ticks kept: more than a tracker cycle at 1 kHz
   std::vector<InstrumentsAt> instruments_at_;

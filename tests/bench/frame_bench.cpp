@@ -23,6 +23,11 @@
 #include "scene/scene.h"
 #include "tool/tool.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
+
 int main(int argc, char** argv) {
   using namespace surgsim;
   int frames = 120;

@@ -20,17 +20,23 @@
 #include <vector>
 
 #include "csv_out.h"
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
-#include "liver/precompute.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
+#include "compliance/precompute.h"
 #include "mesh/box_mesh.h"
 #include "mesher/scene_mesh.h"
 #include "force_stage.h"
-#include "organs/liver_contacts.h"
+#include "contact/tool_contacts.h"
 #include "organs/liver_organ.h"
 #include "scene/scene.h"
 #include "support/slab_util.h"
 #include "tool/trajectory.h"
+
+using namespace surgsim::tool;
+using namespace surgsim::contact;
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 namespace surgsim {
 namespace {
@@ -66,7 +72,7 @@ struct Slab : test::Slab {
   }
 };
 
-ContactTick step(LiverContacts& c, const Eigen::Vector3d& tip, double jaw = 0.5) {
+ContactTick step(ToolContacts& c, const Eigen::Vector3d& tip, double jaw = 0.5) {
   ContactTick t;
   c.step(test::vertical_tool(tip), jaw, t, kDt);
   return t;
@@ -83,7 +89,7 @@ void slab_slides(const Slab& slab, Out& out) {
   for (const Path& path : paths) {
     for (double depth : {0.001, 0.003}) {
       for (ContactModel m : {ContactModel::kTriangle, ContactModel::kPatch}) {
-        LiverContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
+        ToolContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
         step(c, path.start + Eigen::Vector3d(0, 0, kTop + 0.002));
         for (int k = 0; k <= 100; ++k)
           step(c, path.start + Eigen::Vector3d(0, 0, kTop - depth * std::min(1.0, k / 50.0)));
@@ -112,7 +118,7 @@ void slab_steps(const Slab& slab, Out& out) {
   const Eigen::Vector3d start(0.0731, 0.0977, kTop + 0.003);
   for (ContactModel m : {ContactModel::kTriangle, ContactModel::kPatch}) {
     {  // approach at 0.1 m/s to 6 mm below the start (3 mm deep), hold
-      LiverContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
+      ToolContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
       double prev = 0, worst = 0, held = 0;
       for (int k = 0; k <= 160; ++k) {
         held = step(c, start + Eigen::Vector3d(0, 0, std::max(-0.006, -1e-4 * k))).force.norm();
@@ -122,7 +128,7 @@ void slab_steps(const Slab& slab, Out& out) {
       out.figure("slab onset 0.1 m/s to 3 mm", m, "step_max", held > 0 ? 100 * worst / held : 0, "% of held");
     }
     if (m == ContactModel::kPatch) {  // the same approach, as the device is sent it (after the force stage)
-      LiverContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
+      ToolContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
       ForceStage stage(HapticSpec{}, 100.0);
       double prev = 0, moving = 0, stop = 0, held = 0;
       for (int k = 0; k <= 160; ++k) {
@@ -142,7 +148,7 @@ void slab_steps(const Slab& slab, Out& out) {
       out.figure("slab approach stops dead", kStaged, "step_max", held > 0 ? 100 * stop / held : 0, "% of held");
     }
     {  // a 5 mm stab in one tick, hold 100 ms
-      LiverContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
+      ToolContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
       step(c, start);
       double prev = 0, worst = 0, held = 0;
       for (int k = 0; k < 100; ++k) {
@@ -153,7 +159,7 @@ void slab_steps(const Slab& slab, Out& out) {
       out.figure("slab stab 5 mm in one tick", m, "step_max", held > 0 ? 100 * worst / held : 0, "% of held");
     }
     {  // a grasp pulled 3 mm above the rest surface, then released
-      LiverContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
+      ToolContacts c(slab.mesh, slab.surface, slab.tensors, slab.spec(m));
       for (int k = 0; k <= 60; ++k) step(c, start + Eigen::Vector3d(0, 0, std::max(-0.006, -1e-4 * k)));
       for (int k = 0; k < 10; ++k) step(c, start + Eigen::Vector3d(0, 0, -0.006), 0.0);
       ContactTick t;

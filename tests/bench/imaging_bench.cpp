@@ -15,6 +15,8 @@
 #include "imaging/segmentation.h"
 #include "imaging/volume_io.h"
 
+using namespace surgsim::imaging;
+
 namespace {
 
 using namespace surgsim;

@@ -29,6 +29,11 @@
 #include "support/intestine_test_util.h"
 #include "intestine/tube_geometry.h"
 
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::intestine;
+
 namespace {
 
 using namespace surgsim::intestine;

@@ -37,6 +37,8 @@
 #include "scene/scene.h"
 #include "intestine/tube_geometry.h"
 
+using namespace surgsim::intestine;
+
 namespace {
 
 using namespace surgsim::intestine;
@@ -449,7 +451,7 @@ void lod_table(const Config& cfg, const std::vector<std::vector<double>>& states
              "render_ms_p50,render_ms_p99,frame_ms_p50,frame_ms_p99,renderer");
   std::unique_ptr<surgsim::Renderer> renderer;
   std::string renderer_name = "none";
-  const surgsim::Scene scene = surgsim::load_scene(surgsim::resolve_scene_path("intestine"));
+  const surgsim::scene::Scene scene = surgsim::scene::load_scene(surgsim::scene::resolve_scene_path("intestine"));
   LodScene drawn(params.rows, params.columns, params.columns);
   if (cfg.render) {
     renderer = surgsim::make_renderer("osmesa", cfg.width, cfg.height);
@@ -524,7 +526,7 @@ void frame_rate_table(const Config& cfg, const std::vector<std::vector<double>>&
   CsvOut csv(cfg.out, "intestine_frame_rate",
              "target_fps,frames,fps_mean,work_ms_p50,work_ms_p99,lod_mean,lod_min,lod_max,lod_final,frames_to_settle,"
              "samples,triangles_mean,renderer,skinning");
-  surgsim::Scene scene = surgsim::load_scene(surgsim::resolve_scene_path("intestine"));
+  surgsim::scene::Scene scene = surgsim::scene::load_scene(surgsim::scene::resolve_scene_path("intestine"));
   auto renderer = surgsim::make_renderer("osmesa", cfg.width, cfg.height);
   std::string skinning_used = "cpu";
   std::printf("%-10s %8s %9s %9s %9s %8s %8s %9s %8s %9s\n", "target Hz", "mean Hz", "work p50", "work p99", "LOD mean",

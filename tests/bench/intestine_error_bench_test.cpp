@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+using namespace surgsim::core;
+
 namespace {
 
 namespace fs = std::filesystem;

@@ -17,8 +17,8 @@ namespace surgsim::intestine::bench {
 struct RunResult {
   std::vector<double> total, dynamics, detection, response;  // wall clock per step, us
   std::vector<double> cpu;                                   // thread CPU time per step, us
-  RecallStats recall;    // summed over the compared steps
-  RecallStats recall_kind[2];  // the same, intestine-intestine [0] and intestine-mesentery [1] contacts apart
+  intestine::RecallStats recall;    // summed over the compared steps
+  intestine::RecallStats recall_kind[2];  // the same, intestine-intestine [0] and intestine-mesentery [1] contacts apart
   int compared = 0;      // steps compared with the reference
   double residual = 0;   // m, largest brute-force penetration after the response (compared steps)
   double contacts_mean = 0;
@@ -35,15 +35,15 @@ struct RunResult {
 namespace detail {
 
 // Identity of a contact as compare_with_reference counts it: kind, segment, segment or mesentery cell.
-inline std::int64_t contact_key(const CollisionContact& c) {
-  const int b = c.kind == ContactKind::kSegmentSegment ? c.element_b : c.element_b / 2;
+inline std::int64_t contact_key(const intestine::CollisionContact& c) {
+  const int b = c.kind == intestine::ContactKind::kSegmentSegment ? c.element_b : c.element_b / 2;
   return (static_cast<std::int64_t>(c.kind) << 40) | (static_cast<std::int64_t>(c.element_a) << 20) | b;
 }
 
 // Onsets of reference contacts and their latency until the detector reports them.
 class DetectLatency {
  public:
-  void compare(int step, const ContactList& found, const ContactList& truth, RunResult& r) {
+  void compare(int step, const intestine::ContactList& found, const intestine::ContactList& truth, RunResult& r) {
     reported_.clear();
     for (const auto& c : found) reported_.insert(contact_key(c));
     current_.clear();
@@ -96,14 +96,14 @@ class DetectLatency {
 /// (recall, time to detect) and measures the penetration left by the response. after_step(s, state, report) is
 /// called after each step, outside the timed parts.
 template <class AfterStep>
-RunResult scripted_run(const IntestineParams& params, int steps, int every, double dt, AfterStep&& after_step) {
+RunResult scripted_run(const intestine::IntestineParams& params, int steps, int every, double dt, AfterStep&& after_step) {
   using surgsim::bench::thread_cpu_us;
   using surgsim::bench::us_since;
   using surgsim::bench::WallClock;
-  const IntestineModel model(params);
-  IntestineState state(model, 1);
-  StepReport report;
-  ContactList truth(100000), kind_found(100000), kind_truth(100000);
+  const intestine::IntestineModel model(params);
+  intestine::IntestineState state(model, 1);
+  intestine::StepReport report;
+  intestine::ContactList truth(100000), kind_found(100000), kind_truth(100000);
   detail::DetectLatency latency;
   RunResult r;
   for (auto* v : {&r.total, &r.dynamics, &r.detection, &r.response, &r.cpu}) {
@@ -111,22 +111,22 @@ RunResult scripted_run(const IntestineParams& params, int steps, int every, doub
   }
   long contacts = 0;
   for (int s = 0; s < steps; ++s) {
-    const Probe probe = test::scripted_probe(s * dt);
+    const intestine::Probe probe = test::scripted_probe(s * dt);
     const bool compare = every > 0 && s % every == 0;
     const double c0 = thread_cpu_us();
     const auto t0 = WallClock::now();
-    step_dynamics(model, state, probe, dt, report);
+    intestine::step_dynamics(model, state, probe, dt, report);
     const double d0 = us_since(t0);
     const auto t1 = WallClock::now();
-    step_detection(model, state, report);
+    intestine::step_detection(model, state, report);
     const double d1 = us_since(t1);
     const double c1 = thread_cpu_us();
     if (compare) {
       truth.clear();
-      detect_brute_force(model.topology(), state.x, truth);
-      r.recall += compare_with_reference(model.topology(), state.contacts(), truth);
+      intestine::detect_brute_force(model.topology(), state.x, truth);
+      r.recall += intestine::compare_with_reference(model.topology(), state.contacts(), truth);
       for (int k = 0; k < 2; ++k) {
-        const ContactKind kind = k == 0 ? ContactKind::kSegmentSegment : ContactKind::kSegmentTriangle;
+        const intestine::ContactKind kind = k == 0 ? intestine::ContactKind::kSegmentSegment : intestine::ContactKind::kSegmentTriangle;
         kind_found.clear();
         kind_truth.clear();
         for (const auto& c : state.contacts()) {
@@ -135,20 +135,20 @@ RunResult scripted_run(const IntestineParams& params, int steps, int every, doub
         for (const auto& c : truth) {
           if (c.kind == kind) kind_truth.push(c);
         }
-        r.recall_kind[k] += compare_with_reference(model.topology(), kind_found, kind_truth);
+        r.recall_kind[k] += intestine::compare_with_reference(model.topology(), kind_found, kind_truth);
       }
       latency.compare(s, state.contacts(), truth, r);
       ++r.compared;
     }
     const auto t2 = WallClock::now();
     const double c2 = thread_cpu_us();
-    step_response(model, state, report);
+    intestine::step_response(model, state, report);
     const double d2 = us_since(t2);
     r.cpu.push_back((c1 - c0) + (thread_cpu_us() - c2));
-    r.faults += report.status != StepStatus::kOk;
+    r.faults += report.status != intestine::StepStatus::kOk;
     if (compare) {
       truth.clear();
-      detect_brute_force(model.topology(), state.x, truth);
+      intestine::detect_brute_force(model.topology(), state.x, truth);
       for (const auto& c : truth) r.residual = std::max(r.residual, c.radius_sum - c.distance);
     }
     r.dynamics.push_back(d0);
@@ -157,7 +157,7 @@ RunResult scripted_run(const IntestineParams& params, int steps, int every, doub
     r.total.push_back(d0 + d1 + d2);
     contacts += report.contacts;
     r.contacts_max = std::max(r.contacts_max, report.contacts);
-    after_step(s, static_cast<const IntestineState&>(state), static_cast<const StepReport&>(report));
+    after_step(s, static_cast<const intestine::IntestineState&>(state), static_cast<const intestine::StepReport&>(report));
   }
   latency.finish(r);
   r.contacts_mean = steps > 0 ? static_cast<double>(contacts) / steps : 0.0;
@@ -165,8 +165,8 @@ RunResult scripted_run(const IntestineParams& params, int steps, int every, doub
 }
 
 /// The scripted run at dt = 1 ms with nothing observed after the steps.
-inline RunResult scripted_run(const IntestineParams& params, int steps, int every) {
-  return scripted_run(params, steps, every, 1e-3, [](int, const IntestineState&, const StepReport&) {});
+inline RunResult scripted_run(const intestine::IntestineParams& params, int steps, int every) {
+  return scripted_run(params, steps, every, 1e-3, [](int, const intestine::IntestineState&, const intestine::StepReport&) {});
 }
 
 }  // namespace surgsim::intestine::bench

@@ -1,5 +1,5 @@
 // large_deformation_bench: the liver at large deformation (issue 16), every method against the neo-Hookean Newton
-// reference (common/liver/hyperelastic.h) on the shipped liver, in one run. A plain program run by hand
+// reference (common/fem/hyperelastic.h) on the shipped liver, in one run. A plain program run by hand
 // (build/bench/large_deformation_bench --out DIR [--quick]); tables on stdout, progress on stderr.
 //
 // Cases (constraints: every component of the constrained nodes imposed, as liver_error_bench's non-linear study):
@@ -14,7 +14,7 @@
 //                           indentation"), disp_rel_error against the rigid displacement.
 // Methods: linear (lambda = G_CC^-1 u*, the tensors as precomputed), quasi_cylinder (the law with the scene's
 // cylinder curves, as the nodes apply it), quasi_organ (the law with Q fitted on the organ's own Newton
-// indentations, liver/organ_curves.h, cached in --cache; no P, as in the scenes), corotational (W = R_i G R_j^T, liver/corotation.h, the
+// indentations, nonlinear/organ_curves.h, cached in --cache; no P, as in the scenes), corotational (W = R_i G R_j^T, compliance/corotation.h, the
 // rotations iterated to a fixed point from the rest-frame response; the free configuration is the rest shape carried
 // by the fixed set's rigid frame), corotational_organ (corotational, then the organ law).
 // Errors: force = |F - F_ref| / |F_ref| of the total tool force (vectors); disp = |u - u_ref| / |u_ref| over the
@@ -23,11 +23,11 @@
 // wall clock, 99th percentile of --repeats.
 // Diagnostic rows on stdout only (corot_true_rot): the corotational force with the rotations of the Newton
 // reference's own displacement field, which tells an error of the rotation estimate from one of the formulation.
-// Then, without a reference: the haptic tick of LiverContacts (patch model, one instrument pressing 8 mm on the
+// Then, without a reference: the haptic tick of ToolContacts (patch model, one instrument pressing 8 mm on the
 // shipped liver; and a solve of exactly 10 contact nodes), linear against corotational, and the visual node's
 // SurfaceDeformer::apply for 10 contacts, linear against corotational (the rotations recomputed there).
 //
-// multirate (liver/multirate.h): a slow neo-Hookean tracker publishing f_c and the contact stiffness S, the 1 kHz loop
+// multirate (nonlinear/multirate.h): a slow neo-Hookean tracker publishing f_c and the contact stiffness S, the 1 kHz loop
 // evaluating f_c + S du. Its static row (the tool held at the target until the tracker converged) is Newton's
 // tolerance by construction. The honest figure is the motion table: the tool moved from rest to each case's target
 // (straight press, circular lift) in --durations, the slow side emulated in step (a cycle starts when the previous
@@ -54,16 +54,27 @@
 #include "bench_util.h"
 #include "core/error.h"
 #include "csv_out.h"
-#include "liver/corotation.h"
-#include "liver/hyperelastic.h"
+#include "compliance/corotation.h"
+#include "fem/hyperelastic.h"
 #include "liver/liver_setup.h"
-#include "liver/multirate.h"
-#include "liver/nonlinear_law.h"
-#include "liver/organ_curves.h"
-#include "liver/patch_solve.h"
+#include "nonlinear/multirate.h"
+#include "nonlinear/nonlinear_law.h"
+#include "nonlinear/organ_curves.h"
+#include "compliance/patch_solve.h"
 #include "liver_bench_organ.h"
-#include "organs/liver_contacts.h"
+#include "contact/tool_contacts.h"
 #include "views/surface_deformer.h"
+
+using namespace surgsim::mesh;
+using namespace surgsim::tool;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::contact;
+using namespace surgsim::liver;
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 namespace {
 
@@ -154,7 +165,7 @@ class Corotational {
       change = 0;
     }
     for (int it = 0; it < 30 && change > 1e-7; ++it) {
-      if (one_pass() != ContactStatus::kOk) throw surgsim::Error(c.name + ": corotational factorization failed");
+      if (one_pass() != ContactStatus::kOk) throw surgsim::core::Error(c.name + ": corotational factorization failed");
       for (int u = 0; u < n; ++u) rest_lambda[static_cast<std::size_t>(u)] = rotation(c.nodes[static_cast<std::size_t>(u)]).transpose() * lambda[static_cast<std::size_t>(u)];
       visual_.displacements(c.nodes.data(), rest_lambda.data(), n, uv);
       for (int row = 0; row < vis.row_count(); ++row) ut_.row(vis.row_nodes[static_cast<std::size_t>(row)]) = uv.segment<3>(3 * row).transpose();
@@ -193,7 +204,7 @@ class Corotational {
   Eigen::MatrixX3d ut_;
 };
 
-// ---- multirate (liver/multirate.h) ----
+// ---- multirate (nonlinear/multirate.h) ----
 
 // The contact targets of a case at fraction s of its motion, in the fixed set's frame: a press straight from rest
 // (s u*), a lift along the circle (the grasp turned by s times the angle about the hinge), the rigid case 0 (the
@@ -480,8 +491,8 @@ int main(int argc, char** argv) {
       cases.erase(std::remove_if(cases.begin(), cases.end(),
                                  [&](const Case& c) { return std::find(only.begin(), only.end(), c.name) == only.end(); }),
                   cases.end());
-    if (punch.empty() || grasp.empty()) throw surgsim::Error("no punch or grasp nodes on this mesh");
-    if (static_cast<int>(std::max(punch.size(), grasp.size())) > kMaxContacts) throw surgsim::Error("more than kMaxContacts constrained nodes");
+    if (punch.empty() || grasp.empty()) throw surgsim::core::Error("no punch or grasp nodes on this mesh");
+    if (static_cast<int>(std::max(punch.size(), grasp.size())) > kMaxContacts) throw surgsim::core::Error("more than kMaxContacts constrained nodes");
 
     // The multirate slow side on this liver: a Newton iteration's cost decides the snapshot rate.
     const HyperelasticSolver newton(*o.model);
@@ -494,7 +505,7 @@ int main(int argc, char** argv) {
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
     if (!trace_path.empty()) {
       trace.reset(std::fopen(trace_path.c_str(), "w"));
-      if (!trace) throw surgsim::Error("--trace " + trace_path + ": cannot write the file (does its folder exist?)");
+      if (!trace) throw surgsim::core::Error("--trace " + trace_path + ": cannot write the file (does its folder exist?)");
     }
     Superposition linear_fallback(tensors, "haptic");
     const auto print_slow_cycle = [&](const char* what, const MotionResult& mr) {
@@ -600,7 +611,7 @@ int main(int argc, char** argv) {
             law->apply_force(f, dir, sol.nodes.data(), sol.displacement.data(), sol.count, f);
           out.tick_us.push_back(us_since(t0));
         }
-        if (haptic.solve(contacts.data(), m, sol) != ContactStatus::kOk) throw surgsim::Error(c.name + ": G_CC solve failed");
+        if (haptic.solve(contacts.data(), m, sol) != ContactStatus::kOk) throw surgsim::core::Error(c.name + ": G_CC solve failed");
         out.force = sol.tool_force;
         out.u.resize(3 * vis.row_count());
         visual.displacements(sol.nodes.data(), sol.lambda.data(), sol.count, out.u);
@@ -713,14 +724,14 @@ int main(int argc, char** argv) {
                   bench::percentile(all_cycle, 0.99), 1000 / bench::percentile(all_cycle, 0.5));
 
     // ---- the haptic tick and the visual frame, linear against corotational ----
-    std::printf("\nHaptic tick (LiverContacts, patch model, one instrument pressing 8 mm at (0.03, 0); us, %d ticks "
+    std::printf("\nHaptic tick (ToolContacts, patch model, one instrument pressing 8 mm at (0.03, 0); us, %d ticks "
                 "after 50 warm)\n", 10 * repeats);
     std::printf("%-14s | %8s %8s %8s | %6s\n", "deformation", "p50", "p99", "max", "nodes");
     for (LiverDeformation d : {LiverDeformation::kLinear, LiverDeformation::kCorotational}) {
       const SurfaceMesh surface = boundary_surface(o.mesh);
       ToolSpec spec = scene.tools[0];
       spec.shaft_points = 1;
-      LiverContacts lc(o.mesh, surface, tensors, std::vector<ToolSpec>{spec}, nullptr, d);
+      ToolContacts lc(o.mesh, surface, tensors, std::vector<ToolSpec>{spec}, nullptr, d);
       const double top = [&] {
         double z = -1;
         for (int k : punch) z = std::max(z, o.mesh.nodes(k, 2));

@@ -20,13 +20,19 @@
 #include "mesh/box_mesh.h"
 #include "csv_out.h"
 #include "fork_child.h"
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
 #include "liver/liver_setup.h"
-#include "liver/precompute.h"
-#include "liver/static_solver.h"
-#include "liver/superposition.h"
+#include "compliance/precompute.h"
+#include "fem/static_solver.h"
+#include "compliance/superposition.h"
 #include "mesher/organ_mesher.h"
+
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::liver;
+using namespace surgsim::mesher;
 
 namespace {
 

@@ -9,11 +9,11 @@
 #include <string>
 #include <vector>
 
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
-#include "liver/nonlinear_law.h"
-#include "liver/precompute.h"
-#include "liver/superposition.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
+#include "nonlinear/nonlinear_law.h"
+#include "compliance/precompute.h"
+#include "compliance/superposition.h"
 #include "mesh/box_mesh.h"
 #include "mesher/scene_mesh.h"
 #include "scene/scene.h"
@@ -26,38 +26,38 @@ constexpr double kPunchRadius = 0.02;                  // m
 // An organ ready to solve: the scene's material and clamp on a generated liver (or a liver-sized box).
 struct Organ {
   std::string kind;               // "liver" | "box"
-  TetMesh mesh;
-  FixedSet fixed;
-  std::unique_ptr<ElasticModel> model;
+  mesh::TetMesh mesh;
+  fem::FixedSet fixed;
+  std::unique_ptr<fem::ElasticModel> model;
   std::vector<int> contacts;      // contactable (free boundary) nodes
-  std::vector<RowSet> rows;       // "haptic", "visual"
+  std::vector<compliance::RowSet> rows;       // "haptic", "visual"
   std::vector<int> visible;       // boundary nodes = the visual rows, in row order
   Eigen::MatrixX3d normals;       // #V x 3, unit outward normals on boundary nodes (0 inside)
   double height = 0;              // m, z extent
 };
 
 /// The scene's liver at `target_nodes` (meshes cached in `cache`), or with `box` a liver-sized structured box.
-inline std::unique_ptr<Organ> make_organ(const Scene& scene, int target_nodes, const std::string& cache, bool box) {
+inline std::unique_ptr<Organ> make_organ(const scene::Scene& scene, int target_nodes, const std::string& cache, bool box) {
   auto o = std::make_unique<Organ>();
   if (!box) {
-    Scene sized = scene;
+    scene::Scene sized = scene;
     sized.mesh.target_nodes = target_nodes;
     o->kind = "liver";
-    o->mesh = load_scene_mesh(sized, cache, nullptr);
+    o->mesh = mesher::load_scene_mesh(sized, cache, nullptr);
   }
   if (o->mesh.nodes.rows() == 0) {
     // The liver's bounding box (x [-0.13, 0.13], y [-0.08, 0.08], z [-0.04, 0.04] m), structured.
     o->kind = "box";
-    o->mesh = make_box_mesh_with_nodes(target_nodes, Eigen::Vector3d(0.26, 0.16, 0.08));
+    o->mesh = mesh::make_box_mesh_with_nodes(target_nodes, Eigen::Vector3d(0.26, 0.16, 0.08));
     o->mesh.nodes.rowwise() -= Eigen::RowVector3d(0.13, 0.08, 0.04);
   }
-  o->fixed = fixed_set_from_region(o->mesh, scene.fixed);
-  o->model = std::make_unique<ElasticModel>(build_elastic_model(o->mesh, scene.material, o->fixed, scene.file));
-  o->contacts = contactable_nodes(o->mesh, o->fixed);
-  o->rows = standard_row_sets(o->mesh, o->contacts);
+  o->fixed = fem::fixed_set_from_region(o->mesh, scene.fixed);
+  o->model = std::make_unique<fem::ElasticModel>(fem::build_elastic_model(o->mesh, scene.material, o->fixed, scene.file));
+  o->contacts = compliance::contactable_nodes(o->mesh, o->fixed);
+  o->rows = compliance::standard_row_sets(o->mesh, o->contacts);
   for (const auto& r : o->rows)
     if (r.name == "visual") o->visible = r.nodes;
-  const SurfaceMesh surface = boundary_surface(o->mesh);
+  const mesh::SurfaceMesh surface = mesh::boundary_surface(o->mesh);
   o->normals.setZero(o->mesh.nodes.rows(), 3);
   for (Eigen::Index f = 0; f < surface.tris.rows(); ++f) {
     const Eigen::RowVector3d a = o->mesh.nodes.row(surface.tris(f, 0)), b = o->mesh.nodes.row(surface.tris(f, 1)),
@@ -93,15 +93,15 @@ inline double rel(double err, double scale) { return err / std::max(scale, 1e-30
 
 /// The quasi non-linear law as the nodes apply it: the haptic node's Q (the organ law: its surface field at the
 /// contact nodes) on the tool force `force` along the mean imposed displacement (`imposed`, `m` of them;
-/// haptic_node/organs/liver_contacts.cpp), the visual node's P on every visible row of `u` (3R, the "visual" block's rows) along the direction of the summed rows of the contact nodes
+/// common/contact/tool_contacts.cpp), the visual node's P on every visible row of `u` (3R, the "visual" block's rows) along the direction of the summed rows of the contact nodes
 /// (visual_node/views/surface_deformer.cpp).
-inline void apply_quasi(const NonlinearLaw& law, const Eigen::Vector3d* imposed, int m, const int* nodes,
-                        const TensorBlock& visual, Eigen::Vector3d& force, Eigen::VectorXd& u) {
+inline void apply_quasi(const nonlinear::NonlinearLaw& law, const Eigen::Vector3d* imposed, int m, const int* nodes,
+                        const compliance::TensorBlock& visual, Eigen::Vector3d& force, Eigen::VectorXd& u) {
   Eigen::Vector3d dir;
-  if (constraint_direction(imposed, m, dir)) law.apply_force(force, dir, nodes, imposed, m, force);
+  if (nonlinear::constraint_direction(imposed, m, dir)) law.apply_force(force, dir, nodes, imposed, m, force);
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   for (int l = 0; l < m; ++l) sum += u.segment<3>(3 * visual.row_of_node[static_cast<std::size_t>(nodes[l])]);
-  if (constraint_direction(&sum, 1, dir)) law.apply_displacements(u, dir);
+  if (nonlinear::constraint_direction(&sum, 1, dir)) law.apply_displacements(u, dir);
 }
 
 }  // namespace surgsim::bench_liver

@@ -26,7 +26,7 @@
 //   3. Non-linear: the same punch at 5 .. 30 % of the organ's height (z extent), linear tensors, quasi non-linear
 //      (tensors + the law as the nodes apply it: Q on the tool force along the mean imposed displacement, as
 //      haptic_node/liver_contacts.cpp; P on every visible row along the direction of the summed contact rows, as
-//      visual_node/views/surface_deformer.cpp) against the neo-Hookean Newton reference (common/liver/hyperelastic.h).
+//      visual_node/views/surface_deformer.cpp) against the neo-Hookean Newton reference (common/fem/hyperelastic.h).
 //
 // Errors: disp = |u - u_ref|_2 / |u_ref|_2 over the visible (boundary) nodes (stacked x, y, z); force =
 // |F - F_ref| / |F_ref| of the total contact force (vectors). In the summary a method's error is its worst frame.
@@ -80,15 +80,23 @@
 #include "mesh/box_mesh.h"
 #include "csv_out.h"
 #include "core/error.h"
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
-#include "liver/hyperelastic.h"
-#include "liver/nonlinear_law.h"
-#include "liver/precompute.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
+#include "fem/hyperelastic.h"
+#include "nonlinear/nonlinear_law.h"
+#include "compliance/precompute.h"
 #include "scene/scene.h"
-#include "liver/static_solver.h"
-#include "liver/superposition.h"
+#include "fem/static_solver.h"
+#include "compliance/superposition.h"
 #include "mesher/scene_mesh.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 namespace {
 

@@ -3,7 +3,7 @@
 // along the scene's trajectory (a grasp-and-lift of the free lobe for config/liver_multirate.yaml), next to the same
 // scene with the linear model stepped on the same poses. Every --sample-ms of a tick in contact the tick's contact
 // targets (the solution's nodes and their imposed displacements, which the tracker is handed) and both forces are
-// kept; after the run the neo-Hookean Newton solve of those very targets (liver/hyperelastic.h, the reference the
+// kept; after the run the neo-Hookean Newton solve of those very targets (fem/hyperelastic.h, the reference the
 // tracker converges to) gives the reference force. The error is |F - F_ref| / max(|F_ref|, 5 % of the largest
 // |F_ref| of the run) (large_deformation_bench's measure), per sample and per phase of the trajectory. It measures the
 // multirate model's lag, extrapolation, partial matches and trust-region blend in the node; the contact kinematics
@@ -24,14 +24,24 @@
 #include "bench_util.h"
 #include "core/error.h"
 #include "csv_out.h"
-#include "liver/fem.h"
-#include "liver/hyperelastic.h"
+#include "fem/fem.h"
+#include "fem/hyperelastic.h"
 #include "liver/liver_setup.h"
 #include "mesher/scene_mesh.h"
 #include "organs/liver_organ.h"
 #include "scene/scene.h"
 #include "tool/tool.h"
 #include "tool/trajectory.h"
+
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::contact;
+using namespace surgsim::liver;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 using namespace surgsim;
 
@@ -91,7 +101,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "multirate_node_bench: building the organs (%s)\n", scene.file.c_str());
     LiverOrgan organ(scene, cache, &std::cerr, true, tracker_threads);
     LiverOrgan linear(linear_scene, cache, &std::cerr, false);
-    LiverMultirate& mr = *organ.multirate();
+    MultirateContacts& mr = *organ.multirate();
 
     // The run: 1 kHz in real time, the tracker thread cycling as in the node.
     const double dt = 1e-3;

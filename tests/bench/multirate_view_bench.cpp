@@ -21,6 +21,11 @@
 #include "surgsim_types.h"
 #include "views/liver_view.h"
 
+using namespace surgsim::core;
+using namespace surgsim::compliance;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
+
 namespace {
 
 using namespace surgsim;

@@ -20,8 +20,8 @@
 #include "core/clock.h"
 #include "csv_out.h"
 #include "fork_child.h"
-#include "liver/bucket_grid.h"
-#include "organs/liver_contacts.h"
+#include "contact/bucket_grid.h"
+#include "contact/tool_contacts.h"
 #include "liver/liver_setup.h"
 #include "mesher/organ_mesher.h"
 #include "render/renderer.h"
@@ -29,6 +29,18 @@
 #include "mesher/scene_mesh.h"
 #include "core/stats.h"
 #include "views/surface_deformer.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::tool;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::contact;
+using namespace surgsim::liver;
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 using namespace surgsim;
 

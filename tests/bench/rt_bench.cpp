@@ -18,6 +18,9 @@
 #include "rt_loop.h"
 #include "core/stats.h"
 
+using namespace surgsim::core;
+using namespace surgsim::os;
+
 int main(int argc, char** argv) {
   double seconds = 20, rate = 1000, work_us = 50;
   int priority = 80, cpu = -1, cpu_latency_us = 0;

@@ -1,7 +1,7 @@
 // two_hands_bench (issue 19): two instruments on the shipped liver, coupled through the tissue. Replays the shipped
 // two-instrument trajectory (config/liver_two_tools.yaml: a grasper holding the free lobe, a probe pressing beside
 // it) tick by tick at 1 kHz, in one run:
-//  1. the tick: both instruments' contacts in one solve (LiverContacts with the scene's law) plus each instrument's
+//  1. the tick: both instruments' contacts in one solve (ToolContacts with the scene's law) plus each instrument's
 //     force stage, with each instrument's contact capacity set to --capacity (10: the issue's 2 instruments x 10
 //     contacts), percentiles over the ticks where both instruments touch, against the 100 us budget;
 //  2. the coupling: the grasper's force while the probe presses, from the two-instrument solve, from the grasper alone
@@ -24,15 +24,26 @@
 #include "core/stats.h"
 #include "csv_out.h"
 #include "force_stage.h"
-#include "liver/fem.h"
+#include "fem/fem.h"
 #include "liver/liver_setup.h"
-#include "liver/nonlinear_law.h"
-#include "liver/tensor_cache.h"
+#include "nonlinear/nonlinear_law.h"
+#include "compliance/tensor_cache.h"
 #include "mesher/scene_mesh.h"
-#include "organs/liver_contacts.h"
+#include "contact/tool_contacts.h"
 #include "scene/scene.h"
 #include "support/direct_solve.h"
 #include "tool/trajectory.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::tool;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::contact;
+using namespace surgsim::liver;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 namespace surgsim {
 namespace {
@@ -102,7 +113,7 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
       for (ToolSpec& t : tools) t.contact_capacity = cap;
     const std::string tag = cap > 0 ? "" : "_shipped_capacity";
     const auto fig = [&](const char* metric, double v, const char* unit) { figure((metric + tag).c_str(), v, unit); };
-    LiverContacts c(mesh, surface, tensors, tools, law.identity() ? nullptr : &law);
+    ToolContacts c(mesh, surface, tensors, tools, law.identity() ? nullptr : &law);
     std::vector<ForceStage> stages;
     for (const ToolSpec& t : tools) stages.emplace_back(scene.haptic, t.force_limit);
     SampleRecorder both_us(ticks + 16), all_us(ticks + 16);
@@ -147,9 +158,9 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
 
   // --- 2. the coupling: the grasper's force with the probe, alone, and from the direct solve (linear) ---
   {
-    LiverContacts both(mesh, surface, tensors, scene.tools, nullptr);
-    LiverContacts grasper(mesh, surface, tensors, std::vector<ToolSpec>{scene.tools[0]}, nullptr);
-    LiverContacts probe(mesh, surface, tensors, std::vector<ToolSpec>{scene.tools[1]}, nullptr);
+    ToolContacts both(mesh, surface, tensors, scene.tools, nullptr);
+    ToolContacts grasper(mesh, surface, tensors, std::vector<ToolSpec>{scene.tools[0]}, nullptr);
+    ToolContacts probe(mesh, surface, tensors, std::vector<ToolSpec>{scene.tools[1]}, nullptr);
     Run r, rg, rp;
     double err_max = 0, coupling_max = 0, coupling_at = 0, grasp_alone_at = 0, grasp_both_at = 0;
     std::uint64_t compared = 0;

@@ -18,6 +18,10 @@
 #include "support/alloc_counter.h"
 #include "tool/tool.h"
 
+using namespace surgsim::tool;
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

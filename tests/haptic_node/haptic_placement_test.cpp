@@ -13,6 +13,8 @@
 #include "haptic_app.h"
 #include "os/cpu_affinity.h"
 
+using namespace surgsim::os;
+
 namespace surgsim {
 namespace {
 

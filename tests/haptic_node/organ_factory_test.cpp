@@ -8,6 +8,9 @@
 #include "organ.h"
 #include "support/error_test_util.h"
 
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

@@ -15,6 +15,8 @@
 #include "core/clock.h"
 #include "support/alloc_counter.h"
 
+using namespace surgsim::core;
+
 namespace surgsim {
 namespace {
 

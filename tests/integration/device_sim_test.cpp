@@ -21,6 +21,8 @@
 #include "node_test.h"
 #include "process.h"
 
+using namespace surgsim::core;
+
 namespace surgsim {
 namespace {
 

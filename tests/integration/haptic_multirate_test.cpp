@@ -19,6 +19,8 @@
 #include "node_test.h"
 #include "process.h"
 
+using namespace surgsim::core;
+
 namespace surgsim {
 namespace {
 

@@ -36,6 +36,9 @@
 #include "views/body_state_listener.h"
 #include "views/liver_view.h"
 
+using namespace surgsim::core;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

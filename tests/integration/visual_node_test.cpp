@@ -37,6 +37,10 @@
 #include "tool/tool.h"
 #include "views/liver_view.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

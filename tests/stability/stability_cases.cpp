@@ -11,19 +11,29 @@
 #include <sstream>
 
 #include "mesh/box_mesh.h"
-#include "liver/cholmod_solver.h"
+#include "fem/cholmod_solver.h"
 #include "core/error.h"
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
 #include "intestine/intestine_model.h"
-#include "organs/liver_contacts.h"
+#include "contact/tool_contacts.h"
 #include "mesh/mesh.h"
-#include "liver/nonlinear_law.h"
-#include "liver/precompute.h"
+#include "nonlinear/nonlinear_law.h"
+#include "compliance/precompute.h"
 #include "scene/scene.h"
-#include "liver/static_solver.h"
-#include "liver/superposition.h"
+#include "fem/static_solver.h"
+#include "compliance/superposition.h"
 #include "tool/tool.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::tool;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::contact;
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
 
 namespace surgsim::stability {
 
@@ -122,7 +132,7 @@ struct LiverSetup {
   std::unique_ptr<Superposition> haptic;
   std::unique_ptr<Superposition> visual;
 
-  // Throws surgsim::Error for a refused material, mesh or fixed set (as the nodes would at start).
+  // Throws surgsim::core::Error for a refused material, mesh or fixed set (as the nodes would at start).
   LiverSetup(const TetMesh& m, const Material& material, const FixedSet& fixed)
       : mesh(m), model(build_elastic_model(m, material, fixed)) {
     CholmodSolver factor(model.k_ff);
@@ -486,7 +496,7 @@ std::vector<CaseResult> liver_contact_cases() {
       spec.trocar = t.trocar;
       spec.axis = t.axis;
       spec.shaft_points = 1;
-      LiverContacts contacts(box.mesh, box.surface, setup.tensors, spec);
+      ToolContacts contacts(box.mesh, box.surface, setup.tensors, spec);
       ContactTick tick;
       int constrained = 0, fixed_corners = 0;
       bool touched = false;
@@ -579,7 +589,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
   };
   // Issue 14: the patch contact (a tip of 2.5 mean edges) is stiffer than the paper's point load on three nodes, so
   // the soft box reaches the 8 N clamp before 30 mm: the speed runs end at 8 mm, below it, and every run holds its
-  // final pose for 30 ticks (a fast stab's initial penetration is blended in over LiverContacts::kOnsetRamp).
+  // final pose for 30 ticks (a fast stab's initial penetration is blended in over ToolContacts::kOnsetRamp).
   const std::vector<Run> runs = {{0.1, 0.008, false, ""},
                                  {1.0, 0.008, false, ""},
                                  {10.0, 0.008, false, ""},
@@ -587,7 +597,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
                                  {10.0, 0.10, false, ", through"}};
   for (const Run& run : runs) {
     out.push_back(guarded(make("liver", "tool_speed", "v=" + g(run.speed) + " m/s" + run.what), [&](CaseResult& r) {
-      LiverContacts contacts(box.mesh, box.surface, (run.stiff ? stiff_setup : setup).tensors, spec,
+      ToolContacts contacts(box.mesh, box.surface, (run.stiff ? stiff_setup : setup).tensors, spec,
                              run.stiff ? &linear : &law);
       const double start = 0.0237;  // m above the top face
       const double step = run.speed * kHapticDt;

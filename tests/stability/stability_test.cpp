@@ -8,6 +8,11 @@
 #include <string>
 #include <vector>
 
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::intestine;
+
 namespace surgsim::stability {
 namespace {
 

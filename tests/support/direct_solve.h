@@ -1,5 +1,5 @@
 // A direct solve of linear elasticity under linear constraints on surface nodes, independent of the precomputed
-// tensors and of CHOLMOD: K_ff (assembled by liver/fem.h) factored by Eigen's sparse LDLT, the constraints imposed by
+// tensors and of CHOLMOD: K_ff (assembled by fem/fem.h) factored by Eigen's sparse LDLT, the constraints imposed by
 // Lagrange multipliers. Used to check that the contact solve of several instruments (issue 19) is the exact one: the
 // liver two-hands test and two_hands_bench.
 #pragma once
@@ -7,8 +7,8 @@
 #include <Eigen/SparseCholesky>
 #include <vector>
 
-#include "liver/fem.h"
-#include "organs/liver_contacts.h"
+#include "fem/fem.h"
+#include "contact/tool_contacts.h"
 
 namespace surgsim::test {
 
@@ -21,11 +21,11 @@ struct ConstraintRow {
   int instrument = 0;
 };
 
-/// The rows LiverContacts (patch model) imposed for point i of instrument t in its last step: the patch's normal row
+/// The rows ToolContacts (patch model) imposed for point i of instrument t in its last step: the patch's normal row
 /// (a sliding contact), or three Cartesian rows (a grasp or sticking contact: a 3-D constraint, basis-independent).
-inline void add_patch_rows(const LiverContacts& c, int i, int t, bool three_d, std::vector<ConstraintRow>& rows) {
-  const PointPatch& p = c.patch(i, t);
-  const PointContact& pc = c.point(i, t);
+inline void add_patch_rows(const contact::ToolContacts& c, int i, int t, bool three_d, std::vector<ConstraintRow>& rows) {
+  const contact::PointPatch& p = c.patch(i, t);
+  const contact::PointContact& pc = c.point(i, t);
   const Eigen::Vector3d dirs[3] = {Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
   for (int r = 0; r < (three_d ? 3 : 1); ++r) {
     ConstraintRow row;
@@ -41,7 +41,7 @@ inline void add_patch_rows(const LiverContacts& c, int i, int t, bool three_d, s
 class DirectConstraintSolver {
  public:
   /// Factors K_ff of `model` (which must outlive this).
-  explicit DirectConstraintSolver(const ElasticModel& model) : model_(model), ldlt_(model.k_ff) {}
+  explicit DirectConstraintSolver(const fem::ElasticModel& model) : model_(model), ldlt_(model.k_ff) {}
   bool ok() const { return ldlt_.info() == Eigen::Success; }
 
   /// Minimum energy with every row imposed: S = A K_ff^-1 A^T, mu = S^-1 b; row r pushes the ORGAN with mu_r d_r (its
@@ -71,7 +71,7 @@ class DirectConstraintSolver {
   }
 
  private:
-  const ElasticModel& model_;
+  const fem::ElasticModel& model_;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt_;
 };
 

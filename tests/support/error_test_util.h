@@ -6,12 +6,12 @@
 
 namespace surgsim::test {
 
-/// The message of the surgsim::Error `f` throws ("" if it throws nothing).
+/// The message of the surgsim::core::Error `f` throws ("" if it throws nothing).
 template <typename F>
 std::string error_of(F&& f) {
   try {
     f();
-  } catch (const Error& e) {
+  } catch (const core::Error& e) {
     return e.what();
   }
   return "";

@@ -11,7 +11,7 @@ namespace surgsim::intestine::test {
 
 /// Probe path for the default model (vessel along x through the origin, the folds hanging below it once gravity has
 /// acted): settle 0.4 s, push the folds sideways, lift them, sweep along the vessel, pull back. Piecewise linear.
-inline Probe scripted_probe(double t) {
+inline intestine::Probe scripted_probe(double t) {
   struct Key {
     double t;
     double x, y, z;
@@ -22,7 +22,7 @@ inline Probe scripted_probe(double t) {
                                             {2.2, -0.12, 0.0, -0.08},
                                             {2.8, 0.1, 0.05, -0.13},
                                             {3.4, 0.0, 0.25, -0.1}}};
-  Probe p;
+  intestine::Probe p;
   p.radius = 0.01;
   if (t < keys.front().t || t > keys.back().t) return p;
   p.active = true;

@@ -5,9 +5,9 @@
 #include <cmath>
 #include <vector>
 
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
-#include "liver/precompute.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
+#include "compliance/precompute.h"
 #include "mesh/box_mesh.h"
 #include "tool/tool.h"
 
@@ -16,26 +16,26 @@ namespace surgsim::test {
 /// An nx x ny x nz-cell box of size `size` (m) with its corner at the origin, every node of the bottom face (z = 0)
 /// fixed, E = 3 kPa, nu = 0.45, and the "haptic" and "visual" tensors of its free surface nodes.
 struct Slab {
-  TetMesh mesh;
-  SurfaceMesh surface;
-  Tensors tensors;
+  mesh::TetMesh mesh;
+  mesh::SurfaceMesh surface;
+  compliance::Tensors tensors;
   Slab(int nx, int ny, int nz, const Eigen::Vector3d& size) {
-    mesh = make_box_mesh(nx, ny, nz, size);
-    surface = boundary_surface(mesh);
-    FixedRegion region;
+    mesh = mesh::make_box_mesh(nx, ny, nz, size);
+    surface = mesh::boundary_surface(mesh);
+    fem::FixedRegion region;
     region.has_plane = true;
     region.plane_point = {0, 0, 0.001};
     region.plane_normal = {0, 0, -1};
-    const FixedSet fixed = fixed_set_from_region(mesh, region);
-    const ElasticModel model = build_elastic_model(mesh, Material{3000.0, 0.45}, fixed);
-    const std::vector<int> contacts = contactable_nodes(mesh, fixed);
-    tensors = precompute_tensors(model, contacts, standard_row_sets(mesh, contacts), {});
+    const fem::FixedSet fixed = fem::fixed_set_from_region(mesh, region);
+    const fem::ElasticModel model = fem::build_elastic_model(mesh, fem::Material{3000.0, 0.45}, fixed);
+    const std::vector<int> contacts = compliance::contactable_nodes(mesh, fixed);
+    tensors = compliance::precompute_tensors(model, contacts, compliance::standard_row_sets(mesh, contacts), {});
   }
 };
 
 /// A single-point tool whose tip is at `tip`, its shaft vertical (trocar 15 cm above).
-inline ToolGeometry vertical_tool(const Eigen::Vector3d& tip) {
-  ToolGeometry g{};
+inline tool::ToolGeometry vertical_tool(const Eigen::Vector3d& tip) {
+  tool::ToolGeometry g{};
   g.direction = {0, 0, -1};
   g.trocar = tip + Eigen::Vector3d(0, 0, 0.15);
   g.tip = tip;

@@ -164,7 +164,7 @@ struct Direction {
       delay = std::max(0.0, delay);
       delay_sum_s += delay;
       delay_max_s = std::max(delay_max_s, delay);
-      queue.push(Frame{surgsim::monotonic_ns() + static_cast<std::uint64_t>(delay * 1e9), next_seq++,
+      queue.push(Frame{surgsim::core::monotonic_ns() + static_cast<std::uint64_t>(delay * 1e9), next_seq++,
                        std::vector<unsigned char>(buf.begin(), buf.begin() + n)});
     }
   }
@@ -236,7 +236,7 @@ int main(int argc, char** argv) {
       std::uint64_t next = UINT64_MAX;
       if (!ab.queue.empty()) next = std::min(next, ab.queue.top().due_ns);
       if (!ba.queue.empty()) next = std::min(next, ba.queue.top().due_ns);
-      const std::uint64_t now = surgsim::monotonic_ns();
+      const std::uint64_t now = surgsim::core::monotonic_ns();
       const std::uint64_t wait = next == UINT64_MAX ? 200000000ull : (next > now ? next - now : 0);
       timespec ts{static_cast<time_t>(wait / 1000000000ull), static_cast<long>(wait % 1000000000ull)};
       const int r = ::ppoll(fds, 2, &ts, nullptr);
@@ -246,7 +246,7 @@ int main(int argc, char** argv) {
         if (fds[1].revents & POLLIN) ba.read_all(buf);
         if ((fds[0].revents | fds[1].revents) & (POLLERR | POLLHUP | POLLNVAL)) break;  // a namespace went away
       }
-      const std::uint64_t t = surgsim::monotonic_ns();
+      const std::uint64_t t = surgsim::core::monotonic_ns();
       ab.send_due(t);
       ba.send_due(t);
     }

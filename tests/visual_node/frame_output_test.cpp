@@ -21,6 +21,9 @@
 #include "core/error.h"
 #include "organ_view.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
 namespace surgsim {
 namespace {
 

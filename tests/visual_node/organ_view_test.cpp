@@ -16,6 +16,9 @@
 #include "views/intestine_view.h"
 #include "views/liver_view.h"
 
+using namespace surgsim::tool;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

@@ -6,6 +6,8 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+
 namespace surgsim {
 
 void Image::resize(int w, int h) {

@@ -21,11 +21,11 @@ struct Image {
 };
 
 /// Writes `image` as an 8-bit RGB PNG, compressed for speed rather than size (frames are written while running).
-/// Throws surgsim::Error naming `path` when the file cannot be written or the image is malformed.
+/// Throws surgsim::core::Error naming `path` when the file cannot be written or the image is malformed.
 void write_png(const std::string& path, const Image& image);
 
 /// Reads any PNG libpng understands, converted to 8-bit RGB (alpha dropped over black, grey expanded).
-/// Throws surgsim::Error naming `path` on failure.
+/// Throws surgsim::core::Error naming `path` on failure.
 Image read_png(const std::string& path);
 
 }  // namespace surgsim

@@ -22,6 +22,11 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::fem;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

@@ -6,6 +6,10 @@
 #include "core/error.h"
 #include "render/osmesa_renderer.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

@@ -68,7 +68,7 @@ class Renderer {
 
   /// Starts a frame: clears to the background and sets view and projection from `camera` (vertical field of view;
   /// near and far planes follow the eye-target distance).
-  virtual void begin_frame(const Camera& camera) = 0;
+  virtual void begin_frame(const scene::Camera& camera) = 0;
 
   /// A triangle surface. positions: #V x 3, m; tris: #F x 3 indices into positions, counter-clockwise seen from
   /// outside. Smooth normals (area-weighted per vertex) are recomputed from the positions on every call; both
@@ -98,9 +98,9 @@ class Renderer {
 
   /// A tool in metallic `rgb` (instrument_rgb(i) for instrument i): the shaft as a cylinder of `radius` (m) from
   /// tool.trocar to tool.tip, and the two jaws as thinner cylinders from the tip to jaw_tips[0] and jaw_tips[1].
-  virtual void draw_tool(const ToolGeometry& tool, float radius, const Eigen::Vector3f& rgb) = 0;
+  virtual void draw_tool(const tool::ToolGeometry& tool, float radius, const Eigen::Vector3f& rgb) = 0;
   /// The same in the first instrument's grey.
-  void draw_tool(const ToolGeometry& tool, float radius) { draw_tool(tool, radius, instrument_rgb(0)); }
+  void draw_tool(const tool::ToolGeometry& tool, float radius) { draw_tool(tool, radius, instrument_rgb(0)); }
 
   /// Small spheres of `radius` (m) at each row of `points` (#P x 3, m), e.g. contact points.
   virtual void draw_points(const Eigen::Ref<const Eigen::MatrixX3f>& points, float radius,
@@ -153,7 +153,7 @@ class Renderer {
 };
 
 /// Creates a renderer: backend "osmesa" or "null"; width and height in pixels (16..8192).
-/// Throws surgsim::Error on an unknown backend, a bad size, or when the GL context or shaders cannot be created.
+/// Throws surgsim::core::Error on an unknown backend, a bad size, or when the GL context or shaders cannot be created.
 std::unique_ptr<Renderer> make_renderer(const std::string& backend, int width, int height);
 
 // Geometry shared by the backends and by tests (pure; no GL).
@@ -172,10 +172,10 @@ void vertex_normals(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const E
 bool membrane_drawable(const intestine::MesenterySurface& surface, const MembraneLook& look) noexcept;
 
 /// World -> view (right-handed, camera looking down -z) for camera.eye/target/up.
-Eigen::Matrix4f view_matrix(const Camera& camera);
+Eigen::Matrix4f view_matrix(const scene::Camera& camera);
 /// View -> clip (OpenGL conventions) for the camera's vertical field of view and the image aspect (width / height).
-Eigen::Matrix4f projection_matrix(const Camera& camera, float aspect);
+Eigen::Matrix4f projection_matrix(const scene::Camera& camera, float aspect);
 /// Where a world point lands in a width x height image: x right, y down (row 0 = top), pixel centres at +0.5.
-Eigen::Vector2f project_to_pixel(const Camera& camera, int width, int height, const Eigen::Vector3f& world);
+Eigen::Vector2f project_to_pixel(const scene::Camera& camera, int width, int height, const Eigen::Vector3f& world);
 
 }  // namespace surgsim

@@ -9,6 +9,9 @@
 #include "render/renderer.h"
 #include "views/body_state_listener.h"
 
+using namespace surgsim::core;
+using namespace surgsim::scene;
+
 namespace surgsim {
 
 namespace {

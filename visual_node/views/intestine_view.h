@@ -66,10 +66,10 @@ constexpr int kMesenteryColSteps = 2;
 
 class IntestineView {
  public:
-  /// Init (allocates; throws surgsim::Error on bad parameters): the tube builder for scene.intestine's columns, the
+  /// Init (allocates; throws surgsim::core::Error on bad parameters): the tube builder for scene.intestine's columns, the
   /// meshes at the finest LOD, the mesentery's refined surface, the frame-rate controller. BodyStates whose scene
   /// hash differs from `scene_hash` are refused.
-  IntestineView(const Scene& scene, std::uint64_t scene_hash,
+  IntestineView(const scene::Scene& scene, std::uint64_t scene_hash,
                 intestine::TubeSkinning skinning = intestine::TubeSkinning::kGpu);
   ~IntestineView();
   IntestineView(const IntestineView&) = delete;
@@ -147,8 +147,8 @@ class IntestineView {
   std::uint64_t build_failures_ = 0;
   std::uint64_t last_seq_ = 0;
   std::array<std::uint64_t, intestine::kTubeMaxLod + 1> lod_frames_{};
-  SampleRecorder work_ms_{1 << 18};
-  SampleRecorder build_us_{1 << 18};
+  core::SampleRecorder work_ms_{1 << 18};
+  core::SampleRecorder build_us_{1 << 18};
   int tube_vertices_max_ = 0;
   int tube_triangles_max_ = 0;
 };
@@ -159,7 +159,7 @@ class IntestineView {
 class IntestineOrganView : public OrganView {
  public:
   /// Init: see IntestineView (no mesh, no tensors).
-  IntestineOrganView(const Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning);
+  IntestineOrganView(const scene::Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning);
 
   /// Skins the tube on the CPU when the renderer cannot on the GPU (says so on stderr).
   void attach(const Renderer& renderer) override;

@@ -9,10 +9,19 @@
 #include "core/clock.h"
 #include "core/error.h"
 #include "liver/liver_setup.h"
-#include "liver/organ_curves.h"
+#include "nonlinear/organ_curves.h"
 #include "mesher/scene_mesh.h"
 #include "render/renderer.h"
 #include "views/body_state_listener.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::tool;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::liver;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
 
 namespace surgsim {
 
@@ -25,7 +34,7 @@ LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
   // The visible mesh.
   mesh_ = load_scene_mesh(scene, options.cache_dir, options.log);
   surface_ = boundary_surface(mesh_);
-  mesh_hash_ = surgsim::mesh_hash(mesh_);
+  mesh_hash_ = surgsim::mesh::mesh_hash(mesh_);
 
   // The visual rows of the tensors (visible x surface), from the cache both nodes share.
   const LiverTensorSetup setup = liver_tensor_setup(scene.material, scene.fixed, mesh_, options.cache_dir, scene.file);

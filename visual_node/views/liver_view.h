@@ -5,7 +5,7 @@
 // (issue 19) the contacts of all of them deform the organ together (one solve on the haptic side); the non-linear law
 // bends each instrument's share about that instrument's own direction (SurfaceDeformer::apply with instruments).
 // liver.deformation corotational (issue 16): the deformer recomputes the rotations from the received forces (no
-// more data on the wire); liver.curves organ: the law from the organ's own curves (liver/organ_curves.h).
+// more data on the wire); liver.curves organ: the law from the organ's own curves (nonlinear/organ_curves.h).
 //
 // liver.deformation multirate (issue 16): the haptic node's neo-Hookean tracker publishes the organ's shape as
 // BodyState (one position per boundary surface node, SurfaceMesh node order, the scene identity as scene_hash; see
@@ -29,9 +29,9 @@
 
 #include "core/stats.h"
 #include "instruments.h"
-#include "liver/nonlinear_law.h"
-#include "liver/precompute.h"
-#include "liver/superposition.h"
+#include "nonlinear/nonlinear_law.h"
+#include "compliance/precompute.h"
+#include "compliance/superposition.h"
 #include "mesh/mesh.h"
 #include "organ_view.h"
 #include "views/surface_deformer.h"
@@ -43,8 +43,8 @@ class BodyStateListener;
 class LiverView : public OrganView {
  public:
   /// Init: loads (or generates) the mesh, the tensors' "visual" block and the law; embeds visual.surface when the
-  /// scene names one. Throws surgsim::Error (the embedded surface's errors name the scene key).
-  LiverView(const Scene& scene, const OrganViewOptions& options);
+  /// scene names one. Throws surgsim::core::Error (the embedded surface's errors name the scene key).
+  LiverView(const scene::Scene& scene, const OrganViewOptions& options);
   ~LiverView() override;
 
   std::uint64_t mesh_hash() const override { return mesh_hash_; }
@@ -88,19 +88,19 @@ class LiverView : public OrganView {
   std::uint64_t scene_hash() const { return scene_hash_; }
 
  private:
-  TetMesh mesh_;
-  SurfaceMesh surface_;
+  mesh::TetMesh mesh_;
+  mesh::SurfaceMesh surface_;
   std::uint64_t mesh_hash_ = 0;
   std::uint64_t tensor_hash_ = 0;
-  Tensors tensors_;  // "visual" block only (no interior rows)
-  std::unique_ptr<NonlinearLaw> law_;
+  compliance::Tensors tensors_;  // "visual" block only (no interior rows)
+  std::unique_ptr<nonlinear::NonlinearLaw> law_;
   std::unique_ptr<SurfaceDeformer> deformer_;
   int tools_ = 1;  // the scene's instruments
   // The shown frame's contacts (the last fresh frame's nodes, forces and instruments; fixed storage) and its
   // instruments' directions (the non-linear law's axis of each instrument's share).
-  std::array<int, kMaxContacts> contact_nodes_{};
-  std::array<Eigen::Vector3d, kMaxContacts> contact_lambda_{};
-  std::array<int, kMaxContacts> contact_instrument_{};
+  std::array<int, compliance::kMaxContacts> contact_nodes_{};
+  std::array<Eigen::Vector3d, compliance::kMaxContacts> contact_lambda_{};
+  std::array<int, compliance::kMaxContacts> contact_instrument_{};
   InstrumentPoses instruments_;
   int contacts_ = 0;
   Eigen::MatrixX3f markers_;  // contact points drawn as markers
@@ -114,7 +114,7 @@ class LiverView : public OrganView {
   std::unique_ptr<BodyStateListener> listener_;
   std::vector<double> body_xyz_;  // 3 x kMaxBodyPoints, the listener's newest copied out
   std::vector<double> snapshot_xyz_;  // 3 x surface nodes: the last state taken (carried to each frame's contacts)
-  std::array<Contact, kMaxContacts> carry_contacts_{};  // the last fresh frame's nodes and imposed displacements
+  std::array<compliance::Contact, compliance::kMaxContacts> carry_contacts_{};  // the last fresh frame's nodes and imposed displacements
   std::uint64_t carry_failures_ = 0;
   InstrumentPoses body_instruments_;
   int body_state_instruments_ = 0;  // instruments the last state drawn carried (the wire protocol: all of them)
@@ -128,10 +128,10 @@ class LiverView : public OrganView {
   std::uint64_t frames_linear_ = 0;  // frames drawn by the linear deformer before the first BodyState
   std::uint64_t frames_body_ = 0;    // frames drawn with the tracker's shape
   std::uint64_t age_unknown_ = 0;    // frames whose shape's stamp is after the draw (another host's clock)
-  SampleRecorder body_age_ms_{1 << 18};  // the drawn shape's age at draw: draw time - BodyState stamp_ns
-  SampleRecorder body_first_age_ms_{1 << 18};  // the same at the first frame that draws each state (its delivery)
+  core::SampleRecorder body_age_ms_{1 << 18};  // the drawn shape's age at draw: draw time - BodyState stamp_ns
+  core::SampleRecorder body_first_age_ms_{1 << 18};  // the same at the first frame that draws each state (its delivery)
   bool body_new_ = false;  // a state was taken since the last frame
-  SampleRecorder body_apply_us_{1 << 18};
+  core::SampleRecorder body_apply_us_{1 << 18};
   void say_rejection(BodyRejection why, std::uint64_t seq, int count, std::uint64_t scene_hash) noexcept;
 };
 

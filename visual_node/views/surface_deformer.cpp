@@ -3,10 +3,16 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
-#include "liver/bucket_grid.h"
+#include "contact/bucket_grid.h"
 #include "core/error.h"
 
-#include "liver/nonlinear_law.h"
+#include "nonlinear/nonlinear_law.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::contact;
 
 namespace surgsim {
 

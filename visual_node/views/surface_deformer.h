@@ -8,13 +8,15 @@
 #include <vector>
 
 #include "mesh/mesh.h"
-#include "liver/corotation.h"
-#include "liver/precompute.h"
-#include "liver/superposition.h"
+#include "compliance/corotation.h"
+#include "compliance/precompute.h"
+#include "compliance/superposition.h"
+
+namespace surgsim::nonlinear {
+class NonlinearLaw;
+}  // namespace surgsim::nonlinear
 
 namespace surgsim {
-
-class NonlinearLaw;
 
 class SurfaceDeformer {
  public:
@@ -22,24 +24,24 @@ class SurfaceDeformer {
   /// `law` (may be null: linear) applies P to the displacements orthogonal to the constraint direction.
   /// `deformation` kCorotational (issue 16): the visual node recomputes the rotations itself from the
   /// displacements (nothing more is sent): per frame, kCorotationalPasses fixed-point passes of
-  ///   u~_n = sum_l G(n, k_l) R_l^T lambda_l,  then R_n of every visible node from u~ (liver/corotation.h),
+  ///   u~_n = sum_l G(n, k_l) R_l^T lambda_l,  then R_n of every visible node from u~ (compliance/corotation.h),
   /// and the drawn u_n = R_n u~_n with the last rotations;
   /// warm-started from the previous frame's rotations; the law's P comes after, on the warped u.
-  SurfaceDeformer(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors* tensors,
-                  const NonlinearLaw* law = nullptr, LiverDeformation deformation = LiverDeformation::kLinear);
+  SurfaceDeformer(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, const compliance::Tensors* tensors,
+                  const nonlinear::NonlinearLaw* law = nullptr, compliance::LiverDeformation deformation = compliance::LiverDeformation::kLinear);
   static constexpr int kCorotationalPasses = 2;
 
   /// Deforms for forces lambda (N) on m contact nodes (mesh indices). m = 0 restores the rest shape. On a bad
   /// input (unknown node, non-finite lambda) the previous shape is kept and the status says why. `direction`
   /// (unit; the ContactFrame's mean imposed displacement) is the axis of the non-linear law; zero skips it.
-  ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
+  compliance::ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
                       const Eigen::Vector3d& direction = Eigen::Vector3d::Zero()) noexcept;
   /// Several instruments (issue 19): contact l belongs to instrument instrument[l], whose mean imposed displacement
   /// direction is directions[instrument[l]] (`instruments` of them). The displacements are the same linear sum
   /// u = sum_l G(., k_l) lambda_l; the non-linear law bends each instrument's share u_i (its own contacts) about its
   /// own direction before the shares are added. Contacts naming an instrument outside 0..instruments-1 or one with
   /// a zero direction are superposed linearly. One instrument: the same as apply(nodes, lambda, m, direction).
-  ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, const int* instrument, int m,
+  compliance::ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, const int* instrument, int m,
                       const Eigen::Vector3d* directions, int instruments) noexcept;
 
   /// The shape itself (issue 16, liver.deformation multirate: the haptic node's tracker publishes it as BodyState):
@@ -52,13 +54,13 @@ class SurfaceDeformer {
   /// node from its place in `xyz` to rest + its displacement, lambda = G_CC^-1 (u* - u_xyz), added to the whole
   /// shape, so the contact nodes land exactly where the tool holds them and the rest follows linearly between two
   /// tracker states. m = 0 is set_positions. kOk, or why not (then the previous shape is kept). No allocation.
-  ContactStatus carry_positions(const double* xyz, int count, const Contact* contacts, int m) noexcept;
+  compliance::ContactStatus carry_positions(const double* xyz, int count, const compliance::Contact* contacts, int m) noexcept;
 
   /// Embeds a finer visual surface: each of its vertices is tied to the closest point of the mechanical boundary
   /// (triangle, barycentric coordinates, offset along the triangle's normal) and follows it. Only boundary rows are
-  /// used, so the visual node still holds no interior rows. Throws surgsim::Error naming the file and the first
+  /// used, so the visual node still holds no interior rows. Throws surgsim::core::Error naming the file and the first
   /// vertex further than `max_distance` (m) from the boundary.
-  void embed(const TriSurface& fine, const TetMesh& mesh, const SurfaceMesh& surface, double max_distance);
+  void embed(const mesh::TriSurface& fine, const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, double max_distance);
   bool embedded() const { return fine_tris_.rows() > 0; }
   /// What the renderer draws: the embedded surface when there is one, else the boundary.
   const Eigen::MatrixX3f& drawn_positions() const { return embedded() ? fine_positions_ : positions_; }
@@ -77,7 +79,7 @@ class SurfaceDeformer {
   double max_displacement() const { return max_displacement_; }
   bool has_tensors() const { return superposition_ != nullptr; }
   /// The rotations in use (corotational; null otherwise).
-  const NodeRotations* rotations() const { return rotations_.get(); }
+  const compliance::NodeRotations* rotations() const { return rotations_.get(); }
 
  private:
   std::vector<int> visible_nodes_;
@@ -86,8 +88,8 @@ class SurfaceDeformer {
   Eigen::MatrixX3i tris_;
   Eigen::MatrixX3f rest_;
   Eigen::MatrixX3f positions_;
-  std::unique_ptr<Superposition> superposition_;
-  const NonlinearLaw* law_ = nullptr;
+  std::unique_ptr<compliance::Superposition> superposition_;
+  const nonlinear::NonlinearLaw* law_ = nullptr;
   // Embedded surface: per fine vertex, the boundary triangle's vertices, barycentrics and normal offset (m).
   Eigen::MatrixX3i fine_tris_;
   Eigen::MatrixX3i fine_anchor_;
@@ -100,19 +102,19 @@ class SurfaceDeformer {
   Eigen::VectorXd u_;
   Eigen::VectorXd u_sum_;  // apply() with several instruments: the sum of their shares
   // carry_positions(): the contacts' displacements from the given shape and their linear solution.
-  std::array<Contact, kMaxContacts> carry_{};
-  ContactSolution carry_solution_;
+  std::array<compliance::Contact, compliance::kMaxContacts> carry_{};
+  compliance::ContactSolution carry_solution_;
   // One instrument's contacts, gathered (kMaxContacts each).
   std::vector<int> group_nodes_;
   std::vector<Eigen::Vector3d> group_lambda_;
   double max_displacement_ = 0;
   // --- corotational (issue 16) ---
   /// u (3 per visual row) for forces lambda on m contact nodes: linear, or warped by the current rotations.
-  ContactStatus displace(const int* nodes, const Eigen::Vector3d* lambda, int m, Eigen::VectorXd& u,
+  compliance::ContactStatus displace(const int* nodes, const Eigen::Vector3d* lambda, int m, Eigen::VectorXd& u,
                          bool rotate_rows = true) noexcept;
   /// The rotations of every visible node from the contacts (kCorotationalPasses passes); u_ holds the last pass's u.
-  ContactStatus update_rotations(const int* nodes, const Eigen::Vector3d* lambda, int m) noexcept;
-  std::unique_ptr<NodeRotations> rotations_;
+  compliance::ContactStatus update_rotations(const int* nodes, const Eigen::Vector3d* lambda, int m) noexcept;
+  std::unique_ptr<compliance::NodeRotations> rotations_;
   std::vector<Eigen::Vector3d> rest_lambda_;  // kMaxContacts: R_l^T lambda_l
 };
 

@@ -13,6 +13,10 @@
 #include "web_dds.h"
 #include "web_server.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::scene;
+
 #ifndef SURGSIM_WEB_ROOT
 #define SURGSIM_WEB_ROOT "visual_node/web/www"
 #endif

@@ -6,6 +6,9 @@
 #include "frame_stream.h"
 #include "surgsim_types.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+
 namespace surgsim::web {
 
 using eprosima::fastdds::dds::DataReader;

@@ -34,7 +34,7 @@ struct Telemetry {
   std::uint32_t contacts = 0;            // contact entries of the newest frame (every instrument)
   std::uint32_t instrument_contacts = 0; // the driven instrument's contact points
   double sim_time = 0;                   // s
-  Pose5 pose;                            // the driven instrument's pose as the haptic node used it
+  tool::Pose5 pose;                            // the driven instrument's pose as the haptic node used it
   // VisualStatus echoes: the haptic -> visual one-way latency of the newest echo (same host clocks), us.
   double haptic_visual_latency_us = -1;
   double visual_fps = 0;
@@ -65,9 +65,9 @@ class WebDds {
   /// The newest frame message (header + JPEG) when one arrived since `last_number`, else null.
   std::shared_ptr<const std::string> frame_since(std::uint64_t last_number);
   /// Publishes the driven instrument's ToolCommand (stamped now).
-  void publish(const Pose5& pose, std::uint64_t seq);
+  void publish(const tool::Pose5& pose, std::uint64_t seq);
   /// Render -> received here (us, same-host clocks) of every frame so far.
-  Percentiles frame_arrival_us();
+  core::Percentiles frame_arrival_us();
   /// The render stamp of frame `number` when it is among the last frames received (0: unknown).
   std::uint64_t render_stamp_of(std::uint64_t number);
   const dds::Participant& participant() const;

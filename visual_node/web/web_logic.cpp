@@ -5,6 +5,10 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::intestine;
+
 namespace surgsim::web {
 
 Request parse_target(std::string_view target) {

@@ -42,7 +42,7 @@ const char* content_type(std::string_view name);
 /// A message from a page (JSON text over the WebSocket).
 struct ClientMessage {
   enum class Type { kTake, kRelease, kPose, kShown } type = Type::kTake;
-  Pose5 pose;                    // kPose: the pose the page asks for (pitch, yaw, insertion, roll, jaw)
+  tool::Pose5 pose;                    // kPose: the pose the page asks for (pitch, yaw, insertion, roll, jaw)
   std::uint64_t frame = 0;       // kShown: the frame number the page just displayed
 };
 
@@ -62,9 +62,9 @@ struct DeviceLimits {
 };
 
 /// `target` clamped to the device's range.
-Pose5 clamp_pose(const Pose5& target, const DeviceLimits& limits);
+tool::Pose5 clamp_pose(const tool::Pose5& target, const DeviceLimits& limits);
 /// One step of `dt` seconds from `current` towards `target` (clamped), each degree of freedom at most its rate.
-Pose5 step_towards(const Pose5& current, const Pose5& target, const DeviceLimits& limits, double dt);
+tool::Pose5 step_towards(const tool::Pose5& current, const tool::Pose5& target, const DeviceLimits& limits, double dt);
 
 /// Who drives the tool: at most one session at a time; the others watch.
 class DriveArbiter {

@@ -23,6 +23,10 @@
 #include "core/stats.h"
 #include "web_dds.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::intestine;
+
 namespace surgsim::web {
 
 namespace beast = boost::beast;

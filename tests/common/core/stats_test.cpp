@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+using namespace surgsim::core;
+
 namespace surgsim {
 namespace {
 

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-namespace surgsim::text {
+namespace surgsim::core::text {
 namespace {
 
 TEST(Text, TrimStripsBlanksOnly) {
@@ -67,4 +67,4 @@ TEST(Text, ParseIntAndHelpers) {
 }
 
 }  // namespace
-}  // namespace surgsim::text
+}  // namespace surgsim::core::text

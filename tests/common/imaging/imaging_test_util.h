@@ -18,31 +18,31 @@
 namespace surgsim::test {
 
 /// A tetrahedral mesh's boundary as a compact triangle surface (outward).
-inline TriSurface boundary_tri_surface(const TetMesh& mesh) {
-  const SurfaceMesh s = boundary_surface(mesh);
-  TriSurface out;
+inline mesh::TriSurface boundary_tri_surface(const mesh::TetMesh& mesh) {
+  const mesh::SurfaceMesh s = mesh::boundary_surface(mesh);
+  mesh::TriSurface out;
   out.vertices = mesh.nodes;
   out.tris = s.tris;
-  compact_tri_surface(out);
+  mesh::compact_tri_surface(out);
   return out;
 }
 
-inline double tets_volume(const TetMesh& mesh) {
+inline double tets_volume(const mesh::TetMesh& mesh) {
   double v = 0.0;
-  for (int t = 0; t < mesh.tets.rows(); ++t) v += tet_volume(mesh, t);
+  for (int t = 0; t < mesh.tets.rows(); ++t) v += mesh::tet_volume(mesh, t);
   return v;
 }
 
 /// The original organ: the generated liver (generate_organ) and its boundary.
 struct ReferenceOrgan {
-  TetMesh mesh;
-  TriSurface surface;
+  mesh::TetMesh mesh;
+  mesh::TriSurface surface;
   double volume = 0.0;  // m^3
 };
 
 inline ReferenceOrgan reference_liver(int nodes) {
   ReferenceOrgan r;
-  r.mesh = generate_organ(OrganSpec{"liver", nodes});
+  r.mesh = mesher::generate_organ(mesher::OrganSpec{"liver", nodes});
   r.surface = boundary_tri_surface(r.mesh);
   r.volume = tets_volume(r.mesh);
   return r;
@@ -50,9 +50,9 @@ inline ReferenceOrgan reference_liver(int nodes) {
 
 /// A test volume: the reference voxelized at `spacing` (m), label `label`, optionally with seeded noise
 /// (boundary voxels flipped with probability `noise`, plus `speckles` stray voxels).
-inline LabelVolume liver_volume(const ReferenceOrgan& reference, double spacing, double noise = 0.0,
+inline imaging::LabelVolume liver_volume(const ReferenceOrgan& reference, double spacing, double noise = 0.0,
                                 int speckles = 0, std::uint32_t seed = 1, std::int32_t label = 1) {
-  LabelVolume v = voxelize(reference.surface.vertices, reference.surface.tris, spacing, 2, label);
+  imaging::LabelVolume v = imaging::voxelize(reference.surface.vertices, reference.surface.tris, spacing, 2, label);
   if (noise > 0.0 || speckles > 0) add_label_noise(v, noise, speckles, seed);
   return v;
 }
@@ -66,13 +66,13 @@ struct RoundTrip {
   double mc_volume_error = 0.0, surface_volume_error = 0.0, mesh_volume_error = 0.0;  // relative, signed
 };
 
-inline RoundTrip round_trip(const ReferenceOrgan& reference, const Segmentation& s, double spacing) {
+inline RoundTrip round_trip(const ReferenceOrgan& reference, const imaging::Segmentation& s, double spacing) {
   RoundTrip r;
   const double step = 0.25 * spacing;  // sampling of the surfaces for the distances
-  const SurfaceDistance ds = surface_distance(s.surface, reference.surface, step);
-  const TriSurface boundary = boundary_tri_surface(s.mesh);
-  const SurfaceDistance dm = surface_distance(boundary, reference.surface, step);
-  const SurfaceDistance dc = surface_distance(s.marching_cubes, reference.surface, step);
+  const imaging::SurfaceDistance ds = imaging::surface_distance(s.surface, reference.surface, step);
+  const mesh::TriSurface boundary = boundary_tri_surface(s.mesh);
+  const imaging::SurfaceDistance dm = imaging::surface_distance(boundary, reference.surface, step);
+  const imaging::SurfaceDistance dc = imaging::surface_distance(s.marching_cubes, reference.surface, step);
   r.surface_hausdorff = ds.hausdorff / spacing;
   r.surface_mean = ds.mean / spacing;
   r.mesh_hausdorff = dm.hausdorff / spacing;
@@ -82,8 +82,8 @@ inline RoundTrip round_trip(const ReferenceOrgan& reference, const Segmentation&
   r.mc_triangles = static_cast<int>(s.marching_cubes.tris.rows());
   r.surface_triangles = static_cast<int>(s.surface.tris.rows());
   r.mesh_triangles = static_cast<int>(boundary.tris.rows());
-  r.mc_volume_error = tri_surface_volume(s.marching_cubes) / reference.volume - 1.0;
-  r.surface_volume_error = tri_surface_volume(s.surface) / reference.volume - 1.0;
+  r.mc_volume_error = mesh::tri_surface_volume(s.marching_cubes) / reference.volume - 1.0;
+  r.surface_volume_error = mesh::tri_surface_volume(s.surface) / reference.volume - 1.0;
   r.mesh_volume_error = tets_volume(s.mesh) / reference.volume - 1.0;
   return r;
 }

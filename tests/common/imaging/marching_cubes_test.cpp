@@ -10,6 +10,9 @@
 #include "mesh/tri_surface.h"
 #include "imaging/voxel_boundary.h"
 
+using namespace surgsim::mesh;
+using namespace surgsim::imaging;
+
 namespace surgsim {
 namespace {
 

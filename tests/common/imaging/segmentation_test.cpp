@@ -18,14 +18,21 @@
 
 #include "support/error_test_util.h"
 #include "core/error.h"
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
 #include "imaging_test_util.h"
 #include "mesh/mesh.h"
 #include "scene/scene.h"
 #include "mesher/scene_mesh.h"
-#include "liver/static_solver.h"
+#include "fem/static_solver.h"
 #include "imaging/volume_io.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
+using namespace surgsim::imaging;
 
 namespace surgsim {
 namespace {

@@ -14,6 +14,9 @@
 #include "imaging/surface_smoothing.h"
 #include "imaging/voxel_boundary.h"
 
+using namespace surgsim::mesh;
+using namespace surgsim::imaging;
+
 namespace surgsim {
 namespace {
 

@@ -13,6 +13,9 @@
 #include "support/error_test_util.h"
 #include "core/error.h"
 
+using namespace surgsim::core;
+using namespace surgsim::imaging;
+
 namespace surgsim {
 namespace {
 

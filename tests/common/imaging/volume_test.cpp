@@ -9,6 +9,8 @@
 #include "support/error_test_util.h"
 #include "core/error.h"
 
+using namespace surgsim::imaging;
+
 namespace surgsim {
 namespace {
 

@@ -12,6 +12,8 @@
 #include "intestine/intestine_model.h"
 #include "support/intestine_test_util.h"
 
+using namespace surgsim::intestine;
+
 namespace surgsim::intestine {
 namespace {
 

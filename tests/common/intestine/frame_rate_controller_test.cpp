@@ -12,6 +12,9 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+using namespace surgsim::intestine;
+
 namespace surgsim::intestine {
 namespace {
 

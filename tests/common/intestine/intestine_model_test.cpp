@@ -11,6 +11,9 @@
 #include "core/error.h"
 #include "support/intestine_test_util.h"
 
+using namespace surgsim::core;
+using namespace surgsim::intestine;
+
 namespace surgsim::intestine {
 namespace {
 

@@ -10,6 +10,9 @@
 #include "core/error.h"
 #include "intestine/intestine_model.h"
 
+using namespace surgsim::core;
+using namespace surgsim::intestine;
+
 namespace surgsim::intestine {
 namespace {
 

@@ -16,6 +16,10 @@
 #include "mesh/geometry.h"
 #include "support/intestine_test_util.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::intestine;
+
 namespace surgsim::intestine {
 namespace {
 

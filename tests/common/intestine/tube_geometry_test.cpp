@@ -16,6 +16,9 @@
 #include "intestine/intestine_model.h"
 #include "support/intestine_test_util.h"
 
+using namespace surgsim::core;
+using namespace surgsim::intestine;
+
 namespace surgsim::intestine {
 namespace {
 

@@ -7,12 +7,20 @@
 #include <cstring>
 #include <memory>
 
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
 #include "liver/liver_setup.h"
-#include "liver/precompute.h"
-#include "liver/superposition.h"
+#include "compliance/precompute.h"
+#include "compliance/superposition.h"
 #include "mesher/organ_mesher.h"
+
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::liver;
+using namespace surgsim::intestine;
+using namespace surgsim::mesher;
 
 namespace surgsim {
 namespace {

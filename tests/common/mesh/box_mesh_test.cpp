@@ -7,6 +7,9 @@
 #include "core/error.h"
 #include "mesh/mesh.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
 namespace surgsim {
 namespace {
 

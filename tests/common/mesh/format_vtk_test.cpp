@@ -10,6 +10,9 @@
 #include "core/error.h"
 #include "mesh_test_util.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
 namespace surgsim {
 namespace {
 

@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+using namespace surgsim::mesh;
+using namespace surgsim::intestine;
+
 namespace surgsim {
 namespace {
 

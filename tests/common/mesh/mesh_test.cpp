@@ -15,6 +15,9 @@
 #include "core/error.h"
 #include "mesh_test_util.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
 namespace surgsim {
 namespace {
 
@@ -112,7 +115,7 @@ TEST(TetVolume, SignFollowsNodeOrder) {
   EXPECT_NEAR(tet_volume(m, 0), -1.0 / 6.0, 1e-15);
 }
 
-// Garbage: random byte edits of the fixtures and random bytes give surgsim::Error or a mesh, never a crash.
+// Garbage: random byte edits of the fixtures and random bytes give surgsim::core::Error or a mesh, never a crash.
 TEST(ReadErrors, GarbageNeverCrashes) {
   std::mt19937 rng(12345);
   const std::string alphabet = std::string("0123456789$-+.e \n\r\tEN", 21) + std::string(1, '\0') + "\xff";

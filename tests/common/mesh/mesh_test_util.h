@@ -19,8 +19,8 @@ namespace surgsim::test {
 // ---- Fixtures: a unit cube split into 5 tets (4 corner tets + a central one), in every supported format.
 // Node order is the same everywhere: (0,0,0) (1,0,0) (1,1,0) (0,1,0) (0,0,1) (1,0,1) (1,1,1) (0,1,1).
 
-inline TetMesh cube_mesh() {
-  TetMesh m;
+inline mesh::TetMesh cube_mesh() {
+  mesh::TetMesh m;
   m.nodes.resize(8, 3);
   m.nodes << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 1, 1, 1, 0, 1, 1;
   m.tets.resize(5, 4);
@@ -256,39 +256,39 @@ inline std::string replace(std::string s, const std::string& from, const std::st
   return s;
 }
 
-// Runs f expecting a surgsim::Error whose message holds every part; returns the message.
+// Runs f expecting a surgsim::core::Error whose message holds every part; returns the message.
 inline std::string expect_error(const std::function<void()>& f, std::initializer_list<std::string> parts) {
   try {
     f();
-  } catch (const Error& e) {
+  } catch (const core::Error& e) {
     const std::string msg = e.what();
     for (const std::string& p : parts) EXPECT_NE(msg.find(p), std::string::npos) << "missing '" << p << "' in: " << msg;
     return msg;
   } catch (const std::exception& e) {
-    ADD_FAILURE() << "expected surgsim::Error, got another exception: " << e.what();
+    ADD_FAILURE() << "expected surgsim::core::Error, got another exception: " << e.what();
     return "";
   }
-  ADD_FAILURE() << "expected surgsim::Error, nothing was thrown";
+  ADD_FAILURE() << "expected surgsim::core::Error, nothing was thrown";
   return "";
 }
 
-inline void expect_same_geometry(const TetMesh& a, const TetMesh& b) {
+inline void expect_same_geometry(const mesh::TetMesh& a, const mesh::TetMesh& b) {
   ASSERT_EQ(a.nodes.rows(), b.nodes.rows());
   ASSERT_EQ(a.tets.rows(), b.tets.rows());
   EXPECT_TRUE(a.nodes == b.nodes);
   EXPECT_TRUE(a.tets == b.tets);
-  EXPECT_EQ(mesh_hash(a), mesh_hash(b));
+  EXPECT_EQ(mesh::mesh_hash(a), mesh::mesh_hash(b));
 }
 
-inline double total_volume(const TetMesh& m) {
+inline double total_volume(const mesh::TetMesh& m) {
   double v = 0;
-  for (int t = 0; t < m.tets.rows(); ++t) v += tet_volume(m, t);
+  for (int t = 0; t < m.tets.rows(); ++t) v += mesh::tet_volume(m, t);
   return v;
 }
 
 // n x n x n cubes of side h, 6 tets each (Kuhn/Freudenthal split, conforming); half the tets are inverted.
-inline TetMesh grid_mesh(int n, double h) {
-  TetMesh m;
+inline mesh::TetMesh grid_mesh(int n, double h) {
+  mesh::TetMesh m;
   const int p = n + 1;
   m.nodes.resize(p * p * p, 3);
   for (int k = 0; k < p; ++k) {

@@ -10,6 +10,9 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+
 namespace surgsim {
 namespace {
 

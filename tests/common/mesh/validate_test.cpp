@@ -11,6 +11,8 @@
 #include "core/error.h"
 #include "mesh_test_util.h"
 
+using namespace surgsim::mesh;
+
 namespace surgsim {
 namespace {
 

@@ -17,6 +17,10 @@
 #include "core/error.h"
 #include "mesh/mesh.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::mesher;
+
 namespace surgsim {
 namespace {
 

@@ -7,6 +7,8 @@
 #include <future>
 #include <thread>
 
+using namespace surgsim::os;
+
 namespace surgsim {
 namespace {
 

@@ -6,6 +6,8 @@
 
 #include <filesystem>
 
+using namespace surgsim::os;
+
 namespace surgsim {
 namespace {
 

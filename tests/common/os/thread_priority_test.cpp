@@ -5,6 +5,8 @@
 
 #include <thread>
 
+using namespace surgsim::os;
+
 namespace surgsim {
 namespace {
 

@@ -9,6 +9,9 @@
 #include "core/error.h"
 #include "scene/scene.h"
 
+using namespace surgsim::core;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

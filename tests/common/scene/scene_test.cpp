@@ -15,6 +15,16 @@
 #include "tool/tool.h"
 #include "tool/trajectory.h"
 
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::tool;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
+using namespace surgsim::mesher;
+
 namespace surgsim {
 namespace {
 
@@ -885,7 +895,7 @@ INSTANTIATE_TEST_SUITE_P(
                   "key 'liver.deformation'", "the multirate tracker is the non-linear model itself"}),
     [](const ::testing::TestParamInfo<ErrorCase>& info) { return std::string(info.param.name); });
 
-TEST(SceneLoad, LiverMultirateIsReadAndHashed) {
+TEST(SceneLoad, MultirateContactsIsReadAndHashed) {
   const fs::path dir = test_dir();
   const Scene linear = load_scene(write(dir / "linear.yaml", kMinimal));
   const Scene multirate = load_scene(write(dir / "multirate.yaml", std::string(kMinimal) + "liver: {deformation: multirate}\n"));

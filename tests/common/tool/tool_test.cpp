@@ -4,6 +4,8 @@
 
 #include <cmath>
 
+using namespace surgsim::tool;
+
 namespace surgsim {
 namespace {
 

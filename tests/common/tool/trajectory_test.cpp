@@ -18,6 +18,9 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+
 namespace surgsim {
 namespace {
 

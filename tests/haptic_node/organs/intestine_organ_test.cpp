@@ -16,6 +16,10 @@
 #include "publisher.h"
 #include "support/alloc_counter.h"
 
+using namespace surgsim::tool;
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

@@ -9,6 +9,10 @@
 #include <cmath>
 #include <iostream>
 
+using namespace surgsim::tool;
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

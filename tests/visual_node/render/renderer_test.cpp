@@ -15,6 +15,11 @@
 
 #include "core/error.h"
 
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 
@@ -556,7 +561,7 @@ TEST(NullRenderer, CountsAndHasNoImage) {
 TEST(MakeRenderer, RefusesUnknownBackendAndBadSize) {
   try {
     make_renderer("vulkan", 64, 64);
-    FAIL() << "expected surgsim::Error";
+    FAIL() << "expected surgsim::core::Error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("vulkan"), std::string::npos) << e.what();
   }
@@ -570,7 +575,7 @@ TEST(WritePng, UnwritablePathThrowsNamingIt) {
   const std::string path = "/nonexistent-surgsim-dir/frame.png";
   try {
     write_png(path, image);
-    FAIL() << "expected surgsim::Error";
+    FAIL() << "expected surgsim::core::Error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
   }

@@ -12,6 +12,9 @@
 #include "render/renderer.h"
 #include "intestine/tube_geometry.h"
 
+using namespace surgsim::intestine;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

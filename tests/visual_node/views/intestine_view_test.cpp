@@ -12,6 +12,8 @@
 #include "intestine/intestine_model.h"
 #include "render/renderer.h"
 
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

@@ -23,6 +23,10 @@
 #include "support/contact_frame_util.h"
 #include "surgsim_types.h"
 
+using namespace surgsim::core;
+using namespace surgsim::compliance;
+using namespace surgsim::scene;
+
 namespace surgsim {
 namespace {
 

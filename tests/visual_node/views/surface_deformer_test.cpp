@@ -7,12 +7,19 @@
 
 #include "mesh/box_mesh.h"
 #include "core/error.h"
-#include "liver/fem.h"
-#include "liver/fixed_set.h"
-#include "liver/nonlinear_law.h"
-#include "liver/precompute.h"
+#include "fem/fem.h"
+#include "fem/fixed_set.h"
+#include "nonlinear/nonlinear_law.h"
+#include "compliance/precompute.h"
 #include "render/renderer.h"
-#include "liver/static_solver.h"
+#include "fem/static_solver.h"
+
+using namespace surgsim::core;
+using namespace surgsim::mesh;
+using namespace surgsim::fem;
+using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
+using namespace surgsim::scene;
 
 namespace surgsim {
 namespace {

@@ -8,6 +8,8 @@
 #include <limits>
 #include <set>
 
+using namespace surgsim::tool;
+
 namespace surgsim::web {
 namespace {
 
