@@ -41,7 +41,7 @@ inline std::string printable(std::string_view s) {
 
 inline std::string read_whole_file(const std::string& path) {
   std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) throw_error(path, ": cannot open mesh file: ", std::strerror(errno));
+  if (!f) core::throw_error(path, ": cannot open mesh file: ", std::strerror(errno));
   std::string text;
   char buf[1 << 16];
   std::size_t n = 0;
@@ -49,16 +49,16 @@ inline std::string read_whole_file(const std::string& path) {
   const bool failed = std::ferror(f) != 0;
   const int err = errno;
   std::fclose(f);
-  if (failed) throw_error(path, ": cannot read mesh file: ", std::strerror(err));
+  if (failed) core::throw_error(path, ": cannot read mesh file: ", std::strerror(err));
   return text;
 }
 
 inline void write_whole_file(const std::string& path, const std::string& text) {
   std::FILE* f = std::fopen(path.c_str(), "wb");
-  if (!f) throw_error(path, ": cannot open for writing: ", std::strerror(errno));
+  if (!f) core::throw_error(path, ": cannot open for writing: ", std::strerror(errno));
   const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
   const int err = errno;
-  if (std::fclose(f) != 0 || !ok) throw_error(path, ": cannot write: ", std::strerror(ok ? errno : err));
+  if (std::fclose(f) != 0 || !ok) core::throw_error(path, ": cannot write: ", std::strerror(ok ? errno : err));
 }
 
 inline void append_number(std::string& out, double v) {

@@ -20,7 +20,7 @@
 using namespace surgsim::core;
 
 namespace surgsim::mesh {
-namespace mesh_internal {
+namespace internal {
 
 std::string mesh_name(const TetMesh& mesh) { return mesh.source.empty() ? "<in-memory mesh>" : mesh.source; }
 
@@ -69,7 +69,7 @@ std::vector<Face> sorted_faces(const Eigen::MatrixX4i& tets) {
   return faces;
 }
 
-}  // namespace mesh_internal
+}  // namespace internal
 
 namespace {
 
