@@ -18,3 +18,15 @@ for f,items in fix.items():
         lines[line-1]=L[:c]+ns+L[c:]; n+=1
     open(f,'w').write('\n'.join(lines))
 print('fixed',n,'in',len(fix),'files')
+# using-directives of namespaces the translation unit never declares: drop the line.
+bad=re.compile(r"^(/work/wip/[^:]+):(\d+):\d+: error: ‘(\w+)’ is not a namespace-name")
+drop=collections.defaultdict(set)
+for l in open(sys.argv[1]):
+    m=bad.match(l)
+    if m: drop[m.group(1)].add((int(m.group(2)), m.group(3)))
+for f,ls in drop.items():
+    lines=open(f).read().split('\n')
+    for i,ns in sorted(ls,reverse=True):
+        if lines[i-1].strip()==f'using namespace surgsim::{ns};': del lines[i-1]  # idempotent: checks the name
+    open(f,'w').write('\n'.join(lines))
+print('dropped directives in',len(drop),'files')

@@ -4,7 +4,6 @@
 #include <cmath>
 
 using namespace surgsim::mesh;
-using namespace surgsim::fem;
 
 namespace surgsim::compliance {
 

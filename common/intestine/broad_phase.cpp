@@ -8,7 +8,6 @@
 #include "core/error.h"
 
 using namespace surgsim::core;
-using namespace surgsim::mesh;
 
 namespace surgsim::intestine {
 

@@ -15,7 +15,6 @@ using namespace surgsim::core;
 using namespace surgsim::mesh;
 using namespace surgsim::fem;
 using namespace surgsim::compliance;
-using namespace surgsim::nonlinear;
 
 namespace surgsim::liver {
 

@@ -49,8 +49,8 @@ void check_indices(const TetMesh& mesh, const char* caller) {
 }
 
 // All tet faces sorted by key, so that equal faces are adjacent.
-std::vector<Face> sorted_faces(const Eigen::MatrixX4i& tets) {
-  std::vector<Face> faces;
+std::vector<mesh::internal::Face> sorted_faces(const Eigen::MatrixX4i& tets) {
+  std::vector<mesh::internal::Face> faces;
   faces.reserve(static_cast<std::size_t>(tets.rows()) * 4);
   for (int t = 0; t < tets.rows(); ++t) {
     for (int f = 0; f < 4; ++f) {

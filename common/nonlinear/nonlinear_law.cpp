@@ -14,7 +14,6 @@
 
 using namespace surgsim::core;
 using namespace surgsim::fem;
-using namespace surgsim::compliance;
 
 namespace surgsim::nonlinear {
 namespace {

@@ -10,6 +10,7 @@
 #include "intestine/intestine_spec.h"
 #include "compliance/corotation.h"
 #include "fem/material.h"
+#include "nonlinear/nonlinear_law.h"
 #include "mesh/mesh_source.h"
 #include "tool/tool.h"
 
