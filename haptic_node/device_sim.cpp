@@ -251,7 +251,7 @@ Pose5 scripted(double t, double depth) {
 // the scene's order).
 std::vector<double> per_instrument(const std::string& option, const std::string& value,
                                    const std::vector<std::string>& names) {
-  const auto fields = text::split(value, ',');
+  const auto fields = core::text::split(value, ',');
   if (fields.size() != 1 && fields.size() != names.size())
     throw_error(option, " '", value, "': ", fields.size(), " values for the scene's ", names.size(), " instrument",
                 names.size() == 1 ? "" : "s", " (", join(names),
@@ -259,8 +259,8 @@ std::vector<double> per_instrument(const std::string& option, const std::string&
   std::vector<double> v;
   for (const auto f : fields) {
     double x = 0;
-    if (text::parse_double(f, x) != text::Number::kOk)
-      throw_error(option, " '", value, "': ", text::quote(f), " is not a finite number");
+    if (core::text::parse_double(f, x) != text::Number::kOk)
+      throw_error(option, " '", value, "': ", core::text::quote(f), " is not a finite number");
     v.push_back(x);
   }
   if (v.size() == 1) v.assign(names.size(), v.front());
@@ -275,20 +275,20 @@ struct Silence {
 };
 
 Silence parse_silence(const std::string& arg, const std::vector<std::string>& names) {
-  const auto fields = text::split(arg, ':');
+  const auto fields = core::text::split(arg, ':');
   const auto fail = [&](const std::string& what) {
     throw_error("--silence '", arg, "': ", what, " (NAME, NAME:FROM or NAME:FROM:TO, seconds from the start; the "
                 "scene's instruments: ", join(names), ")");
   };
   if (fields.size() > 3) fail("too many ':'");
   Silence s;
-  const auto it = std::find(names.begin(), names.end(), std::string(text::trim(fields[0])));
-  if (it == names.end()) fail(text::quote(fields[0]) + " is not an instrument of the scene");
+  const auto it = std::find(names.begin(), names.end(), std::string(core::text::trim(fields[0])));
+  if (it == names.end()) fail(core::text::quote(fields[0]) + " is not an instrument of the scene");
   s.instrument = static_cast<int>(it - names.begin());
-  if (fields.size() > 1 && (text::parse_double(fields[1], s.from) != text::Number::kOk || s.from < 0))
-    fail("FROM " + text::quote(fields[1]) + " is not a time >= 0");
-  if (fields.size() > 2 && (text::parse_double(fields[2], s.to) != text::Number::kOk || !(s.to > s.from)))
-    fail("TO " + text::quote(fields[2]) + " is not a time after FROM");
+  if (fields.size() > 1 && (core::text::parse_double(fields[1], s.from) != text::Number::kOk || s.from < 0))
+    fail("FROM " + core::text::quote(fields[1]) + " is not a time >= 0");
+  if (fields.size() > 2 && (core::text::parse_double(fields[2], s.to) != text::Number::kOk || !(s.to > s.from)))
+    fail("TO " + core::text::quote(fields[2]) + " is not a time after FROM");
   return s;
 }
 

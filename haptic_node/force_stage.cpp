@@ -4,7 +4,6 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
-using namespace surgsim::core;
 using namespace surgsim::tool;
 using namespace surgsim::contact;
 using namespace surgsim::scene;

@@ -23,16 +23,16 @@ namespace surgsim::apps::cli {
 
 inline std::vector<std::string> split(const std::string& s, char sep) {
   std::vector<std::string> out;
-  for (const std::string_view f : text::split(s, sep)) out.emplace_back(f);
+  for (const std::string_view f : core::text::split(s, sep)) out.emplace_back(f);
   return out;
 }
 
-inline std::string trim(const std::string& s) { return std::string(text::trim(s)); }
+inline std::string trim(const std::string& s) { return std::string(core::text::trim(s)); }
 
 /// A finite number, the whole string; throws surgsim::core::Error naming `what`.
 inline double parse_number(const std::string& field, const std::string& what) {
   double v = 0;
-  if (text::parse_double(field, v) == text::Number::kOk) return v;
+  if (core::text::parse_double(field, v) == text::Number::kOk) return v;
   core::throw_error(what, ": '", field, "' is not a finite number");
 }
 
@@ -40,7 +40,7 @@ inline double parse_number(const std::string& field, const std::string& what) {
 inline int parse_index(const std::string& text, const std::string& what) {
   const std::string t = trim(text);
   if (t.empty() || t.find_first_not_of("0123456789") != std::string::npos || t.size() > 9)
-    throw_error(what, ": '", text, "' is not a node index (0-based integer)");
+    core::throw_error(what, ": '", text, "' is not a node index (0-based integer)");
   return std::stoi(t);
 }
 
@@ -54,7 +54,7 @@ inline std::vector<int> parse_index_list(const std::string& text, const std::str
 /// "a,b,c,..." with exactly n numbers.
 inline std::vector<double> parse_numbers(const std::string& text, std::size_t n, const std::string& what) {
   const auto parts = split(text, ',');
-  if (parts.size() != n) throw_error(what, ": '", text, "' needs ", n, " comma-separated numbers, got ", parts.size());
+  if (parts.size() != n) core::throw_error(what, ": '", text, "' needs ", n, " comma-separated numbers, got ", parts.size());
   std::vector<double> v;
   for (const auto& p : parts) v.push_back(parse_number(p, what));
   return v;
@@ -65,19 +65,19 @@ inline fem::ImposedDisplacement parse_impose(const std::string& text) {
   const std::string what = "--impose '" + text + "'";
   const auto colon = text.find(':');
   if (colon == std::string::npos)
-    throw_error(what, ": expected NODE:ux,uy,uz (metres; leave a component empty to leave it free)");
+    core::throw_error(what, ": expected NODE:ux,uy,uz (metres; leave a component empty to leave it free)");
   fem::ImposedDisplacement im;
   im.node = parse_index(text.substr(0, colon), what);
   const auto comps = split(text.substr(colon + 1), ',');
   if (comps.size() != 3)
-    throw_error(what, ": expected 3 components ux,uy,uz after the colon, got ", comps.size());
+    core::throw_error(what, ": expected 3 components ux,uy,uz after the colon, got ", comps.size());
   im.components = 0;
   for (int c = 0; c < 3; ++c) {
     if (trim(comps[static_cast<std::size_t>(c)]).empty()) continue;
     im.value[c] = parse_number(comps[static_cast<std::size_t>(c)], what);
     im.components = static_cast<std::uint8_t>(im.components | (1u << c));
   }
-  if (im.components == 0) throw_error(what, ": no component given");
+  if (im.components == 0) core::throw_error(what, ": no component given");
   return im;
 }
 
@@ -97,12 +97,12 @@ inline fem::FixedRegion fixed_region(const FixedOptions& o) {
     r.has_plane = true;
     r.plane_point = Eigen::Vector3d(v[0], v[1], v[2]);
     r.plane_normal = Eigen::Vector3d(v[3], v[4], v[5]);
-    if (r.plane_normal.norm() == 0) throw_error("--fixed-plane: the normal (last three numbers) must not be zero");
+    if (r.plane_normal.norm() == 0) core::throw_error("--fixed-plane: the normal (last three numbers) must not be zero");
   }
   for (const auto& b : o.boxes) {
     const auto v = parse_numbers(b, 6, "--fixed-box");
     const Eigen::Vector3d lo(v[0], v[1], v[2]), hi(v[3], v[4], v[5]);
-    if (!(lo.array() <= hi.array()).all()) throw_error("--fixed-box '", b, "': min must not exceed max");
+    if (!(lo.array() <= hi.array()).all()) core::throw_error("--fixed-box '", b, "': min must not exceed max");
     r.boxes.emplace_back(lo, hi);
   }
   return r;

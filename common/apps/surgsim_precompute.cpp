@@ -30,7 +30,7 @@ int main(int argc, char** argv) {
   std::string mesh_file, generate, scene_file, out, precision = "auto", method = "direct";
   int nodes = 1500, max_iter = 0, block = PrecomputeOptions().block_columns, threads = 0;
   double young = -1, poisson = -1, tol = 1e-10, memory_limit_mb = 4096;
-  cli::FixedOptions fixed_opts;
+  surgsim::apps::cli::FixedOptions fixed_opts;
   bool force = false, quiet = false;
 
   CLI::App app{
@@ -87,8 +87,8 @@ int main(int argc, char** argv) {
       material.poisson_ratio = poisson;
       if (!fixed_opts.any())
         throw_error("no fixed nodes: give --fixed i,j,k, --fixed-plane or --fixed-box (at least 3 non-collinear nodes)");
-      region = cli::fixed_region(fixed_opts);
-      mesh = cli::load_mesh(mesh_file, generate, nodes, quiet ? nullptr : &std::cerr);
+      region = surgsim::apps::cli::fixed_region(fixed_opts);
+      mesh = surgsim::apps::cli::load_mesh(mesh_file, generate, nodes, quiet ? nullptr : &std::cerr);
       where = mesh_file.empty() ? "generated " + generate : mesh_file;
     }
     const FixedSet fixed = fixed_set_from_region(mesh, region);
@@ -106,7 +106,7 @@ int main(int argc, char** argv) {
     opts.cg_max_iterations = max_iter;
     opts.block_columns = block;
     opts.memory_limit_mb = memory_limit_mb;
-    cli::ProgressPrinter printer(quiet);
+    surgsim::apps::cli::ProgressPrinter printer(quiet);
     opts.progress = [&](const PrecomputeProgress& p) { printer(p); };
 
     const TensorCacheKey key = tensor_cache_key(mesh, material, fixed, contacts, rows, opts);

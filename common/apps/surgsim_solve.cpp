@@ -96,7 +96,7 @@ int main(int argc, char** argv) {
   std::string mesh_file, generate, method = "direct", out_dir;
   int nodes = 1500, max_iter = 0;
   double young = 0, poisson = 0, tol = 1e-10;
-  cli::FixedOptions fixed_opts;
+  surgsim::apps::cli::FixedOptions fixed_opts;
   std::vector<std::string> imposes;
   bool vtk = false;
 
@@ -131,14 +131,14 @@ int main(int argc, char** argv) {
     if (method != "direct" && method != "cg" && method != "tensor")
       throw_error("--method '", method, "': expected direct, cg or tensor");
     std::vector<ImposedDisplacement> imposed;
-    for (const auto& s : imposes) imposed.push_back(cli::parse_impose(s));
+    for (const auto& s : imposes) imposed.push_back(surgsim::apps::cli::parse_impose(s));
     if (!fixed_opts.any())
       throw_error("no fixed nodes: give --fixed i,j,k, --fixed-plane or --fixed-box (at least 3 non-collinear nodes)");
     Material material;
     material.young_modulus = young;
     material.poisson_ratio = poisson;
-    const TetMesh mesh = cli::load_mesh(mesh_file, generate, nodes, &std::cerr);
-    const FixedRegion region = cli::fixed_region(fixed_opts);
+    const TetMesh mesh = surgsim::apps::cli::load_mesh(mesh_file, generate, nodes, &std::cerr);
+    const FixedRegion region = surgsim::apps::cli::fixed_region(fixed_opts);
     const FixedSet fixed = fixed_set_from_region(mesh, region);
     const std::string where = mesh_file.empty() ? generate : mesh_file;
     const ElasticModel model = build_elastic_model(mesh, material, fixed, where);

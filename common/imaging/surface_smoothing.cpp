@@ -9,7 +9,6 @@
 
 using namespace surgsim::core;
 using namespace surgsim::mesh;
-using namespace surgsim::intestine;
 
 namespace surgsim::imaging {
 

@@ -170,8 +170,8 @@ long slice_number(const std::string& stem) {
 // ---------------------------------------------------------------------------------------------------------------
 // NRRD (http://teem.sourceforge.net/nrrd/format.html)
 
-std::string trim(const std::string& s) { return std::string(text::trim(s)); }
-std::string lower(const std::string& s) { return text::lower(s); }
+std::string trim(const std::string& s) { return std::string(core::text::trim(s)); }
+std::string lower(const std::string& s) { return core::text::lower(s); }
 
 struct NrrdType {
   const char* name;  // canonical

@@ -341,7 +341,7 @@ TetMesh resolve_msh(MshData& d, Cursor& cur, const std::string& path) {
 
 TetMesh read_msh(const std::string& path) {
   const std::string text = read_whole_file(path);
-  if (text::trim(text).empty()) throw_error(path, ": empty mesh file");
+  if (core::text::trim(text).empty()) throw_error(path, ": empty mesh file");
   Cursor cur(path, text);
   MshData d;
   double version = 1.0;

@@ -32,7 +32,7 @@ using internal::write_whole_file;
 
 TetMesh read_vtk(const std::string& path) {
   const std::string text = read_whole_file(path);
-  if (text::trim(text).empty()) throw_error(path, ": empty mesh file");
+  if (core::text::trim(text).empty()) throw_error(path, ": empty mesh file");
   Cursor cur(path, text);
 
   // Header: version line, title line, ASCII/BINARY, DATASET type.

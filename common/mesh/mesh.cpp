@@ -97,7 +97,7 @@ using internal::sorted_faces;
 TetMesh read_mesh(const std::string& path) {
   const std::size_t slash = path.find_last_of("/\\");
   const std::size_t dot = path.find_last_of('.');
-  const std::string ext = text::lower(
+  const std::string ext = core::text::lower(
       (dot == std::string::npos || (slash != std::string::npos && dot < slash)) ? "" : path.substr(dot));
   if (ext == ".msh") return read_msh(path);
   if (ext == ".vtk") return read_vtk(path);

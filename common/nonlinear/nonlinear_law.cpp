@@ -23,17 +23,17 @@ constexpr double kMaterialTolerance = 1e-9;
 // Samples of the monotonicity check on [0, t_max].
 constexpr int kMonotoneSamples = 2001;
 
-std::string trim(const std::string& s) { return std::string(text::trim(s)); }
+std::string trim(const std::string& s) { return std::string(core::text::trim(s)); }
 
 std::vector<std::string> split(const std::string& s, char sep) {
   std::vector<std::string> out;
-  for (const std::string_view f : text::split(s, sep)) out.emplace_back(f);
+  for (const std::string_view f : core::text::split(s, sep)) out.emplace_back(f);
   return out;
 }
 
 // A number spanning the whole (trimmed) text; NaN and infinities parse (the caller reports them as non-finite).
 bool parse_double(const std::string& s, double& value) {
-  const text::Number n = text::parse_double(s, value);
+  const text::Number n = core::text::parse_double(s, value);
   return n == text::Number::kOk || n == text::Number::kNotFinite;
 }
 

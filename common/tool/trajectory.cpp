@@ -33,7 +33,7 @@ constexpr const char* kDofNames[kDof] = {"pitch", "yaw", "insertion", "roll", "j
 // large or too small counts as not finite.
 enum class NumberStatus { kOk, kNotNumber, kNotFinite };
 NumberStatus parse_double(std::string_view s, double& out) {
-  switch (text::parse_double(s, out)) {
+  switch (core::text::parse_double(s, out)) {
     case text::Number::kOk: return NumberStatus::kOk;
     case text::Number::kNotNumber: return NumberStatus::kNotNumber;
     default: return NumberStatus::kNotFinite;
@@ -116,13 +116,13 @@ int read_magic(const std::string& path, std::string_view line, bool complete, bo
   if (line == kMagic) return 1;
   if (multi && line == kMagicV2) return 2;
   if (!complete && kMagic.substr(0, line.size()) == line) {
-    throw_error(path, ":1: truncated first line ", text::quote(line), " (the file was cut while being written; ",
+    throw_error(path, ":1: truncated first line ", core::text::quote(line), " (the file was cut while being written; ",
                 "re-record it)");
   }
   if (line.substr(0, kMagicPrefix.size()) == kMagicPrefix) {
-    const std::string_view version = text::trim(line.substr(kMagicPrefix.size()));
+    const std::string_view version = core::text::trim(line.substr(kMagicPrefix.size()));
     if (version == "v1" || (multi && version == "v2")) {
-      throw_error(path, ":1: first line ", text::quote(line), " has extra spaces (it must be exactly '",
+      throw_error(path, ":1: first line ", core::text::quote(line), " has extra spaces (it must be exactly '",
                   version == "v1" ? kMagic : kMagicV2, "')");
     }
     if (multi) {
@@ -134,10 +134,10 @@ int read_magic(const std::string& path, std::string_view line, bool complete, bo
                 "re-record the trajectory or convert it)");
   }
   if (multi) {
-    throw_error(path, ":1: not a surgsim trajectory: first line is ", text::quote(line), " (the first line must be ",
+    throw_error(path, ":1: not a surgsim trajectory: first line is ", core::text::quote(line), " (the first line must be ",
                 "exactly '", kMagic, "' or '", kMagicV2, "', then the column header)");
   }
-  throw_error(path, ":1: not a surgsim trajectory: first line is ", text::quote(line), " (the first line must be ",
+  throw_error(path, ":1: not a surgsim trajectory: first line is ", core::text::quote(line), " (the first line must be ",
               "exactly '", kMagic, "', then the header '", kHeader, "')");
 }
 
@@ -148,7 +148,7 @@ std::vector<std::string> read_header_v2(const std::string& path, int line_no, st
                           std::string(kHeaderV2.substr(2)) + "', e.g. 't,grasper.pitch,grasper.yaw," +
                           "grasper.insertion,grasper.roll,grasper.jaw')";
   if (fields[0] != "t") {
-    throw_error(path, ":", line_no, ": column header is ", text::quote(body), ": the first column must be 't'", fix);
+    throw_error(path, ":", line_no, ": column header is ", core::text::quote(body), ": the first column must be 't'", fix);
   }
   if (count == 1 || (count - 1) % kDof != 0) {
     throw_error(path, ":", line_no, ": column header has ", count - 1, " columns after 't', not a whole group of ",
@@ -168,7 +168,7 @@ std::vector<std::string> read_header_v2(const std::string& path, int line_no, st
       const std::size_t dot = f.rfind('.');
       if (j == 0) {
         if (dot == std::string_view::npos || dot == 0 || f.substr(dot + 1) != kDofNames[0]) {
-          throw_error(path, ":", line_no, ": column ", c + 1, " is ", text::quote(f),
+          throw_error(path, ":", line_no, ": column ", c + 1, " is ", core::text::quote(f),
                       ", expected NAME.pitch, the first column of instrument ", g + 1, "'s group", fix);
         }
         name = std::string(f.substr(0, dot));
@@ -187,7 +187,7 @@ std::vector<std::string> read_header_v2(const std::string& path, int line_no, st
       }
       const std::string want = name + "." + kDofNames[j];
       if (f != want) {
-        throw_error(path, ":", line_no, ": column ", c + 1, " is ", text::quote(f), ", expected '", want,
+        throw_error(path, ":", line_no, ": column ", c + 1, " is ", core::text::quote(f), ", expected '", want,
                     "' (instrument '", name, "': its five columns are pitch, yaw, insertion, roll, jaw in this order)");
       }
     }
@@ -230,12 +230,12 @@ Table read_table(const std::string& path, bool multi) {
     }
 
     // Comments and blank lines.
-    const std::string_view body = text::trim(line);
+    const std::string_view body = core::text::trim(line);
     if (body.empty() || body.front() == '#') continue;
 
     // Split into at most kMaxColumns fields (more are counted, not stored).
     std::string_view fields[kMaxColumns];
-    const int count = text::split_trimmed(body, ',', fields, kMaxColumns);
+    const int count = core::text::split_trimmed(body, ',', fields, kMaxColumns);
 
     // The column header comes once, before any sample.
     if (!header_seen) {
@@ -244,7 +244,7 @@ Table read_table(const std::string& path, bool multi) {
         const std::vector<std::string> want = column_names(1, {std::string(kSingleName)});
         for (int c = 0; ok && c < count; ++c) ok = fields[c] == want[static_cast<std::size_t>(c)];
         if (!ok) {
-          throw_error(path, ":", line_no, ": column header is ", text::quote(body), " (expected exactly '", kHeader,
+          throw_error(path, ":", line_no, ": column header is ", core::text::quote(body), " (expected exactly '", kHeader,
                       "' after the first line)");
         }
         table.names = {std::string(kSingleName)};
@@ -284,7 +284,7 @@ Table read_table(const std::string& path, bool multi) {
       if (status != NumberStatus::kOk) bad = c;
     }
     if (!complete && (status != NumberStatus::kOk || partly >= 0)) {
-      throw_error(path, ":", line_no, ": truncated last line ", text::quote(body), " (", std::min(count, columns),
+      throw_error(path, ":", line_no, ": truncated last line ", core::text::quote(body), " (", std::min(count, columns),
                   " of ", columns, " columns and no newline: the recording was interrupted; delete this line or ",
                   "re-record)");
     }
