@@ -32,7 +32,7 @@ inline std::string trim(const std::string& s) { return std::string(core::text::t
 /// A finite number, the whole string; throws surgsim::core::Error naming `what`.
 inline double parse_number(const std::string& field, const std::string& what) {
   double v = 0;
-  if (core::text::parse_double(field, v) == text::Number::kOk) return v;
+  if (core::text::parse_double(field, v) == core::text::Number::kOk) return v;
   core::throw_error(what, ": '", field, "' is not a finite number");
 }
 

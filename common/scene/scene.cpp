@@ -27,6 +27,7 @@ using namespace surgsim::mesh;
 using namespace surgsim::tool;
 using namespace surgsim::fem;
 using namespace surgsim::compliance;
+using namespace surgsim::nonlinear;
 using namespace surgsim::intestine;
 
 #ifndef SURGSIM_DEFAULT_CONFIG_DIR

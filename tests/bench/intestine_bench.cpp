@@ -29,9 +29,6 @@
 #include "support/intestine_test_util.h"
 #include "intestine/tube_geometry.h"
 
-using namespace surgsim::fem;
-using namespace surgsim::compliance;
-using namespace surgsim::nonlinear;
 using namespace surgsim::intestine;
 
 namespace {

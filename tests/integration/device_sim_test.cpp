@@ -21,7 +21,6 @@
 #include "node_test.h"
 #include "process.h"
 
-using namespace surgsim::core;
 
 namespace surgsim {
 namespace {

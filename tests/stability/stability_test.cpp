@@ -8,10 +8,6 @@
 #include <string>
 #include <vector>
 
-using namespace surgsim::fem;
-using namespace surgsim::compliance;
-using namespace surgsim::nonlinear;
-using namespace surgsim::intestine;
 
 namespace surgsim::stability {
 namespace {

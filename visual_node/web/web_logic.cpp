@@ -5,9 +5,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
-using namespace surgsim::core;
 using namespace surgsim::tool;
-using namespace surgsim::intestine;
 
 namespace surgsim::web {
 

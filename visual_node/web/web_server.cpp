@@ -25,7 +25,6 @@
 
 using namespace surgsim::core;
 using namespace surgsim::tool;
-using namespace surgsim::intestine;
 
 namespace surgsim::web {
 

@@ -8,7 +8,6 @@
 
 using namespace surgsim::mesh;
 using namespace surgsim::contact;
-using namespace surgsim::intestine;
 
 namespace surgsim {
 namespace {

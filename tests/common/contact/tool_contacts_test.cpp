@@ -16,7 +16,6 @@ using namespace surgsim::mesh;
 using namespace surgsim::tool;
 using namespace surgsim::compliance;
 using namespace surgsim::contact;
-using namespace surgsim::intestine;
 
 namespace surgsim {
 namespace {

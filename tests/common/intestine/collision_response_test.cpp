@@ -8,7 +8,6 @@
 #include "support/alloc_counter.h"
 #include "intestine/stochastic_collision.h"
 
-using namespace surgsim::mesh;
 using namespace surgsim::intestine;
 
 namespace surgsim::intestine {

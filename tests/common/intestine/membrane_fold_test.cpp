@@ -16,7 +16,6 @@
 #include "intestine/intestine_model.h"
 #include "intestine/stochastic_collision.h"
 
-using namespace surgsim::mesh;
 using namespace surgsim::intestine;
 
 namespace surgsim::intestine {

@@ -17,9 +17,7 @@
 using namespace surgsim::mesh;
 using namespace surgsim::fem;
 using namespace surgsim::compliance;
-using namespace surgsim::nonlinear;
 using namespace surgsim::liver;
-using namespace surgsim::intestine;
 using namespace surgsim::mesher;
 
 namespace surgsim {

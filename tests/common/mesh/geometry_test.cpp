@@ -3,7 +3,6 @@
 #include <gtest/gtest.h>
 
 using namespace surgsim::mesh;
-using namespace surgsim::intestine;
 
 namespace surgsim {
 namespace {

@@ -470,7 +470,7 @@ RayHit first_hit(const TetMesh& mesh, const SurfaceMesh& surface, const Eigen::V
   for (int f = 0; f < surface.tris.rows(); ++f) {
     double s = 0;
     Eigen::Vector3d bary;
-    if (segment_triangle(from, from + reach * direction, mesh.nodes.row(surface.tris(f, 0)).transpose(),
+    if (mesh::segment_triangle(from, from + reach * direction, mesh.nodes.row(surface.tris(f, 0)).transpose(),
                          mesh.nodes.row(surface.tris(f, 1)).transpose(), mesh.nodes.row(surface.tris(f, 2)).transpose(),
                          s, bary) &&
         (!hit.found || s * reach < hit.s)) {
@@ -895,7 +895,7 @@ INSTANTIATE_TEST_SUITE_P(
                   "key 'liver.deformation'", "the multirate tracker is the non-linear model itself"}),
     [](const ::testing::TestParamInfo<ErrorCase>& info) { return std::string(info.param.name); });
 
-TEST(SceneLoad, MultirateContactsIsReadAndHashed) {
+TEST(SceneLoad, LiverMultirateIsReadAndHashed) {
   const fs::path dir = test_dir();
   const Scene linear = load_scene(write(dir / "linear.yaml", kMinimal));
   const Scene multirate = load_scene(write(dir / "multirate.yaml", std::string(kMinimal) + "liver: {deformation: multirate}\n"));
