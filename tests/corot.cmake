@@ -8,6 +8,6 @@ if(SURGSIM_BUILD_BENCHMARKS AND SURGSIM_BUILD_VISUAL)
   surgsim_bench(large_deformation_bench SOURCES bench/large_deformation_bench.cpp
     LIBS surgsim_haptic surgsim_visual surgsim_mesher)
 endif()
-# scripts/report_large_deformation.py on a synthetic CSV (Debian's python3-matplotlib, as scripts_report_test).
+# scripts/report/large_deformation.py on a synthetic CSV (Debian's python3-matplotlib, as scripts_report_test).
 add_test(NAME scripts_report_large_deformation_test
   COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/scripts/report_large_deformation_test.py ${SURGSIM_SOURCE_DIR})
