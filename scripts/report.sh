@@ -40,13 +40,15 @@ fi
 for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench \
          bench/liver_error_bench bench/intestine_error_bench bench/tube_skinning_bench bench/stability_report \
          bench/rt_bench bench/two_hands_bench bench/large_deformation_bench bench/multirate_node_bench bench/frame_bench \
-         bin/surgsim-web; do
+         bench/haptic_signal_bench bin/surgsim-web bin/surgsim-device-sim; do
   [ -x "$build/$p" ] || { echo "report: $build/$p not found: run scripts/build.sh first" >&2; exit 1; }
 done
 build_s=$(( $(date +%s) - start_all ))
 
 rm -rf "$out"
-mkdir -p "$out/csv" "$out/logs" "$out/raw" "$out/plots"
+# Every folder a step writes into is made here, on a fresh tree too: liver_bench and node_bench write their CSV files
+# only into an existing folder (--out), the haptic node its logs only into one (--log, --stats).
+mkdir -p "$out/csv" "$out/logs" "$out/raw/rates" "$out/raw/scale" "$out/plots"
 # Tensors and meshes are made by this run (their precompute times are part of the report), not taken from a cache.
 export SURGSIM_CACHE_DIR=$out/raw/cache
 export SURGSIM_CONFIG_DIR=$root/config
@@ -100,7 +102,6 @@ step liver_error "$bench/liver_error_bench" "${quick_flag[@]}" --out "$csv"
 haptic_rates() {
   local rates=(100 300 1000 10000)
   local trajs=(liver_press_slide liver_fast_stab)
-  mkdir -p "$out/raw/rates"
   for t in "${trajs[@]}"; do
     for r in "${rates[@]}"; do
       echo "== $t at $r Hz"
