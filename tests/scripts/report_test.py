@@ -17,8 +17,9 @@ import unittest
 
 SOURCE = sys.argv.pop(1) if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", "..")
 REPORT_PY = os.path.join(SOURCE, "scripts", "report", "build.py")
+# The headings' numbers come from the list of sections (scripts/report/sections.py).
 sys.path.insert(0, os.path.join(SOURCE, "scripts"))
-from report import haptic_signal, intestine_live, sections  # noqa: E402  (the headings' numbers come from the list of sections)
+from report import haptic_signal, intestine_live, sections  # noqa: E402
 
 
 def write(path, text):
