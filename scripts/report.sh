@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The benchmark report (issue 8): error against run time (liver and intestine), the stability suite and the speed
+# The benchmark report: error against run time (liver and intestine), the stability suite and the speed
 # figures behind every claim, all measured in this run on this machine, written to report/ as Markdown tables, CSV
 # files and PNG plots (Debian's python3-matplotlib).
 #
@@ -196,7 +196,7 @@ live_intestine() {
 # for as long as the live run, just before it (misses on a shared VM come and go within minutes).
 step rt_floor "$bench/rt_bench" --seconds "$live_s" --label alone --out "$csv"
 step live_liver live_liver
-# Issue 14: the same live run with the DDS writes back on the loop thread (SURGSIM_HAPTIC_PUBLISHER=inline), right
+# The same live run with the DDS writes back on the loop thread (SURGSIM_HAPTIC_PUBLISHER=inline), right
 # after, so the publisher thread's effect on the tick is measured side by side on the same machine state.
 live_liver_inline() {
   SURGSIM_HAPTIC_PUBLISHER=inline SURGSIM_OUT=$out/raw/live_liver_inline HAPTIC_ARGS="--rate 1000 --duration $live_s" \
@@ -204,7 +204,7 @@ live_liver_inline() {
 }
 step live_liver_inline live_liver_inline
 step live_intestine live_intestine
-# Issue 14: what the hand feels. The contact signal (triangle against patch on a slab and the shipped liver), then the
+# What the hand feels. The contact signal (triangle against patch on a slab and the shipped liver), then the
 # loop closed through a simulated device over DDS (surgsim-device-sim --physical) at the corners of the grid the
 # issue names (mass 0.05-0.2 kg, damping 0.1-1 N s/m, hand force 0.5-3 N): settling, oscillation, resting force.
 step haptic_signal "$bench/haptic_signal_bench" --out "$csv"
@@ -212,7 +212,7 @@ device_loop() {
   "$root/scripts/device_grid.sh" --out "$out/raw/device" --points "$device_points"
 }
 step device_loop device_loop
-# Issue 19: both hands. The tick with two instruments x 10 contacts on the shipped two-tool liver and the grasper's
+# Both hands. The tick with two instruments x 10 contacts on the shipped two-tool liver and the grasper's
 # force while the probe presses, against the grasper alone and a direct solve (two_hands.csv, two_hands_trace.csv);
 # then the machine's floor for as long as the live run, just before it (a row of its own in rt_floor.csv: rt_bench
 # appends), and both nodes live at 1 kHz on that scene replaying the two-instrument trajectory (5 s, held 0.5 s).
@@ -223,7 +223,7 @@ live_two_hands() {
     "$root/scripts/run_local.sh" liver_two_tools "$root/config/trajectories/liver_two_hands.csv"
 }
 step live_two_hands live_two_hands
-# Issue 15: the intestine live at 1 kHz with the visual node on one host, for both shipped trajectories, each just
+# The intestine live at 1 kHz with the visual node on one host, for both shipped trajectories, each just
 # after the machine's floor for as long as it runs (rt_bench, a row of its own in rt_floor.csv), so the missed
 # deadlines are set beside the floor of the same minute. The visual node's frame trace (frames/frame_trace.csv: time,
 # LOD, frame work, rate) shows the LOD controller around a synthetic load step: every frame's work x1.5 from 2 s after
@@ -240,20 +240,20 @@ for traj in push lift; do
   step rt_floor_intestine_$traj "$bench/rt_bench" --seconds "$traj_s" --label before_live_intestine_$traj --out "$csv"
   step live_intestine_$traj live_intestine_1khz "$traj" "$traj_s"
 done
-# Issue 16: large deformation. Every method (linear, quasi non-linear with cylinder and organ curves, corotational, both)
+# Large deformation. Every method (linear, quasi non-linear with cylinder and organ curves, corotational, both)
 # against the neo-Hookean Newton reference at 5-30 % indentation, a lobe lifted 45 and 90 degrees and a rigid turn,
 # with the tick p99 of each (csv/liver_large_deformation.csv; the organ curves are computed, not cached, in this run).
 step large_deformation "$bench/large_deformation_bench" "${large_deformation_args[@]}" --out "$csv"
 # The multirate liver in the haptic node along its grasp-and-lift, against Newton on the same targets (csv/multirate_node.csv).
 step multirate_node "$bench/multirate_node_bench" "${multirate_node_args[@]}" --out "$csv"
-# Issue 17: patient-size livers. Precompute time and peak memory, haptic tick, visual deformation and render at 1.5k,
+# Patient-size livers. Precompute time and peak memory, haptic tick, visual deformation and render at 1.5k,
 # 5k and (not with --quick) 20k nodes, the tensors stored as the scenes store them (raw/scale/*.csv).
 step scale_precompute "$bench/liver_bench" --sizes "$scale_sizes" --no-cg --skip-table --out "$out/raw/scale"
 step scale_nodes "$bench/node_bench" --sizes "$scale_sizes" --out "$out/raw/scale"
-# Issue 18: the web view. JPEG encode per resolution and quality, the machine's floor, then the haptic node's missed
+# The web view. JPEG encode per resolution and quality, the machine's floor, then the haptic node's missed
 # deadlines without the web view, with it and with a browser showing the page, side by side, and render -> page delay.
 step web_figures "$root/scripts/web_figures.sh" "$out/raw/web" "$web_s"
-# Issue 7's round trips: one host (shared memory, UDP), two hosts over veth and through the user-space impairment.
+# The round trips: one host (shared memory, UDP), two hosts over veth and through the user-space impairment.
 step network "$root/scripts/network_figures.sh" "$network_s" 1000
 
 echo "{\"load_at_end\": \"$(cut -d' ' -f1-3 /proc/loadavg)\", \"total_s\": $(( $(date +%s) - start_all ))}" \
