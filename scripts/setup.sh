@@ -10,7 +10,7 @@ packages=(
   libosmesa6-dev libpng-dev           # off-screen rendering, PNG frames
   libgmsh-dev                         # tetrahedral mesher (C++ API) for the generated organs
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev           # scenes, command lines, stats JSON
-  libgtest-dev libgmock-dev libbenchmark-dev                # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev clang-format   # tests and benchmarks (clang-format: scripts/check_format.sh and its test)
   iproute2 procps                     # two-host tests (namespaces), process control in scripts
   openssl                             # test CA and certificates for the DDS Security profile
   libturbojpeg0-dev libboost-dev      # surgsim-web: JPEG frames (libturbojpeg), HTTP + WebSocket (Boost.Beast, headers)

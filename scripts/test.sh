@@ -4,7 +4,7 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${SURGSIM_BUILD_DIR:-$root/build}
 start=$(date +%s)
-SURGSIM_WITH_REPORT=1 "$root/scripts/setup.sh"   # numpy/matplotlib: scripts/report.py is tested too
+SURGSIM_WITH_REPORT=1 "$root/scripts/setup.sh"   # numpy/matplotlib: scripts/report/ is tested too
 "$root/scripts/build.sh"
 built=$(date +%s)
 cd "$build"

@@ -4,7 +4,7 @@
 # web_figures.py (the haptic node's missed deadlines without the web view, with it, and with a browser showing the
 # page, side by side; the delay render -> page). About 4 minutes at 20 s. Run it alone on the machine, under the build lock:
 #   flock /tmp/surgsim_build.lock scripts/web_figures.sh [OUT] [SECONDS]
-# scripts/report_web.py OUT turns the CSV files into the report's section.
+# /usr/bin/python3 scripts/report/web.py OUT turns the CSV files into the report's section.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${SURGSIM_BUILD_DIR:-$root/build}

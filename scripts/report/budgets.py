@@ -1,4 +1,4 @@
-"""The budgets behind the report's verdicts: DESIGN.md section 8, and what the hand feels (issue 14)."""
+"""The budgets behind the report's verdicts: DESIGN.md section 8, and what the hand feels."""
 
 BUDGETS = {
     "precompute_1k4_s": 2.0,
@@ -9,7 +9,7 @@ BUDGETS = {
     "deform_ms": 1.0,
     "fps": 50.0,
     "intestine_step_hz": 1000.0,
-    # Issue 14 (what the hand feels)
+    # What the hand feels
     "ripple_pct": 5.0,              # peak-to-peak of the detrended normal force at constant depth, % of its mean
     "tangential_pct": 2.0,          # frictionless slide: |F_t| / F_n
     "step_pct": 5.0,                # largest one-tick change at onset (0.1 m/s) or grasp release, % of the held force

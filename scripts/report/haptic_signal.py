@@ -1,4 +1,4 @@
-"""What the hand feels (issue 14): the contact signal, triangle against patch (haptic_signal_bench), the live loop
+"""What the hand feels: the contact signal, triangle against patch (haptic_signal_bench), the live loop
 with and without the publisher thread, and the loop closed through a simulated device (device_grid.sh)."""
 import os
 
@@ -9,7 +9,7 @@ TITLE = "What the hand feels (haptic signal)"
 
 
 def write(rep):
-    """Issue 14: the contact signal (triangle against patch), the live loop with and without the publisher thread,
+    """The contact signal (triangle against patch), the live loop with and without the publisher thread,
     and the loop closed through a simulated device."""
     rep.md("`haptic_signal_bench` drives the liver's contact model directly at 1 kHz, with the paper's triangle "
            "distribution and with the patch contact in one run. The slab is 20 x 20 x 4 cm (1 cm cells) with a "
@@ -74,7 +74,7 @@ def write(rep):
     rep.md("### The live loop: publisher thread against writes on the loop thread")
     rep.md()
     rep.md("The same 1 kHz liver run, one after the other: first with the publisher thread (the default), then with "
-           "`SURGSIM_HAPTIC_PUBLISHER=inline` (the DDS writes on the loop thread, as before issue 14).")
+           "`SURGSIM_HAPTIC_PUBLISHER=inline` (the DDS writes on the loop thread, as before the publisher thread).")
     rep.md()
     rep.md("| run | ticks | missed | tick p50 / p99 / max us | budget | verdict |")
     rep.md("|---|---|---|---|---|---|")

@@ -1,4 +1,4 @@
-"""The intestine live at 1 kHz (issue 15): both shipped trajectories with the visual node on one host, each beside
+"""The intestine live at 1 kHz: both shipped trajectories with the visual node on one host, each beside
 the machine's floor just before (rt_bench), and the level-of-detail controller around a synthetic load step (the
 visual node's frames/frame_trace.csv)."""
 import csv
@@ -6,10 +6,10 @@ import os
 
 from report.document import budget_table, convert, load_json_safe, number, plt, step_note, verdict
 
-TITLE = "The intestine live at 1 kHz (issue 15)"
+TITLE = "The intestine live at 1 kHz"
 
 INTESTINE_TRAJECTORIES = ("push", "lift")
-MISSED_PP_OVER_FLOOR = 0.1   # issue 15: missed deadlines within 0.1 percentage points of the machine's floor
+MISSED_PP_OVER_FLOOR = 0.1   # missed deadlines within 0.1 percentage points of the machine's floor
 SCENE_RATE_SHARE = 0.97      # the visual node "at its scene rate": at least 97 % of it
 SETTLE_S = 1.0               # the LOD controller at its target within 1 s of a load change
 
@@ -58,7 +58,7 @@ def load_changes(trace):
 
 
 def write(rep):
-    """Issue 15: both shipped intestine trajectories live at 1 kHz with the visual node on one host, each after the
+    """Both shipped intestine trajectories live at 1 kHz with the visual node on one host, each after the
     machine's floor (rt_bench) for as long; the visual node's rate and its LOD controller around a load step."""
     rep.md("Both nodes on one host (`scripts/run_local.sh intestine`), the haptic node at 1 kHz (SCHED_FIFO) replaying "
            "`config/trajectories/intestine_push.csv` and then `intestine_lift.csv`, each run just after `rt_bench` "

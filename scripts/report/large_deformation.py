@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The report's section on the liver at large deformation (issue 16), from liver_large_deformation.csv
+"""The report's section on the liver at large deformation, from liver_large_deformation.csv
 (large_deformation_bench), liver_large_deformation_motion.csv and multirate_node.csv (multirate_node_bench):
 write(rep) writes it into the report; the functions below also serve on their own.
 
@@ -31,7 +31,7 @@ NODE = "multirate_node.csv"
 # The shipped grasp-and-lift turns the lobe 60 degrees: the issue's 90-degree budget covers it (45 degrees: 5 %).
 NODE_BUDGET = 0.10
 
-TITLE = "Large deformation: error and tick per method (issue 16)"
+TITLE = "Large deformation: error and tick per method"
 
 
 def _num(text):

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The report's section on patient-size livers (issue 17), from the CSV files the benchmarks write with --out OUT:
+"""The report's section on patient-size livers, from the CSV files the benchmarks write with --out OUT:
 
     build/bench/liver_bench --sizes 1500,5000,20000 --no-cg --skip-table --out OUT   -> liver_precompute.csv
     build/bench/node_bench --sizes 1500,5000,20000 --out OUT                        -> node_memory.csv, node_tick.csv,
@@ -7,7 +7,7 @@
     build/bench/liver_error_bench --out OUT (optional)                              -> the float column's error
 
 markdown(OUT) returns its Markdown lines (write(rep) puts them in the report, under its number); run as a program
-it prints them under the title. Budgets (issue 17): precompute <= 0.5 s at ~1.4k nodes, <= 5 s at ~5k, <= 60 s at
+it prints them under the title. Budgets: precompute <= 0.5 s at ~1.4k nodes, <= 5 s at ~5k, <= 60 s at
 ~21k; peak resident memory <= 2 GB (2000 MB) at ~21k in the precompute and in each node; haptic tick p99 <= 100 us
 with 10 contacts at ~21k; visual >= 50 fps at 640x480 at ~21k; float storage within 1e-6 relative. A missing file is
 named, never invented.
@@ -22,7 +22,7 @@ if __name__ == '__main__' and not __package__:
     sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 from report.web import _table, _verdict  # noqa: E402  (the same Markdown helpers)
 
-TITLE = 'Patient-size livers (issue 17)'
+TITLE = 'Patient-size livers'
 
 MIB_PER_GB = 1e9 / (1024.0 * 1024.0)   # the budget's 2 GB in MiB (1907.3)
 PRECOMPUTE_BUDGET_S = [(2000, 0.5), (8000, 5.0), (10 ** 9, 60.0)]  # (up to this many nodes, seconds)

@@ -1,4 +1,4 @@
-"""Two hands (issue 19): two instruments on the shipped liver (two_hands_bench: the tick with both touching, the
+"""Two hands: two instruments on the shipped liver (two_hands_bench: the tick with both touching, the
 grasper's force against a direct solve), the machine's floor just before, and both nodes live at 1 kHz."""
 import csv
 import glob
@@ -11,11 +11,11 @@ from report.budgets import BUDGETS
 from report.document import (budget_table, convert, fmt, load_json_safe, missing_line, number, plt, step_note,
                              verdict)
 
-TITLE = "Two hands (issue 19)"
+TITLE = "Two hands"
 
 
 def write(rep):
-    """Issue 19: two instruments on the shipped liver (grasper holding the free lobe, probe pressing beside it): the
+    """Two instruments on the shipped liver (grasper holding the free lobe, probe pressing beside it): the
     tick with both touching, the coupling against the direct solve, and both nodes live at 1 kHz."""
     rep.md("`two_hands_bench` replays the shipped two-instrument scene `config/liver_two_tools.yaml` tick by tick at "
            "1 kHz along `config/trajectories/liver_two_hands.csv`: the grasper (left port) closes on the free lobe, "
@@ -206,7 +206,7 @@ def two_hands_live_tools(rep, h):
     tools = h.get("tools")
     if not isinstance(tools, list) or not tools:
         rep.md("**Missing**: `raw/live_two_hands/haptic_stats.json` has no `tools` list (a haptic node from before "
-               "issue 19?).")
+               "several instruments?).")
         rep.md()
         return
     rep.md("From [`raw/live_two_hands/haptic_stats.json`](raw/live_two_hands/haptic_stats.json) (%s instruments; "

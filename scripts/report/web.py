@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The report's section on the web view (issue 18), from the CSV files scripts/web_figures.sh writes into OUT:
+"""The report's section on the web view, from the CSV files scripts/web_figures.sh writes into OUT:
 frame_encode.csv, frame_render_loop.csv (frame_bench), rt_floor.csv (rt_bench), web_live.csv and web_delay.csv
 (web_figures.py). markdown(OUT) returns its Markdown lines (write(rep) puts them in the report, under its number);
 run as a program it prints them under the title.
@@ -15,7 +15,7 @@ import csv
 import os
 import sys
 
-TITLE = 'The web view (issue 18)'
+TITLE = 'The web view'
 BOUND_KIB = 512.0
 FRAME_MS_50HZ = 20.0
 

@@ -1,6 +1,6 @@
 // csv_out.h: the machine-readable side of the bench programs. `--out DIR` makes a program write each of its tables
 // as DIR/<name>.csv (a header line with units in the column names, then printf-formatted rows) next to the readable
-// tables it prints; scripts/report.py turns them into the report's tables and plots.
+// tables it prints; scripts/report/ turns them into the report's tables and plots.
 #pragma once
 #include <cerrno>
 #include <cstdarg>

@@ -38,7 +38,7 @@
 // CSV (with --out DIR): liver_large_deformation.csv  case,method,force_rel_error,disp_rel_error,tick_us_p99
 //   liver_large_deformation_motion.csv  case,method,duration_s,force_rel_error_p99,force_rel_error_max,
 //                                       slow_cycle_ms_p50,slow_cycle_ms_p99
-// Plot: scripts/report_large_deformation.py.
+// Plot: scripts/report/large_deformation.py.
 #include <CLI/CLI.hpp>
 
 #include <Eigen/Geometry>

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Tests scripts/report/large_deformation.py (issue 16) on a synthetic liver_large_deformation.csv: the plot is
+"""Tests scripts/report/large_deformation.py on a synthetic liver_large_deformation.csv: the plot is
 written from every case and method, a cell the bench left as nan is skipped, and a missing CSV gives None (no plot
 invented).
 

@@ -17,8 +17,9 @@ import unittest
 
 SOURCE = sys.argv.pop(1) if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", "..")
 REPORT_PY = os.path.join(SOURCE, "scripts", "report", "build.py")
+# The headings' numbers come from the list of sections (scripts/report/sections.py).
 sys.path.insert(0, os.path.join(SOURCE, "scripts"))
-from report import haptic_signal, intestine_live, sections  # noqa: E402  (the headings' numbers come from the list of sections)
+from report import haptic_signal, intestine_live, sections  # noqa: E402
 
 
 def write(path, text):
@@ -89,7 +90,7 @@ class ReportTest(unittest.TestCase):
         self.assertNotIn("failed**", text)
         self.assertIn("| intestine step (400 masses + collisions), dt 1 ms | p99 699 us", text)
         self.assertIn("| stability: cases with only finite outputs | 2 of 3 | all | **over** |", text)
-        # Issue 14's section: the patch contact against the paper's triangle, each against its budget.
+        # What the hand feels: the patch contact against the paper's triangle, each against its budget.
         self.assertIn("| slab slide 31.7 deg 3 mm | ripple | 96.77 % | 2.975 % | - | <= 5 % | within |", text)
         self.assertIn("| slab onset 0.1 m/s to 3 mm | step_max | 3.333 % of held | 6.5 % of held | 7 % of held | <= 5 % | **over** |", text)
         self.assertIn("plots/haptic_signal_slide.png", text)
@@ -134,7 +135,7 @@ class ReportTest(unittest.TestCase):
         self.assertIn("`raw/live_liver/haptic_stats.json`", text)
 
     def test_intestine_live_section(self):
-        """Issue 15: the push run complete (floor, haptic and visual stats, a frame trace with a load step), the lift
+        """The push run complete (floor, haptic and visual stats, a frame trace with a load step), the lift
         run with its floor and haptic stats but no visual node output: figures and verdicts for the first, a named
         missing line (no traceback) for the second."""
         with open(os.path.join(self.dir, "csv", "rt_floor.csv"), "a") as f:
@@ -169,7 +170,7 @@ class ReportTest(unittest.TestCase):
         write(os.path.join(self.dir, "raw", "steps.csv"), "step,seconds,status,log\n"
               "live_intestine_lift,9.0,failed,logs/live_intestine_lift.log\n")
         text = self.report_text()
-        self.assertIn("## %d. The intestine live at 1 kHz (issue 15)" % sections.number(intestine_live), text)
+        self.assertIn("## %d. The intestine live at 1 kHz" % sections.number(intestine_live), text)
         self.assertNotIn("intestine_live.py failed", text)
         self.assertIn("| push: machine floor just before (rt_bench, 6500 ticks) | 10 missed (0.154 %) |", text)
         # 12 / 6500 = 0.185 %, 0.031 points over the floor's 0.154 %: within 0.1.
