@@ -1,12 +1,12 @@
-// Corotational (warped) precomputed compliance (issue 16). The tensors G stay those of the rest shape; at run time
-// each node n carries a rotation R_n of the tissue around it, and the compliance between nodes i and j becomes
+// Corotational (warped) precomputed compliance, for large rotations. The tensors G stay those of the rest shape; at run
+// time each node n carries a rotation R_n of the tissue around it, and the compliance between nodes i and j becomes
 //   W_ij = R_i G_ij R_j^T     (m/N):
 // a force lambda_j (world frame) is taken to the rest frame (R_j^T lambda_j, the constraint directions' half), the
 // rest-frame response G_ij R_j^T lambda_j is rotated back (R_i, the response's half). Both halves are needed: with
 // only one of them a rigidly turned organ answers a push along its rotated normal with the rest normal's stiffness
 // in the wrong direction (SOFA's PrecomputedConstraintCorrection since its 2023 change rotates its response but
-// rotates the constraint normals on a copy that is thrown away; tests/common/compliance/corotation_test.cpp catches both
-// one-half variants through RotationHalves).
+// rotates the constraint normals on a copy that is thrown away; tests/common/compliance/corotation_test.cpp catches
+// both one-half variants through RotationHalves).
 //
 // Rotations. R_n is the shape-matching rotation of node n's one-ring on the boundary surface (the node and its
 // surface neighbours): A_n = sum_k (x_k - xbar)(X_k - Xbar)^T over the ring, X rest and x = X + u~ positions,

@@ -1,4 +1,4 @@
-// Patch constraints through the precomputed tensors (issue 14, part 2): a tool point of finite radius touches the
+// Patch constraints through the precomputed tensors: a tool point of finite radius touches the
 // organ over a patch of surface nodes with smooth weights w_i (sum 1); its contact is one or more SCALAR constraints
 // on the weighted mean displacement of the patch,  d_k^T sum_i w_i u_i = b_k  (d_k a unit direction: the patch
 // normal for a frictionless contact, three orthonormal directions for a sticking contact or a grasp). With
@@ -54,7 +54,7 @@ class PatchSolver {
   /// second instrument's new nodes are read alone); the values are those a full read gives, bit for bit. Refuses fixed, interior, non-row or out-of-range nodes, non-finite or
   /// negative weights (the status; nothing is usable then).
   ContactStatus prepare(const PatchConstraints& c) noexcept { return prepare(c, nullptr); }
-  /// Corotational (issue 16, compliance/corotation.h): as prepare(c), then every block is warped, W_ab = R_a G_ab R_b^T
+  /// Corotational (compliance/corotation.h): as prepare(c), then every block is warped, W_ab = R_a G_ab R_b^T
   /// with rotations[u] the rotation of union node u (null: G unwarped, as prepare(c)). Everything after it
   /// (compliance(), factor(), solve(), node_forces(), union_displacement(), g()) is in the world frame: the row
   /// directions and node forces are world vectors, the displacements the rotated response. `halves` other than

@@ -1,6 +1,7 @@
-// Precomputation of the elementary responses (DESIGN.md 4.1): G = K_ff^-1 restricted to the columns of the
-// contactable nodes (free surface nodes) and to the rows each consumer needs. K_ff is factored once with CHOLMOD and
-// the 3S right-hand sides are solved in blocks; or, as in the paper, each column by CG to a tolerance.
+// Precomputation of the elementary responses (docs/DESIGN.md, section 'Liver: precomputed linear elasticity'):
+// G = K_ff^-1 restricted to the columns of the contactable nodes (free surface nodes) and to the rows each consumer
+// needs. K_ff is factored once with CHOLMOD and the 3S right-hand sides are solved in blocks; or, as in the paper, each
+// column by CG to a tolerance.
 #pragma once
 #include <Eigen/Core>
 #include <cstddef>
@@ -30,10 +31,10 @@ struct RowSet {
 /// G restricted to the rows of one RowSet and to every contactable column: the 3x3 block G(r, c) is the
 /// displacement (m) of node row_nodes[r] for a unit force (N) on contact node c, so G is in m/N.
 /// Dense (the default): exactly one of g / g_float holds data, by the owning Tensors' precision.
-/// Symmetric (issue 17; PrecomputeOptions::symmetric_blocks, for a block whose rows are the contact nodes in column
-/// order, i.e. "haptic"): G is symmetric, so only the node blocks on and below the diagonal are stored, packed node column
-/// by node column (column c holds rows c..R-1, each 3x3 block column-major) in packed / packed_float; g and g_float
-/// are empty. Read either layout through at() and block3().
+/// Symmetric (PrecomputeOptions::symmetric_blocks, for a block whose rows are the contact nodes in column
+/// order, i.e. "haptic"): G is symmetric, so only the node blocks on and below the diagonal are stored, packed node
+/// column by node column (column c holds rows c..R-1, each 3x3 block column-major) in packed / packed_float; g and
+/// g_float are empty. Read either layout through at() and block3().
 struct TensorBlock {
   std::string name;
   std::vector<int> row_nodes;    // R nodes; row r covers matrix rows 3r..3r+2 (x, y, z)
@@ -160,7 +161,7 @@ std::vector<int> contactable_nodes(const mesh::TetMesh& mesh, const fem::FixedSe
 /// The standard consumers: "haptic" (rows = contact nodes: surface x surface, for G_CC and nearby displacements)
 /// and "visual" (rows = every boundary node: visible x surface).
 std::vector<RowSet> standard_row_sets(const mesh::TetMesh& mesh, const std::vector<int>& contact_nodes);
-/// The same without the rows that are always zero (issue 17: store only what is read): "visual" keeps the boundary
+/// The same without the rows that are always zero (store only what is read): "visual" keeps the boundary
 /// nodes with a free component (a fully fixed node does not move; the readers take it at rest).
 std::vector<RowSet> standard_row_sets(const mesh::TetMesh& mesh, const fem::FixedSet& fixed, const std::vector<int>& contact_nodes);
 

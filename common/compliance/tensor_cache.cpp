@@ -20,7 +20,7 @@ namespace surgsim::compliance {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'U', 'R', 'G', 'T', 'N', 'S', 'R'};
-// 1: dense blocks only. 2 (issue 17): a u32 layout per block (0 dense 3R x 3S, 1 symmetric packed half).
+// 1: dense blocks only. 2: a u32 layout per block (0 dense 3R x 3S, 1 symmetric packed half).
 constexpr std::uint32_t kVersion = 2;
 constexpr std::uint32_t kByteOrder = 0x01020304u;
 constexpr std::size_t kHeaderBytes = 8 + 4 * 4 + 8 + 3 * 8 + 4 * 8 + 3 * 8;

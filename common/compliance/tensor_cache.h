@@ -1,13 +1,13 @@
-// Tensor cache file (DESIGN.md section 7): a binary file holding precomputed Tensors, with a header (magic, version,
-// precision, counts), the hashes of everything the tensors depend on (mesh, material, fixed set, solver settings)
-// and a payload checksum. A stale or corrupt file is detected and reported, never used.
+// Tensor cache file (docs/DESIGN.md, section 'Files'): a binary file holding precomputed Tensors, with a header (magic,
+// version, precision, counts), the hashes of everything the tensors depend on (mesh, material, fixed set, solver
+// settings) and a payload checksum. A stale or corrupt file is detected and reported, never used.
 //
 // Layout (little-endian): header = magic "SURGTNSR", u32 version, u32 byte-order tag, u32 precision (4|8),
 // u32 method (0 direct, 1 cg), f64 cg tolerance, i64 nodes, i64 contact nodes, i64 blocks, u64 mesh / material /
 // fixed / settings hashes, u64 payload bytes, u64 payload checksum, u64 header checksum. Payload = i32 contact nodes
 // [S], u8 fixed masks [#V], then per block: u32 name length, name, i64 rows R, i32 row nodes [R], u32 layout (0: the
 // 3R x 3S matrix column-major; 1: symmetric, R = S, the 9 R (R + 1) / 2 packed entries of TensorBlock::packed), in
-// the stored precision. Version 2 (issue 17; version 1 had no layout field): a file of another version is stale,
+// the stored precision. Version 2 (version 1 had no layout field): a file of another version is stale,
 // never parsed.
 #pragma once
 #include <cstdint>

@@ -67,9 +67,9 @@ class CholmodSolver {
   /// x = A^-1 [e_rows[0] .. e_rows[count-1]] on the supernodal factor with our own BLAS calls: the forward solve
   /// visits only the supernodes each unit column reaches (and only the columns reaching them); the backward solve
   /// only the supernodes of `needed` (supernodes_for_rows; x is exact at the rows it was made from, unspecified
-  /// elsewhere). Reads the factor only: several threads may call it at once, each with its own `work` (issue 17).
-  /// The result depends only on the factor and `rows` (same bits whatever the threads). Throws surgsim::core::Error
-  /// before factorize() or on a simplicial factor.
+  /// elsewhere). Reads the factor only: several threads may call it at once, each with its own `work` (the precompute's
+  /// threads). The result depends only on the factor and `rows` (same bits whatever the threads). Throws
+  /// surgsim::core::Error before factorize() or on a simplicial factor.
   void solve_unit_columns(const int* rows, int count, const std::vector<char>& needed, UnitSolveWork& work) const;
 
  private:

@@ -1,5 +1,5 @@
-// Linear-elastic P1 tetrahedral finite elements (DESIGN.md 4.1): element and global stiffness, and the assembled
-// model every liver solver shares. Pure: Eigen only.
+// Linear-elastic P1 tetrahedral finite elements (docs/DESIGN.md, section 'Liver: precomputed linear elasticity'):
+// element and global stiffness, and the assembled model every liver solver shares. Pure: Eigen only.
 #pragma once
 #include <Eigen/Core>
 #include <Eigen/SparseCore>

@@ -1,5 +1,5 @@
-// The clamped degrees of freedom of an organ and the numbering of the free ones (DESIGN.md 4.1: "fixed dofs F are
-// removed"). Built once while starting; immutable afterwards.
+// The clamped degrees of freedom of an organ and the numbering of the free ones (docs/DESIGN.md, section 'Liver:
+// precomputed linear elasticity': "fixed dofs F are removed"). Built once while starting; immutable afterwards.
 #pragma once
 #include <Eigen/Core>
 #include <cstdint>

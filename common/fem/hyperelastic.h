@@ -1,4 +1,4 @@
-// Geometrically non-linear static reference (issue 8): a compressible neo-Hookean organ of P1 tetrahedra with imposed
+// Geometrically non-linear static reference: a compressible neo-Hookean organ of P1 tetrahedra with imposed
 // displacements on some nodes and fixed dofs, solved by Newton's method with load stepping and a line search. It is
 // the reference the linear tensors and the quasi non-linear law (nonlinear_law.h) are measured against at large
 // indentations; the material is the one config/curves was made from:

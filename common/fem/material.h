@@ -1,5 +1,5 @@
-// An elastic body's material and its fixed (clamped) region (docs/DESIGN.md 4.1). Read from YAML by scene/;
-// nothing here knows about scenes.
+// An elastic body's material and its fixed (clamped) region (docs/DESIGN.md, section 'Liver: precomputed linear
+// elasticity'). Read from YAML by scene/; nothing here knows about scenes.
 #pragma once
 #include <Eigen/Core>
 #include <utility>

@@ -13,8 +13,8 @@
 // hierarchy tests ~2 000 block pairs and ~5 000 element pairs, each a few comparisons on contiguous boxes.
 //
 // A block pair whose boxes overlap but whose element pairs all sleep sleeps as a whole for the smallest of their
-// slacks (issue 15), and a contact is built from the exact test's own distance (segment_contact_at,
-// triangle_contact_at) rather than from a second one.
+// slacks (so a body that has not moved is not looked at again), and a contact is built from the exact test's own
+// distance (segment_contact_at, triangle_contact_at) rather than from a second one.
 //
 // The contacts are those of detect_brute_force (same elements, same values), in another order: recall 1 by
 // construction. Construction allocates; detect() allocates nothing and is deterministic.

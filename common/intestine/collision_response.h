@@ -1,4 +1,5 @@
-// Displacement-velocity collision response (Raghupathi et al. 2004, eqs. 2-9; DESIGN.md 4.3).
+// Displacement-velocity collision response (Raghupathi et al. 2004, eqs. 2-9; docs/DESIGN.md, section 'Intestine:
+// mass-spring + stochastic collisions').
 //
 // A contact joins a point of element A (an intestine segment: 2 nodes) and a point of element B (a segment or a
 // mesentery triangle: 2 or 3 nodes), each a barycentric combination p = sum w_k x_k, with a unit collision direction

@@ -1,4 +1,5 @@
-// Guaranteed frame rate for the intestine rendering (Raghupathi et al. 2004, eq. 15; DESIGN.md 4.4).
+// Guaranteed frame rate for the intestine rendering (Raghupathi et al. 2004, eq. 15; docs/DESIGN.md, section 'Intestine
+// rendering').
 //
 //   eps_{k+1} = eps_k + alpha e_k
 //   rho_{k+1} = rho_k + beta (eps_{k+1} - eps_k)
@@ -9,7 +10,7 @@
 // [lod_min, lod_max], and keeps rho inside [0, lod_max - lod_min + 1) so that it does not wind up while the LOD is
 // pinned at a bound. Since rho_{k+1} - rho_k = alpha beta e_k, this is an integral controller of gain alpha beta.
 //
-// Why the paper's law settles slowly (issue 15): with e in Hz its gain is alpha beta = 5e-4 levels per Hz per frame, so
+// Why the paper's law settles slowly: with e in Hz its gain is alpha beta = 5e-4 levels per Hz per frame, so
 // a 10 Hz error moves one level in 200 frames (7 s at 30 Hz); the benchmark needed 74-174 frames, live the LOD stayed
 // at 4-6 for a whole run. And a level's effect on the rate is not a fixed number of Hz: the tube's cost doubles per
 // level, so the same Hz error means a whole level at 30 Hz and a fraction of one at 200 Hz; no single alpha suits

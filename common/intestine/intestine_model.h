@@ -1,6 +1,6 @@
-// The intestine scene's body (Raghupathi et al. 2004; DESIGN.md 4.3): small intestine and mesentery as one
-// mass-spring grid, a probe, stochastic self-collisions and the displacement-velocity response, stepped at the
-// haptic rate.
+// The intestine scene's body (Raghupathi et al. 2004; docs/DESIGN.md, section 'Intestine: mass-spring + stochastic
+// collisions'): small intestine and mesentery as one mass-spring grid, a probe, stochastic self-collisions and the
+// displacement-velocity response, stepped at the haptic rate.
 //
 // Rest shape: a folded sine curve of length `length` on the inner surface of a cylinder of radius
 // `cylinder_radius` whose axis is the mesenteric vessel; the intestine (a tube of radius `intestine_radius`) follows
@@ -10,7 +10,7 @@
 //
 // Callers:
 //   haptic node (1 kHz): IntestineModel once (init; throws surgsim::core::Error on bad parameters), one IntestineState
-//     (init; allocates everything), then per tick one probe per instrument (issue 19, at most kMaxProbes)
+//     (init; allocates everything), then per tick one probe per instrument (at most kMaxProbes)
 //       Probe probes[n] = {{true, tip_i, radius, force_limit_i}, ...};   // active = false: instrument i's input lost
 //       intestine::step(model, state, probes, n, dt, report);    // noexcept, allocates nothing
 //       force feedback i = report.probes[i].force (N, on instrument i, clamped to its force_limit; .saturated)

@@ -1,4 +1,5 @@
-// The intestine's own scene type (Raghupathi 2004, DESIGN.md 4.3). Read from YAML by scene/.
+// The intestine's own scene type (Raghupathi 2004, docs/DESIGN.md, section 'Intestine: mass-spring + stochastic
+// collisions'). Read from YAML by scene/.
 #pragma once
 #include <Eigen/Core>
 #include <string>
@@ -9,7 +10,8 @@
 
 namespace surgsim::intestine {
 
-/// The intestine's body (model "intestine"; Raghupathi et al. 2004, DESIGN.md 4.3), YAML `intestine: {...}`.
+/// The intestine's body (model "intestine"; Raghupathi et al. 2004, docs/DESIGN.md, section 'Intestine: mass-spring +
+/// stochastic collisions'), YAML `intestine: {...}`.
 /// Every key is optional and defaults to intestine::IntestineParams (the paper's 4 m intestine on 4 x 100 masses):
 ///   rest shape: length, cylinder_radius, folds, angular_span, fold_shape, axis_origin, axis_direction, columns, rows
 ///     (rows x columns <= 2048, the BodyState bound), intestine_radius, mesentery_thickness;

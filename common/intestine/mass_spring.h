@@ -1,5 +1,5 @@
-// Damped mass-spring system (DESIGN.md 4.3): structural, shear and bending springs, gravity, viscous drag and
-// penalty contacts (the probe), integrated at the haptic step.
+// Damped mass-spring system (docs/DESIGN.md, section 'Intestine: mass-spring + stochastic collisions'): structural,
+// shear and bending springs, gravity, viscous drag and penalty contacts (the probe), integrated at the haptic step.
 //
 // Two integrators:
 //   kImplicitEuler   linearized backward Euler (Baraff & Witkin 1998): one Newton step,

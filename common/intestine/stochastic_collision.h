@@ -1,5 +1,5 @@
 // Stochastic self-collision detection for the intestine and its mesentery (Raghupathi et al. 2004, section 4;
-// DESIGN.md 4.3), and the brute-force reference.
+// docs/DESIGN.md, section 'Intestine: mass-spring + stochastic collisions'), and the brute-force reference.
 //
 // Elements: the intestine is a chain of segments (capsules of radius r_i); the mesentery is a grid of quads
 // ("cells"), each split into two triangles, of half-thickness r_m. Row 0 of the grid is the intestine's chain.

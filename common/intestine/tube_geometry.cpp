@@ -70,7 +70,7 @@ int write_cap_indices(std::uint32_t* out, std::uint32_t ring, std::uint32_t inte
 }  // namespace
 
 TubeLod tube_lod(int lod) {
-  // Issue 15: the coarsest level is still round (16 sides, 2 rings an interval; see the header).
+  // The coarsest level is still round (16 sides, 2 rings an interval; see the header).
   static constexpr int kSides[kTubeMaxLod + 1] = {16, 24, 24, 32, 32, 40, 48};
   static constexpr int kRings[kTubeMaxLod + 1] = {2, 2, 4, 4, 8, 8, 8};
   lod = std::clamp(lod, 0, kTubeMaxLod);

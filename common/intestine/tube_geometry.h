@@ -1,6 +1,7 @@
-// Intestine rendering geometry (Raghupathi et al. 2004, section 5; DESIGN.md 4.4), pure CPU code usable by any
-// backend: the generalized cylinder around the intestine's points, the mesentery's triangle strip over the grid and
-// the mesentery as a smooth subdivided surface with analytic normals (MesenterySurface, what the visual node draws).
+// Intestine rendering geometry (Raghupathi et al. 2004, section 5; docs/DESIGN.md, section 'Intestine rendering'), pure
+// CPU code usable by any backend: the generalized cylinder around the intestine's points, the mesentery's triangle
+// strip over the grid and the mesentery as a smooth subdivided surface with analytic normals (MesenterySurface, what
+// the visual node draws).
 //
 // Tube pipeline (TubeBuilder::build):
 //   1. a cardinal spline through the points (Hermite pieces, tangents (1 - c) (P_{i+1} - P_{i-1}) / 2);
@@ -21,7 +22,7 @@
 //      32 x 4, 32 x 8, 40 x 8, 48 x 8 (32 to 384 quads; each level 1.2 to 2 times the previous one's triangles).
 //      The paper's ladder doubles from 4 sides x 1 ring (4 2^i quads): its coarsest levels are a square and an
 //      octagon in cross-section with straight pieces between the samples, and a frame-rate controller held below
-//      its target (issue 15: live next to the haptic node on 2 cores) draws them. Here the coarsest level is still
+//      its target (as live next to the haptic node on 2 cores) draws them. Here the coarsest level is still
 //      round: 16 sides (on the skinned rest shape adjacent vertex normals at most 26 degrees apart, so the
 //      interpolated shading turns smoothly, and the flat faces within 2.5 % of the radius: under a pixel at the
 //      shipped camera) and 2 rings per interval, so that the axis follows the skinned curve between samples

@@ -14,10 +14,10 @@
 
 namespace surgsim::liver {
 
-/// Scenes store their tensors in float once double would take more than this (MiB; issue 17).
+/// Scenes store their tensors in float once double would take more than this (MiB), so that patient-size livers fit.
 constexpr double kFloatAboveMiB = 1024;
 
-/// The precompute options of a scene (issue 17): direct, the "haptic" block as one packed half, double unless the
+/// The precompute options of a scene: direct, the "haptic" block as one packed half, double unless the
 /// double tensors would pass kFloatAboveMiB, then float.
 compliance::PrecomputeOptions scene_precompute_options(int contact_count, const std::vector<compliance::RowSet>& rows);
 

@@ -1,4 +1,4 @@
-// Multirate non-linear contact (issue 16; Cavusoglu & Tendick 2000, Astley & Hayward 1998, SOFA's running FEM with
+// Multirate non-linear contact (Cavusoglu & Tendick 2000, Astley & Hayward 1998, SOFA's running FEM with
 // a precomputed correction): a slow thread runs the neo-Hookean organ (fem/hyperelastic.h) under the current
 // contact constraints, a few Newton iterations per cycle from its last state, and publishes a local linear model
 // about that state; the 1 kHz loop evaluates the model at the tool's current position.

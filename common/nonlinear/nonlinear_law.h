@@ -1,6 +1,6 @@
-// Quasi non-linear law of Cotin 1998, section 3.4 (DESIGN.md 4.1, last bullet): the linear-elastic result of the
-// precomputed tensors is bent onto measured (or hyperelastically computed) curves of a reference cylinder under axial
-// compression. Two polynomials, fitted by least squares from curve files:
+// Quasi non-linear law of Cotin 1998, section 3.4 (docs/DESIGN.md, section 'Liver: precomputed linear elasticity', last
+// bullet): the linear-elastic result of the precomputed tensors is bent onto measured (or hyperelastically computed)
+// curves of a reference cylinder under axial compression. Two polynomials, fitted by least squares from curve files:
 //   P maps the linear radial displacement d_r^L = nu r x / h onto the curve d_r(x)  (m -> m),
 //   Q maps the linear axial force        f^L   = s E x / h  onto the curve f(x)    (N -> N),
 // with r, h, s = pi r^2, E, nu those of the cylinder the curves describe (stated in each file's header).
@@ -39,7 +39,8 @@
 //       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
 //       for (int l = 0; l < m; ++l) sum += u.segment<3>(3 * block.row_of_node[nodes[l]]);
 //       Eigen::Vector3d d;
-//       if (surgsim::nonlinear::constraint_direction(&sum, 1, d)) law.apply_displacements(u, d);   // P on every row, in place
+//       // P on every row, in place:
+//       if (surgsim::nonlinear::constraint_direction(&sum, 1, d)) law.apply_displacements(u, d);
 //     Contact nodes are transformed too: for a push along d their u_r is zero and they stay at u*; when the imposed
 //     displacements are not all along d, P moves them off u* by P(|u_r|) - |u_r| (skip their rows if the drawn
 //     surface must stay on the tool).

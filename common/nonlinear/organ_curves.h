@@ -1,4 +1,4 @@
-// Curves for the organ, not for a cylinder (issue 16, part 2). The paper's quasi non-linear law (nonlinear_law.h)
+// Curves for the organ, not for a cylinder. The paper's quasi non-linear law (nonlinear_law.h)
 // bends the linear result onto curves "for the organ we consider"; the shipped curves come from a neo-Hookean
 // cylinder. Here the organ's own mesh is indented with the neo-Hookean Newton solver (hyperelastic.h) and the linear
 // solve (StaticSolver, the model the tensors hold) at sites spread over its free top surface, with a flat punch

@@ -1,4 +1,4 @@
-// CPU placement of threads (issue 15). On a PREEMPT_NONE kernel (Debian's cloud kernels, this CI machine's) a
+// CPU placement of threads. On a PREEMPT_NONE kernel (Debian's cloud kernels, this CI machine's) a
 // SCHED_FIFO thread that wakes on a CPU where another process is inside a system call, a page fault or a TLB
 // shootdown waits until that kernel path ends; the renderer's kernel time then shows up as the haptic loop's
 // lateness. So the haptic node can keep one CPU for its loop thread and put every other thread it starts (DDS,

@@ -1,10 +1,10 @@
 // A CPU wake-up latency request (Linux PM QoS, /dev/cpu_dma_latency), as real-time programs such as cyclictest make.
-// Why (issue 15, measured on the 2-core KVM CI machine): an idle virtual CPU halts (cpuidle "haltpoll" state, HLT)
+// Why (measured on the 2-core KVM CI machine): an idle virtual CPU halts (cpuidle "haltpoll" state, HLT)
 // and hands its physical CPU back to the host; when the loop's timer fires, the host must schedule that virtual CPU
 // again first, which took 0.5-7 ms now and then. Every missed deadline of the haptic node pinned alone on its CPU
 // was such a late wake-up. While a request of 0 us is held, idle CPUs poll instead of halting (the kernel drops
 // every idle state with a longer exit latency), and the same 1 kHz timer woke late by at most 0.2-0.9 ms instead of
-// 2.6-7.5 ms (rt_bench, issue 15 notes). The cost: idle CPUs stay busy for the host while the request is held.
+// 2.6-7.5 ms (rt_bench). The cost: idle CPUs stay busy for the host while the request is held.
 // The request is the kernel's own: it holds while the file stays open and ends when it is closed (or the process
 // exits), so nothing outlives the program.
 #pragma once

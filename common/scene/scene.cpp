@@ -623,7 +623,7 @@ IntestineSpec read_intestine(const Reader& r, const Field& f) {
   read_number("probe_radius", spec.probe_radius, positive(), "radius in m of the sphere at the tool tip, e.g. 0.01");
   read_number("probe_stiffness", p.probe_stiffness, non_negative, "penalty stiffness of the probe contact in N/m");
   if (m.has("self_collisions")) p.self_collisions = r.boolean(m.at("self_collisions"));
-  // The self-collision detector (issue 15): stochastic (the paper's, the default) or broad_phase (the exact box
+  // The self-collision detector: stochastic (the paper's, the default) or broad_phase (the exact box
   // hierarchy: every contact, and faster on the shipped scene; intestine_bench tables 1 and 3b).
   if (m.has("detector")) {
     p.detector = r.one_of(m.at("detector"), {"broad_phase", "stochastic"}) == "stochastic"
@@ -696,15 +696,16 @@ std::uint64_t Scene::hash() const {
     h.value<std::int32_t>(nonlinear.degree);
   }
 
-  // The liver's run-time model (issue 16): hashed only when not the default, so older scenes keep their hash.
+  // The liver's run-time model (liver.deformation, liver.curves): hashed only when not the default, so older scenes
+  // keep their hash.
   if (!liver.defaults()) {
     h.str("liver-options");
     h.value<std::uint8_t>(static_cast<std::uint8_t>(liver.deformation));
     h.value<std::uint8_t>(liver.organ_curves);
   }
 
-  // Every instrument, in order (a second instrument changes the hash; one instrument hashes as before issue 19,
-  // its name excepted).
+  // Every instrument, in order (a second instrument changes the hash; one instrument hashes as the single
+  // `tool:` key does, its name excepted, so scenes written for one instrument keep their hash).
   for (std::size_t i = 0; i < tools.size(); ++i) {
     const ToolSpec& tool = tools[i];
     if (i > 0) h.str(tool.name);

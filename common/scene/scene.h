@@ -1,4 +1,4 @@
-// Scenes: what to simulate and what each node builds (DESIGN.md section 6), loaded from YAML.
+// Scenes: what to simulate and what each node builds (docs/DESIGN.md, section 'Scenes'), loaded from YAML.
 // Unknown keys and out-of-range values are errors naming the file, the line and the key.
 #pragma once
 #include <Eigen/Core>
@@ -42,11 +42,12 @@ struct VisualSpec {
   bool video = false;      // assemble an MP4 with ffmpeg at exit when available
   std::string surface;     // absolute path of a finer visual surface embedded in the mesh; empty = boundary
   double target_fps = 0;   // Hz, target of the intestine's frame-rate controller (paper eq. 15), 1..1000; 0 = rate_hz
-  double stream_fps = 0;   // Hz, frames JPEG-encoded onto surgsim/frame for the web view (issue 18); 0 = off, 0..120
+  double stream_fps = 0;   // Hz, frames JPEG-encoded onto surgsim/frame for the web view; 0 = off, 0..120
   int stream_quality = 75; // JPEG quality of the streamed frames, 1..100 (not in the scene hash: no physics)
 };
 
-/// The liver's run-time model (issue 16), YAML `liver: {deformation: linear | corotational | multirate, curves: cylinder | organ}`.
+/// The liver's run-time model, YAML
+/// `liver: {deformation: linear | corotational | multirate, curves: cylinder | organ}`.
 struct LiverOptions {
   compliance::LiverDeformation deformation = compliance::LiverDeformation::kLinear;  // corotational: warped compliance (compliance/corotation.h);
                                                              // multirate: neo-Hookean tracker (nonlinear/multirate.h)
@@ -64,7 +65,7 @@ struct Scene {
   fem::FixedRegion fixed;
   nonlinear::NonlinearSpec nonlinear;
   LiverOptions liver;       // read for model "liver" only
-  /// The instruments (issue 19): 1..kMaxInstruments, from the `tools:` list or the single `tool:` key (one
+  /// The instruments: 1..kMaxInstruments, from the `tools:` list or the single `tool:` key (one
   /// instrument named "tool"). Never empty. Instrument i is ToolCommand/ForceFeedback instrument i.
   std::vector<tool::ToolSpec> tools = {tool::ToolSpec{}};
   HapticSpec haptic;

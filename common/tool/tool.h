@@ -10,7 +10,7 @@ namespace surgsim::tool {
 
 constexpr int kMaxShaftPoints = 32;
 
-/// How a liver contact is imposed on the organ (issue 14): `patch` (default) spreads one constraint along the surface
+/// How a liver contact is imposed on the organ: `patch` (default) spreads one constraint along the surface
 /// normal (frictionless) or a sticking 3-D constraint (friction, grasp) over every free surface node within
 /// tip_radius of the contact point with smooth weights; `triangle` is the paper's distribution of the contact
 /// displacement over the three vertices of the touched triangle (alpha_v d, all three components imposed).

@@ -9,7 +9,7 @@
 // linearly; before the first it is the first, after the last it is held. The recorder writes each number as the
 // shortest text that reads back to the same double, so record -> load replays the poses bit-exactly.
 //
-// Several instruments (issue 19), version 2: one column group of five per instrument, named by the scene's tool names:
+// Several instruments, version 2: one column group of five per instrument, named by the scene's tool names:
 //
 //   # surgsim-trajectory v2
 //   t,grasper.pitch,grasper.yaw,grasper.insertion,grasper.roll,grasper.jaw,probe.pitch,probe.yaw,...
