@@ -18,7 +18,7 @@
 
 namespace surgsim::dds {
 
-// Topic names (DESIGN.md section 5).
+// Topic names (docs/DESIGN.md, section 'Topics').
 inline constexpr const char* kToolCommandTopic = "surgsim/tool_command";
 inline constexpr const char* kContactFrameTopic = "surgsim/contact_frame";
 inline constexpr const char* kBodyStateTopic = "surgsim/body_state";

@@ -1,4 +1,4 @@
-// The live view's frame stream (issue 18): rendered pictures JPEG-compressed (libturbojpeg) and handed to a sink (the
+// The live view's frame stream: rendered pictures JPEG-compressed (libturbojpeg) and handed to a sink (the
 // DDS writer of surgsim/frame) on a thread of their own, so the render loop never waits for an encode or a write.
 //
 // One preallocated slot sits between the two threads. The render loop asks for it (acquire): when the encoder is still

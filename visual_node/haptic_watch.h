@@ -1,4 +1,4 @@
-// Watches the haptic node from the visual side (issue 7). The ContactFrame reader requests a deadline (100 ms in
+// Watches the haptic node from the visual side. The ContactFrame reader requests a deadline (100 ms in
 // config/dds/profiles.xml): a missed deadline while frames were flowing means "haptic node lost"; the next frame
 // means "back". Liveliness (automatic, 1 s lease) tells a dead haptic participant from a stalled loop. Each change
 // is logged once and counted for the stats JSON. Called from DDS listener threads; all methods are thread-safe.

@@ -1,4 +1,4 @@
-// The instruments the visual node draws (issue 19: two or more instruments on one organ). A ContactFrame (and for the
+// The instruments the visual node draws (two or more instruments on one organ). A ContactFrame (and for the
 // intestine a BodyState) carries one InstrumentState per instrument of the scene, by its index in scene.tools; the
 // node takes each state whose index names a tool of its scene (the others are ignored and counted) and draws every
 // instrument i with scene.tools[i]: its geometry at the received pose (tool_geometry), its own shaft radius and its

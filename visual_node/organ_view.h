@@ -1,4 +1,4 @@
-// What the visual node draws for one organ (issue 13: one organ interface per node). The app (visual_app.h) knows
+// What the visual node draws for one organ (one organ interface per node). The app (visual_app.h) knows
 // only this interface: it receives contact frames, paces the loop, draws the instruments and writes the outputs;
 // everything that depends on the organ model is behind an OrganView. make_organ_view() is the only place that looks
 // at scene.model: adding an organ is one implementation (visual_node/views/) and one line there.
@@ -8,8 +8,8 @@
 // (views/intestine_view.h: the newest BodyState as tube and mesentery, LOD by the frame-rate controller).
 //
 // Phases as in the app: construction and the init hooks (attach, subscribe, print_init) may allocate and throw
-// surgsim::core::Error; update, draw, draw_markers, frame_done run every frame and allocate nothing; the rest is for the
-// frame output (write_vtk, with a PNG) and shutdown (stats).
+// surgsim::core::Error; update, draw, draw_markers, frame_done run every frame and allocate nothing; the rest is for
+// the frame output (write_vtk, with a PNG) and shutdown (stats).
 #pragma once
 #include <cstdint>
 #include <iosfwd>

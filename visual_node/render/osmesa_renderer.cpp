@@ -159,8 +159,8 @@ void main() {
 }
 )";
 
-// Two-matrix skinning of the tube primitive (tube_geometry.h, DESIGN.md 4.4): instance k of a draw skins the
-// primitive with interval u_first_interval + k. A vertex (x, y, t, z) becomes
+// Two-matrix skinning of the tube primitive (tube_geometry.h, docs/DESIGN.md, section 'Intestine rendering'): instance
+// k of a draw skins the primitive with interval u_first_interval + k. A vertex (x, y, t, z) becomes
 //   (1 - w(t)) (A (x, y, t, 1) + z r_a T_a) + w(t) (B (x, y, t, 1) + z r_b T_b),  w(t) = 3 t^2 - 2 t^3,
 // the normal the same blend of x N + y B + z T; r, N, B, T are read from the matrices' columns. v_world and
 // v_world_normal are what capture_skinned_tube reads back by transform feedback.

@@ -1,5 +1,6 @@
-// The visual node's renderer behind an interface (DESIGN.md section 3): an OSMesa backend that draws off-screen
-// and a null backend that only counts calls (--headless, and tests of the visual logic without a GL context).
+// The visual node's renderer behind an interface (docs/DESIGN.md, section 'Layout'): an OSMesa backend that draws
+// off-screen and a null backend that only counts calls (--headless, and tests of the visual logic without a GL
+// context).
 //
 // A frame is: begin_frame(camera), any number of draw_* calls, end_frame(), then optionally read_image().
 // Construction may throw (no GL context, shader compile failure); the per-frame calls never throw: input they
@@ -22,7 +23,7 @@ namespace surgsim {
 /// Default colours, linear RGB in [0, 1].
 inline const Eigen::Vector3f kLiverRgb(0.58f, 0.20f, 0.15f);    // red-brown liver
 inline const Eigen::Vector3f kMarkerRgb(0.95f, 0.85f, 0.20f);   // contact-point markers
-/// Instruments (issue 19: several tools told apart in a picture), by index in the scene's tools list: 0 metallic
+/// Instruments (several tools told apart in a picture), by index in the scene's tools list: 0 metallic
 /// grey (the one-tool colour), 1 blue, 2 green, 3 violet. instrument_rgb() cycles beyond them.
 inline const std::array<Eigen::Vector3f, 4> kInstrumentRgb = {
     Eigen::Vector3f(0.66f, 0.68f, 0.71f), Eigen::Vector3f(0.22f, 0.42f, 0.86f), Eigen::Vector3f(0.22f, 0.70f, 0.36f),
@@ -106,10 +107,11 @@ class Renderer {
   virtual void draw_points(const Eigen::Ref<const Eigen::MatrixX3f>& points, float radius,
                            const Eigen::Vector3f& rgb) = 0;
 
-  /// A tube skinned on the GPU (DESIGN.md 4.4, tube_geometry.h): `primitive` (one interval of a level of detail and
-  /// the two end caps; uploaded on its first use and kept, one buffer per LOD) deformed in the vertex shader by the
-  /// per-interval matrices `skin` (24 floats per interval: A_k then B_k, 3 x 4 row-major, as TubeMesh::skin), one
-  /// instance per interval, the first ring's cap with interval 0 and the last ring's with interval intervals - 1.
+  /// A tube skinned on the GPU (docs/DESIGN.md, section 'Intestine rendering', tube_geometry.h): `primitive` (one
+  /// interval of a level of detail and the two end caps; uploaded on its first use and kept, one buffer per LOD)
+  /// deformed in the vertex shader by the per-interval matrices `skin` (24 floats per interval: A_k then B_k, 3 x 4
+  /// row-major, as TubeMesh::skin), one instance per interval, the first ring's cap with interval 0 and the last
+  /// ring's with interval intervals - 1.
   /// Only the matrices are sent per call. Lit like draw_surface. Rejected (counts().rejected) when the backend has no
   /// GPU skinning (gpu_skinning() false), for intervals < 1 or a non-finite matrix.
   virtual void draw_skinned_tube(const intestine::TubePrimitive& primitive, const float* skin, int intervals,

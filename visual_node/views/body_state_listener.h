@@ -1,6 +1,6 @@
 // The newest BodyState from the haptic node (dds::kBodyStateTopic, stream QoS: best effort, keep last 1), shared by
 // the views that draw one: the intestine's points (views/intestine_view.h) and the multirate liver's boundary surface
-// (views/liver_view.h, issue 16). The DDS listener thread copies each sample under a lock into storage reserved at
+// (views/liver_view.h). The DDS listener thread copies each sample under a lock into storage reserved at
 // init (kMaxBodyPoints positions); the frame loop copies the newest one out with take(). Nothing allocates after init.
 #pragma once
 #include <cstdint>

@@ -1,8 +1,8 @@
-// The intestine scene in the visual node (DESIGN.md 4.4, issue 6): the newest BodyState from the haptic node drawn
-// as a generalized cylinder around the intestine's points (cardinal spline, curvature-refined samples, rotation-
-// minimizing frames, two-matrix skinning of a cylinder primitive: TubeBuilder) and the mesentery as a membrane over
-// the whole grid, with the tube's level of detail chosen by the guaranteed-frame-rate controller (paper eq. 15).
-// A liver scene never builds one, and an intestine scene loads no tetrahedral mesh and no tensors.
+// The intestine scene in the visual node (docs/DESIGN.md, section 'Intestine rendering'): the newest BodyState from the
+// haptic node drawn as a generalized cylinder around the intestine's points (cardinal spline, curvature-refined
+// samples, rotation-minimizing frames, two-matrix skinning of a cylinder primitive: TubeBuilder) and the mesentery as
+// a membrane over the whole grid, with the tube's level of detail chosen by the guaranteed-frame-rate controller
+// (paper eq. 15). A liver scene never builds one, and an intestine scene loads no tetrahedral mesh and no tensors.
 //
 // Skinning (TubeSkinning, --tube-skinning in the visual node) runs by default on the GPU: the builder makes only the
 // per-interval matrices (TubeMesh::skin) and Renderer::draw_skinned_tube sends them, the cylinder primitive of each
@@ -12,7 +12,7 @@
 // the same CPU code in both (the matrices come from the same build). tests/bench/tube_skinning_bench prints the
 // frame time of both per LOD.
 //
-// The picture (issue 15): the mesentery is drawn as a smooth surface, the mass-spring grid refined by a bicubic
+// The picture: the mesentery is drawn as a smooth surface, the mass-spring grid refined by a bicubic
 // Catmull-Rom patch (intestine::MesenterySurface, kMesenteryRowSteps x kMesenteryColSteps vertices per grid cell,
 // analytic per-vertex normals) in translucent pinkish-yellow fat with its vessels drawn by the shader
 // (Renderer::draw_membrane); the tube in glossy pink-red (kIntestineLook) with its rounded ends; behind them a dark

@@ -58,7 +58,7 @@ LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
   }
   markers_.resize(kMaxContacts, 3);
 
-  // Multirate (issue 16): the tracker's shape arrives as BodyState, one position per boundary node.
+  // Multirate: the tracker's shape arrives as BodyState, one position per boundary node.
   multirate_ = scene.liver.deformation == LiverDeformation::kMultirate;
   scene_hash_ = visual_scene_hash(scene, mesh_hash_);
   scene_name_ = scene.name;

@@ -2,12 +2,12 @@
 // of the precomputed tensors (visible x surface, from the cache both nodes share; no interior rows), the quasi
 // non-linear law, the SurfaceDeformer (u_n = sum_k G_nk lambda_k for the newest contacts), an optional finer visual
 // surface embedded in the boundary (visual.surface), and the contact nodes drawn as markers. With several instruments
-// (issue 19) the contacts of all of them deform the organ together (one solve on the haptic side); the non-linear law
+// the contacts of all of them deform the organ together (one solve on the haptic side); the non-linear law
 // bends each instrument's share about that instrument's own direction (SurfaceDeformer::apply with instruments).
-// liver.deformation corotational (issue 16): the deformer recomputes the rotations from the received forces (no
+// liver.deformation corotational: the deformer recomputes the rotations from the received forces (no
 // more data on the wire); liver.curves organ: the law from the organ's own curves (nonlinear/organ_curves.h).
 //
-// liver.deformation multirate (issue 16): the haptic node's neo-Hookean tracker publishes the organ's shape as
+// liver.deformation multirate: the haptic node's neo-Hookean tracker publishes the organ's shape as
 // BodyState (one position per boundary surface node, SurfaceMesh node order, the scene identity as scene_hash; see
 // the wire protocol in the README). The view subscribes to it and each frame draws the newest valid one: the boundary
 // takes the positions, an embedded visual.surface follows through its embedding, normals are recomputed by the
@@ -107,7 +107,7 @@ class LiverView : public OrganView {
   int marker_count_ = 0;
   std::uint64_t deform_errors_ = 0;
 
-  // --- multirate (issue 16): the tracker's shape from BodyState ---
+  // --- multirate: the tracker's shape from BodyState ---
   bool multirate_ = false;
   std::uint64_t scene_hash_ = 0;
   std::string scene_name_, scene_file_;  // for the rejection lines

@@ -22,7 +22,7 @@ class SurfaceDeformer {
  public:
   /// `tensors` (may be null: rest shape only) must hold the "visual" block and outlive this object.
   /// `law` (may be null: linear) applies P to the displacements orthogonal to the constraint direction.
-  /// `deformation` kCorotational (issue 16): the visual node recomputes the rotations itself from the
+  /// `deformation` kCorotational: the visual node recomputes the rotations itself from the
   /// displacements (nothing more is sent): per frame, kCorotationalPasses fixed-point passes of
   ///   u~_n = sum_l G(n, k_l) R_l^T lambda_l,  then R_n of every visible node from u~ (compliance/corotation.h),
   /// and the drawn u_n = R_n u~_n with the last rotations;
@@ -36,7 +36,7 @@ class SurfaceDeformer {
   /// (unit; the ContactFrame's mean imposed displacement) is the axis of the non-linear law; zero skips it.
   compliance::ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
                       const Eigen::Vector3d& direction = Eigen::Vector3d::Zero()) noexcept;
-  /// Several instruments (issue 19): contact l belongs to instrument instrument[l], whose mean imposed displacement
+  /// Several instruments: contact l belongs to instrument instrument[l], whose mean imposed displacement
   /// direction is directions[instrument[l]] (`instruments` of them). The displacements are the same linear sum
   /// u = sum_l G(., k_l) lambda_l; the non-linear law bends each instrument's share u_i (its own contacts) about its
   /// own direction before the shares are added. Contacts naming an instrument outside 0..instruments-1 or one with
@@ -44,7 +44,7 @@ class SurfaceDeformer {
   compliance::ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, const int* instrument, int m,
                       const Eigen::Vector3d* directions, int instruments) noexcept;
 
-  /// The shape itself (issue 16, liver.deformation multirate: the haptic node's tracker publishes it as BodyState):
+  /// The shape itself (liver.deformation multirate: the haptic node's tracker publishes it as BodyState):
   /// `xyz` holds x, y, z (m) of every visible vertex in SurfaceMesh node order (the order of visible_nodes()),
   /// `count` of them; the embedded surface follows. False, and the previous shape kept, when `count` is not the
   /// visible vertex count or a value is not finite. No allocation.
@@ -108,7 +108,7 @@ class SurfaceDeformer {
   std::vector<int> group_nodes_;
   std::vector<Eigen::Vector3d> group_lambda_;
   double max_displacement_ = 0;
-  // --- corotational (issue 16) ---
+  // --- corotational ---
   /// u (3 per visual row) for forces lambda on m contact nodes: linear, or warped by the current rotations.
   compliance::ContactStatus displace(const int* nodes, const Eigen::Vector3d* lambda, int m, Eigen::VectorXd& u,
                          bool rotate_rows = true) noexcept;

@@ -1,4 +1,4 @@
-// surgsim-web: watch and drive the simulator from a browser (issue 18). Joins the DDS domain, serves one page over
+// surgsim-web: watch and drive the simulator from a browser. Joins the DDS domain, serves one page over
 // HTTP + WebSocket (web_server.h) with the visual node's live frames, the force, contacts, rates and the scene, and a
 // virtual device that publishes one instrument's ToolCommand while a page drives it.
 #include <CLI/CLI.hpp>

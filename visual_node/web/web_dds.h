@@ -1,4 +1,4 @@
-// surgsim-web's DDS side (issue 18): one participant that reads what the page shows (the visual node's JPEG Frames,
+// surgsim-web's DDS side: one participant that reads what the page shows (the visual node's JPEG Frames,
 // one instrument's ForceFeedback, ContactFrame, SceneInfo, VisualStatus) and writes that instrument's ToolCommand.
 // Listener callbacks run on DDS threads and only store the newest of each under a mutex; the web server reads
 // snapshots from its own thread.

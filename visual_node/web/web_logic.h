@@ -1,4 +1,4 @@
-// surgsim-web's rules without sockets or DDS (issue 18), so each is unit-tested on its own: which path a request
+// surgsim-web's rules without sockets or DDS, so each is unit-tested on its own: which path a request
 // names and whether its token is right, what a browser's WebSocket message says (anything malformed is refused), who
 // drives the tool, and how the virtual device moves towards the pose the driving page asks for (clamped to the
 // device's range and slew-limited, so a key press or a wild mouse drag never makes the tool jump).

@@ -1,4 +1,4 @@
-// surgsim-web's HTTP + WebSocket server (issue 18), on Boost.Beast with one I/O thread. It serves the page (three
+// surgsim-web's HTTP + WebSocket server, on Boost.Beast with one I/O thread. It serves the page (three
 // files of the www folder, read once at start-up), a JSON /stats, and one WebSocket per page at /ws that carries the
 // newest JPEG frame (binary, sent as soon as it arrives; while a page still receives one, a newer replaces the one
 // waiting, never queued), the telemetry (JSON, 20 Hz) and the page's messages (take / release the tool, the pose it

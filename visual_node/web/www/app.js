@@ -1,4 +1,4 @@
-// surgsim-web page (issue 18): the live view, the plots, the scene and the virtual device. Plain JavaScript, no
+// surgsim-web page: the live view, the plots, the scene and the virtual device. Plain JavaScript, no
 // library. The WebSocket carries binary frames (48-byte header + JPEG, see web_dds.h) and JSON text (hello,
 // telemetry); the page sends JSON: take / release the tool, the pose it asks for (absolute, 50 Hz while it drives),
 // and the number of each frame it has displayed (the server measures render -> shown from it).
