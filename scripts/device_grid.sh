@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# The haptic loop closed through a simulated device over DDS (issue 14, part 5): for each (mass, damping, hand force)
+# The haptic loop closed through a simulated device over DDS: for each (mass, damping, hand force)
 # the real haptic_node on the shipped liver (--input device) and surgsim-device-sim --physical, one run after another;
 # then a Markdown table of settling time, overshoot, what is left moving in the final window and the resting force.
-# A scene with several instruments (issue 19) gets one simulated device per instrument, each with the point's mass,
+# A scene with several instruments gets one simulated device per instrument, each with the point's mass,
 # damping and hand force, and the table one row per instrument.
 #
 #   scripts/device_grid.sh [--out DIR] [--rate HZ] [--scene NAME|FILE] [--no-stage] [--points "M,B,F M,B,F ..."]

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# DDS Security for surgsim (issue 7): makes a TEST certificate authority, one identity per program (haptic node,
+# DDS Security for surgsim: makes a TEST certificate authority, one identity per program (haptic node,
 # visual node, device driver), the governance and permissions documents signed by that CA, and a Fast DDS profiles
 # file with one secure participant profile per program (built-in plugins: PKI-DH authentication, access control by
 # signed permissions, AES-GCM cryptography).

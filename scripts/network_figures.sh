@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The figures of issue 7 as one markdown table: round trip (haptic -> visual -> haptic, on the haptic clock)
+# The network figures as one markdown table: round trip (haptic -> visual -> haptic, on the haptic clock)
 # p50/p99/max, haptic rate and missed deadlines, for one host (shared memory and UDP), two hosts (network namespaces,
 # veth, UDP) and two hosts through surgsim-netem (no impairment, then 5 ms +- 2 ms and 5 % loss each way).
 #   scripts/network_figures.sh [SECONDS] [RATE_HZ]      (default 10 s at 1000 Hz; needs root for the two-host rows)

@@ -2,12 +2,12 @@
 # Runs both nodes on one host: the visual node first, then the haptic node replaying a trajectory; stops the visual
 # node once the haptic node is done, and prints where the frames and stats went.
 #   scripts/run_local.sh [SCENE] [TRAJECTORY]     (SCENE: a shipped name like liver, or a YAML path)
-#   scripts/run_local.sh SCENE --web [TRAJECTORY] (issue 18: also surgsim-web; prints the URL to open. Without a
+#   scripts/run_local.sh SCENE --web [TRAJECTORY] (the web view: also surgsim-web; prints the URL to open. Without a
 #       trajectory the haptic node takes the browser's virtual device (--input device) until Ctrl-C; with one it
 #       replays it and the page watches.)
 # Environment: SURGSIM_OUT (default out/<scene>), SURGSIM_BUILD_DIR, SURGSIM_DOMAIN, HAPTIC_ARGS, VISUAL_ARGS;
 # with --web: WEB_PORT (8080), WEB_FPS (frames streamed per second, 20), WEB_ARGS (e.g. "--bind 0.0.0.0").
-# CPU placement (issue 15): SURGSIM_HAPTIC_CPU=N (on a machine with 2 or more CPUs) gives the haptic loop thread CPU N
+# CPU placement: SURGSIM_HAPTIC_CPU=N (on a machine with 2 or more CPUs) gives the haptic loop thread CPU N
 # to itself: haptic_node --cpu N puts its other threads (DDS, publisher, log writers) on the remaining CPUs, and the
 # visual node (and surgsim-web) start there (taskset). The default, none, pins nothing: the haptic node's CPU latency
 # request (--cpu-latency-us 0) already brings its missed deadlines to the machine's floor, and the visual node keeps

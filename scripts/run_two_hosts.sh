@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Two "machines" on one host (issue 7): two network namespaces joined by a veth pair (or, with --impair, by
+# Two "machines" on one host: two network namespaces joined by a veth pair (or, with --impair, by
 # surgsim-netem through TAP devices), the haptic node in one and the visual node in the other, talking over UDPv4
 # only. The visual node also gets its own /dev/shm, so shared memory cannot carry anything between them.
 # Prints and writes (OUT/summary.json) frames received, round trip, haptic rate and missed deadlines.
@@ -188,7 +188,7 @@ fi
 end=$(date +%s%N)
 if [ -n "$netem_pid" ]; then kill -TERM "$netem_pid"; wait "$netem_pid" || true; netem_pid=""; fi
 
-# Summary: the figures of issue 7, from the two stats files (and the wire's counters when impaired).
+# Summary: the figures listed at the top, from the two stats files (and the wire's counters when impaired).
 python3 - "$out" "$transport" "$profile" "$link" "$(( (end - start) / 1000000 ))" <<'EOF'
 import json, os, sys
 out, transport, profile, link, wall_ms = sys.argv[1:6]

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The web view's live figures (issue 18), one run of three conditions back to back on the same machine, each with the
+"""The web view's live figures, one run of three conditions back to back on the same machine, each with the
 haptic node at 1 kHz replaying config/trajectories/liver_press_slide.csv (held at its end) for --seconds:
   nodes        haptic node + visual node (no frame stream, no surgsim-web): the reference
   web          + the visual node streaming JPEG frames at --fps and surgsim-web (no page open)

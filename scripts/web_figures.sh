@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The web view's figures (issue 18), into OUT (default out/web_figures): frame_bench (JPEG encode time and size per
+# The web view's figures, into OUT (default out/web_figures): frame_bench (JPEG encode time and size per
 # resolution and quality, the render loop's share), rt_bench's 1 kHz floor just before the live runs, then
 # web_figures.py (the haptic node's missed deadlines without the web view, with it, and with a browser showing the
 # page, side by side; the delay render -> page). About 4 minutes at 20 s. Run it alone on the machine, under the build lock:

@@ -1,6 +1,6 @@
-"""Benchmarks against the budgets of DESIGN.md section 8: precompute, haptic tick, the machine's floor, the live
-liver and intestine, deformation and render (liver_bench, node_bench, rt_bench, intestine_error_bench, the live runs'
-stats), then the round trips (network_figures.sh) and intestine_bench's printed tables."""
+"""Benchmarks against the budgets of docs/DESIGN.md, section 'Budgets': precompute, haptic tick, the machine's floor,
+the live liver and intestine, deformation and render (liver_bench, node_bench, rt_bench, intestine_error_bench, the
+live runs' stats), then the round trips (network_figures.sh) and intestine_bench's printed tables."""
 import os
 
 from report.budgets import BUDGETS

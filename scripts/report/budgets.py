@@ -1,4 +1,4 @@
-"""The budgets behind the report's verdicts: DESIGN.md section 8, and what the hand feels."""
+"""The budgets behind the report's verdicts: docs/DESIGN.md, section 'Budgets', and what the hand feels."""
 
 BUDGETS = {
     "precompute_1k4_s": 2.0,

@@ -4,11 +4,11 @@ frame_encode.csv, frame_render_loop.csv (frame_bench), rt_floor.csv (rt_bench), 
 (web_figures.py). markdown(OUT) returns its Markdown lines (write(rep) puts them in the report, under its number);
 run as a program it prints them under the title.
 
-Budgets (DESIGN.md section 8 where it has one): the haptic node's 1 kHz missed deadlines within 0.1 percentage points
-of the machine's floor (rt_bench just before); the visual frame rate unchanged by the stream (>= 99 % of the rate
-without it); every JPEG within the topic's bound (512 KiB, else it is dropped); the encoder keeps up (encode p99
-below the stream period); the render loop's share of a streamed frame (read-back + hand-off, p99) within 10 % of a
-50 Hz frame (2 ms). The render -> page delay has no budget (shown beside the stream period).
+Budgets (docs/DESIGN.md, section 'Budgets', where it has one): the haptic node's 1 kHz missed deadlines within 0.1
+percentage points of the machine's floor (rt_bench just before); the visual frame rate unchanged by the stream
+(>= 99 % of the rate without it); every JPEG within the topic's bound (512 KiB, else it is dropped); the encoder
+keeps up (encode p99 below the stream period); the render loop's share of a streamed frame (read-back + hand-off,
+p99) within 10 % of a 50 Hz frame (2 ms). The render -> page delay has no budget (shown beside the stream period).
 
 Usage: /usr/bin/python3 scripts/report/web.py OUT"""
 import csv

@@ -1,4 +1,4 @@
-// frame_bench (issue 18): what the web view's frame stream costs. For each resolution (320x240, 640x480, 1280x720)
+// frame_bench: what the web view's frame stream costs. For each resolution (320x240, 640x480, 1280x720)
 // the shipped liver is rendered with OSMesa (the tool moving a little every frame, as while pressing) and each picture
 // is JPEG-compressed by the visual node's codec (libturbojpeg) at quality 50, 75 and 90:
 //   - the encode time (wall and this thread's CPU, us) and the JPEG size (KiB) per frame, against the frame period;

@@ -1,4 +1,4 @@
-// haptic_signal_bench (issue 14): what the hand feels, for the paper's triangle contact and the patch contact side by
+// haptic_signal_bench: what the hand feels, for the paper's triangle contact and the patch contact side by
 // side in one run, on a bottom-fixed slab and on the shipped liver. Prints readable tables; --out DIR writes
 //   DIR/haptic_signal.csv        one row per figure: case, model, metric, value, unit
 //   DIR/haptic_signal_slide.csv  force against position while sliding at constant depth (slab) and along the shipped

@@ -1,4 +1,5 @@
-// intestine_bench: the intestine scene's core at the haptic step (DESIGN.md 8: 400 masses + collisions >= 1 kHz).
+// intestine_bench: the intestine scene's core at the haptic step (docs/DESIGN.md, section 'Budgets': 400 masses +
+// collisions >= 1 kHz).
 // Prints tables; run by hand (not a ctest): build/bench/intestine_bench [--quick].
 //   1. step time p50 / p99 (model + detection + response) at dt = 1 ms over the scripted run;
 //   2. integrator stability against spring stiffness at dt = 1 ms (implicit vs explicit);

@@ -1,4 +1,4 @@
-// intestine_error_bench: the intestine's error against run time (issue 8). A plain program run by hand
+// intestine_error_bench: the intestine's error against run time. A plain program run by hand
 // (build/bench/intestine_error_bench --out DIR); readable tables on stdout, progress on stderr, and with --out one
 // CSV per table (csv_out.h) for the report scripts. --smoke is the tiny configuration its ctest runs.
 //   1. time step against a fine-step reference: the scripted probe run (tests/support/intestine_test_util.h) at

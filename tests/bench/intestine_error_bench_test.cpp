@@ -134,7 +134,7 @@ void check_lod(const fs::path& dir) {
       EXPECT_LE(csv.num(r, "geom_max_error_mm"), csv.num(r - 1, "geom_max_error_mm") * 1.0001) << r;
     }
   }
-  // 16 sides (LOD 0, issue 15: the coarsest level still round) alone miss the circle by r (1 - cos(pi / 16)) ~ 1.9 %
+  // 16 sides (LOD 0: the coarsest level still round) alone miss the circle by r (1 - cos(pi / 16)) ~ 1.9 %
   // at mid-side, two rings per interval add the bend between them; 48 sides (LOD 6) by r (1 - cos(pi / 48)) ~ 0.2 %,
   // plus the bend between rings.
   EXPECT_GT(csv.num(0, "geom_max_error_pct_radius"), 1.9);

@@ -1,4 +1,4 @@
-// large_deformation_bench: the liver at large deformation (issue 16), every method against the neo-Hookean Newton
+// large_deformation_bench: the liver at large deformation, every method against the neo-Hookean Newton
 // reference (common/fem/hyperelastic.h) on the shipped liver, in one run. A plain program run by hand
 // (build/bench/large_deformation_bench --out DIR [--quick]); tables on stdout, progress on stderr.
 //
@@ -14,9 +14,9 @@
 //                           indentation"), disp_rel_error against the rigid displacement.
 // Methods: linear (lambda = G_CC^-1 u*, the tensors as precomputed), quasi_cylinder (the law with the scene's
 // cylinder curves, as the nodes apply it), quasi_organ (the law with Q fitted on the organ's own Newton
-// indentations, nonlinear/organ_curves.h, cached in --cache; no P, as in the scenes), corotational (W = R_i G R_j^T, compliance/corotation.h, the
-// rotations iterated to a fixed point from the rest-frame response; the free configuration is the rest shape carried
-// by the fixed set's rigid frame), corotational_organ (corotational, then the organ law).
+// indentations, nonlinear/organ_curves.h, cached in --cache; no P, as in the scenes), corotational (W = R_i G R_j^T,
+// compliance/corotation.h, the rotations iterated to a fixed point from the rest-frame response; the free configuration
+// is the rest shape carried by the fixed set's rigid frame), corotational_organ (corotational, then the organ law).
 // Errors: force = |F - F_ref| / |F_ref| of the total tool force (vectors); disp = |u - u_ref| / |u_ref| over the
 // visible (boundary) nodes. tick_us_p99: the haptic side of one tick for that case (linear: the G_CC solve; quasi: +
 // Q; corotational: the contact nodes' rotations from the rest-frame field, the warped prepare, factor and solve),
@@ -27,8 +27,8 @@
 // shipped liver; and a solve of exactly 10 contact nodes), linear against corotational, and the visual node's
 // SurfaceDeformer::apply for 10 contacts, linear against corotational (the rotations recomputed there).
 //
-// multirate (nonlinear/multirate.h): a slow neo-Hookean tracker publishing f_c and the contact stiffness S, the 1 kHz loop
-// evaluating f_c + S du. Its static row (the tool held at the target until the tracker converged) is Newton's
+// multirate (nonlinear/multirate.h): a slow neo-Hookean tracker publishing f_c and the contact stiffness S, the 1 kHz
+// loop evaluating f_c + S du. Its static row (the tool held at the target until the tracker converged) is Newton's
 // tolerance by construction. The honest figure is the motion table: the tool moved from rest to each case's target
 // (straight press, circular lift) in --durations, the slow side emulated in step (a cycle starts when the previous
 // ends and its snapshot is visible to the loop after the cycle's measured wall time; the haptic side hands it the
@@ -375,10 +375,11 @@ int main(int argc, char** argv) {
   double fixed_cycle_ms = 0, max_step_mm = 5, move_tolerance = 1e-2;
   std::vector<std::string> only;
   std::string trace_path;
-  CLI::App app{"large_deformation_bench: the liver at large deformation (issue 16): linear, quasi non-linear "
-               "(cylinder and organ curves), corotational and corotational with organ curves against a neo-Hookean "
-               "Newton reference, indentation 5-30 %, a lobe lifted 45 and 90 degrees, a rigid 90-degree turn; "
-               "tick and visual timings. Tables on stdout, DIR/liver_large_deformation.csv with --out."};
+  CLI::App app{
+      "large_deformation_bench: the liver at large deformation: linear, quasi non-linear "
+      "(cylinder and organ curves), corotational and corotational with organ curves against a neo-Hookean "
+      "Newton reference, indentation 5-30 %, a lobe lifted 45 and 90 degrees, a rigid 90-degree turn; "
+      "tick and visual timings. Tables on stdout, DIR/liver_large_deformation.csv with --out."};
   app.add_option("--out", out_dir, "Write liver_large_deformation.csv to this folder (created if missing)");
   app.add_option("--cache", cache, "Mesh and organ-curve cache folder (default: $SURGSIM_CACHE_DIR, else ~/.cache/surgsim)");
   app.add_option("--scene", scene_name, "Scene (name or YAML): material, clamp, cylinder curves")->capture_default_str();

@@ -1,9 +1,9 @@
 // liver_bench: precompute time and memory for organs of ~500 to 21k nodes (direct CHOLMOD against CG per column),
 // and the paper's Table 1: time to evaluate 1, 5, 10, 20 contacts with the tensors against the reference solve of the
 // same load. Prints tables; run by hand (not a ctest). Each precomputation runs in a forked child so that its peak
-// resident memory (getrusage ru_maxrss) is its own. The direct precompute stores what the scenes store (issue 17:
-// the haptic block as one packed half, the visual rows without fully fixed nodes, float above 1 GiB of double) on
-// every core; issue 17's budgets: <= 0.5 s at 1.4k nodes, <= 5 s at 5k, <= 60 s and <= 2 GB at 21k:
+// resident memory (getrusage ru_maxrss) is its own. The direct precompute stores what the scenes store (the haptic
+// block as one packed half, the visual rows without fully fixed nodes, float above 1 GiB of double) on every core;
+// the budgets (docs/DESIGN.md, section 'Budgets'): <= 0.5 s at 1.4k nodes, <= 5 s at 5k, <= 60 s and <= 2 GB at 21k:
 //   build/bench/liver_bench --sizes 1500,5000,20000 --no-cg --skip-table
 #include <CLI/CLI.hpp>
 #include <unistd.h>

@@ -1,4 +1,4 @@
-// liver_error_bench: the liver's error against run time (issue 8). A plain program run by hand
+// liver_error_bench: the liver's error against run time. A plain program run by hand
 // (build/bench/liver_error_bench --out DIR); readable tables on stdout, progress on stderr, and with --out one CSV
 // per table (csv_out.h). --quick is the short run, --smoke the tiny configuration its ctest runs (box meshes, no Gmsh).
 //
@@ -624,9 +624,10 @@ std::string cell(double v, const char* format = "%.6g") {
 int main(int argc, char** argv) {
   Settings s;
   bool quick = false;
-  CLI::App app{"liver_error_bench: the liver's error against run time (issue 8): per-frame solves, CG tolerances, "
-               "precomputed tensors (double, float, far field dropped), mesh size, and linear / quasi non-linear "
-               "against a neo-Hookean Newton reference. Tables on stdout, progress on stderr, CSV files with --out."};
+  CLI::App app{
+      "liver_error_bench: the liver's error against run time: per-frame solves, CG tolerances, "
+      "precomputed tensors (double, float, far field dropped), mesh size, and linear / quasi non-linear "
+      "against a neo-Hookean Newton reference. Tables on stdout, progress on stderr, CSV files with --out."};
   app.add_option("--out", s.out, "Write the CSV files to this folder (created if missing)");
   app.add_option("--cache", s.cache, "Mesh cache folder (default: $SURGSIM_CACHE_DIR, else ~/.cache/surgsim)");
   app.add_option("--scene", s.scene, "Scene (name or YAML) giving the material, clamp and curves")->capture_default_str();

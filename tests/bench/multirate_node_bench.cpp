@@ -1,4 +1,4 @@
-// multirate_node_bench (issue 16): how right the force of the haptic node's multirate liver is while the tool moves,
+// multirate_node_bench: how right the force of the haptic node's multirate liver is while the tool moves,
 // as the node computes it: the scene's LiverOrgan with its tracker thread running, stepped at 1 kHz in real time
 // along the scene's trajectory (a grasp-and-lift of the free lobe for config/liver_multirate.yaml), next to the same
 // scene with the linear model stepped on the same poses. Every --sample-ms of a tick in contact the tick's contact

@@ -1,4 +1,4 @@
-// multirate_view_bench (issue 16): what drawing the multirate liver's shape costs the visual node, against the linear
+// multirate_view_bench: what drawing the multirate liver's shape costs the visual node, against the linear
 // deformer it replaces, on the shipped config/liver_multirate.yaml:
 //   - the wire: bytes of one serialized BodyState (XCDR1, encapsulation included) for the scene's boundary surface,
 //     against header + 24 x surface nodes;

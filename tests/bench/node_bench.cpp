@@ -1,7 +1,7 @@
 // node_bench: the run-phase costs of both nodes on generated livers, measured side by side in one run.
 //   haptic tick (collision on the deformed surface + G_CC solve + force) against contact count and mesh size;
 //   visual deformation of every visible node against mesh size; render time at 640x480 (and 1280x720 at the first
-//   size); the peak memory of each node (issue 17).
+//   size); the peak memory of each node.
 // A plain program printing tables (run by hand, never a pass/fail test):
 //   build/bench/node_bench [--sizes 1500,5000,20000] [--reps 2000] [--no-render] [--out DIR]
 // --out DIR also writes node_tick.csv, node_deform.csv, node_render.csv and node_memory.csv there.

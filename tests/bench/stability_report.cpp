@@ -1,4 +1,4 @@
-// stability_report: runs every case of the stability suite (issue 8; tests/stability/stability_cases.h) and writes
+// stability_report: runs every case of the stability suite (tests/stability/stability_cases.h) and writes
 // DIR/stability.csv, then prints the table. The same cases are asserted by the stability_test ctest.
 //   build/bench/stability_report [--out DIR] [--group liver|intestine]
 // Exit status: 0 when no case failed, 1 when some case ended in "failed" (see its message), 2 on a bad argument or
@@ -17,9 +17,10 @@
 int main(int argc, char** argv) {
   using surgsim::stability::CaseResult;
   namespace stab = surgsim::stability;
-  CLI::App app{"Stability suite (issue 8): runs every edge case of the liver and intestine models and writes "
-               "DIR/stability.csv (group,case,parameter,outcome,residual,condition,max_force_n,max_displacement_m,"
-               "all_finite,message) and a table on stdout"};
+  CLI::App app{
+      "Stability suite: runs every edge case of the liver and intestine models and writes "
+      "DIR/stability.csv (group,case,parameter,outcome,residual,condition,max_force_n,max_displacement_m,"
+      "all_finite,message) and a table on stdout"};
   std::string out_dir = "out/stability";
   std::string group;
   app.add_option("--out", out_dir, "folder for stability.csv (created)");

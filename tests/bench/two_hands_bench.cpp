@@ -1,4 +1,4 @@
-// two_hands_bench (issue 19): two instruments on the shipped liver, coupled through the tissue. Replays the shipped
+// two_hands_bench: two instruments on the shipped liver, coupled through the tissue. Replays the shipped
 // two-instrument trajectory (config/liver_two_tools.yaml: a grasper holding the free lobe, a probe pressing beside
 // it) tick by tick at 1 kHz, in one run:
 //  1. the tick: both instruments' contacts in one solve (ToolContacts with the scene's law) plus each instrument's
@@ -230,8 +230,9 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
 }  // namespace surgsim
 
 int main(int argc, char** argv) {
-  CLI::App cli{"two_hands_bench (issue 19): the tick with two instruments on the shipped liver, and the grasper's "
-               "force while the probe presses, against the same grasper alone and a direct solve"};
+  CLI::App cli{
+      "two_hands_bench: the tick with two instruments on the shipped liver, and the grasper's "
+      "force while the probe presses, against the same grasper alone and a direct solve"};
   std::string scene = "liver_two_tools", cache, out;
   int capacity = 10;
   cli.add_option("--scene", scene, "two-instrument scene (file or shipped name)")->capture_default_str();

@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """Every struct of idl/Surgsim.idl is annotated @final (the wire format is XCDR1, final: another vendor's generator
 must not guess its extensibility), and the only keys are the `instrument` members of the per-instrument streams
-(ToolCommand, ForceFeedback: issue 19, wire version v2). Every sequence and string is bounded (samples are
-preallocated). The web view's Frame (issue 18) is keyless and its JPEG payload a bounded sequence<octet, N>. Usage: check_idl_final.py IDL_FILE"""
+(ToolCommand, ForceFeedback: several instruments, wire version v2). Every sequence and string is bounded (samples are
+preallocated). The web view's Frame is keyless and its JPEG payload a bounded sequence<octet, N>.
+Usage: check_idl_final.py IDL_FILE"""
 import re
 import sys
 
@@ -49,7 +50,7 @@ for i, line in enumerate(lines):
             bad.append(f'{path}:{i + 1}: unbounded string: write string<N>')
         elif m.group(1) == 'sequence' and (m.group(2) is None or ',' not in m.group(2)):
             bad.append(f'{path}:{i + 1}: unbounded sequence: write sequence<T, N>')
-# The frame of the web view (issue 18): keyless (one stream), its JPEG a bounded octet sequence.
+# The frame of the web view: keyless (one stream), its JPEG a bounded octet sequence.
 frame = re.search(r'struct\s+Frame\s*\{(.*?)\};', text, re.S)
 if frame is None:
     bad.append(f'{path}: struct Frame (surgsim/frame, issue 18) is missing')

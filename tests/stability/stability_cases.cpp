@@ -507,7 +507,7 @@ std::vector<CaseResult> liver_contact_cases() {
         contacts.step(tool_geometry(spec, pose), pose.jaw, tick);
         r.all_finite = r.all_finite && tick.force.allFinite() && tick.device_force.allFinite();
         r.max_force_n = std::max(r.max_force_n, tick.force.norm());
-        // Issue 14: the patch contact spreads over every surface node within the tip radius; the fixed ones among
+        // The patch contact spreads over every surface node within the tip radius; the fixed ones among
         // them are left out (PointPatch::fixed) and only the free ones constrained.
         const PointContact& pc = contacts.point(0);
         if (pc.tracked || pc.active) {
@@ -587,7 +587,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
     bool stiff;         // the 10x stiffer box
     std::string what;
   };
-  // Issue 14: the patch contact (a tip of 2.5 mean edges) is stiffer than the paper's point load on three nodes, so
+  // The patch contact (a tip of 2.5 mean edges) is stiffer than the paper's point load on three nodes, so
   // the soft box reaches the 8 N clamp before 30 mm: the speed runs end at 8 mm, below it, and every run holds its
   // final pose for 30 ticks (a fast stab's initial penetration is blended in over ToolContacts::kOnsetRamp).
   const std::vector<Run> runs = {{0.1, 0.008, false, ""},

@@ -1,4 +1,4 @@
-// The stability suite of issue 8: every case runs real product code (FEM assembly, CHOLMOD, precomputed tensors,
+// The stability suite: every case runs real product code (FEM assembly, CHOLMOD, precomputed tensors,
 // superposition, the haptic node's liver contacts, the intestine's mass-spring step) at the edge of its range and
 // returns a record of what happened. The ctest (stability_test.cpp) asserts the outcomes; the report program
 // (tests/bench/stability_report.cpp) writes them as a CSV table. Deterministic: no random input, no clocks.

@@ -1,4 +1,4 @@
-// The stability suite of issue 8 as assertions: the expected outcome of every case (stability_cases.h) and no
+// The stability suite as assertions: the expected outcome of every case (stability_cases.h) and no
 // non-finite value in any output. The report program (build/bench/stability_report) prints the same cases.
 #include "stability_cases.h"
 

@@ -1,6 +1,6 @@
 // A direct solve of linear elasticity under linear constraints on surface nodes, independent of the precomputed
 // tensors and of CHOLMOD: K_ff (assembled by fem/fem.h) factored by Eigen's sparse LDLT, the constraints imposed by
-// Lagrange multipliers. Used to check that the contact solve of several instruments (issue 19) is the exact one: the
+// Lagrange multipliers. Used to check that the contact solve of several instruments is the exact one: the
 // liver two-hands test and two_hands_bench.
 #pragma once
 #include <Eigen/Cholesky>

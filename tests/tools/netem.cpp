@@ -1,4 +1,4 @@
-// surgsim-netem: a user-space "wire" with netem-like impairments, for kernels without the netem qdisc (issue 7).
+// surgsim-netem: a user-space "wire" with netem-like impairments, for kernels without the netem qdisc.
 // It opens one TAP device in each of two network namespaces and forwards every Ethernet frame from one to the other
 // after a delay, with jitter, reordering and loss drawn from a seeded generator (the same seed and traffic give the
 // same decisions). scripts/run_two_hosts.sh --impair starts it and puts the hosts' addresses on the two TAPs.

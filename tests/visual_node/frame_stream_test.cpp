@@ -1,4 +1,4 @@
-// The web view's frame stream (issue 18): the JPEG round trip, the topic's size bound (a JPEG above it is dropped and
+// The web view's frame stream: the JPEG round trip, the topic's size bound (a JPEG above it is dropped and
 // counted, never cut), a busy encoder drops the picture instead of making the render loop wait, the stamps carried,
 // and the scene keys that turn it on (validated, outside the scene hash).
 #include "frame_stream.h"

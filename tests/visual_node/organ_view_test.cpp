@@ -142,7 +142,7 @@ TEST(OrganView, LiverSceneGetsTheLiverViewThatDeformsAndMarksContacts) {
   EXPECT_FALSE(j.contains("intestine"));
 }
 
-// Two instruments on the plate (issue 19): the contacts of both deform it together, both are marked.
+// Two instruments on the plate: the contacts of both deform it together, both are marked.
 TEST(OrganView, LiverViewTakesTheContactsOfEveryInstrument) {
   Scene scene = shipped("plate.yaml");
   scene.tools.push_back(scene.tools[0]);

@@ -1,4 +1,4 @@
-// Corotational precomputed compliance (issue 16, compliance/corotation.h) on a liver-sized box clamped on its bottom face:
+// Corotational precomputed compliance (compliance/corotation.h) on a liver-sized box clamped on its bottom face:
 // rotations recovered from rigid motions, a rigid motion of the organ with its fixed set costs no force on the
 // corotational path (and a large one on the linear path), each one-half rotation is caught, and small rotations agree
 // with the linear path. Figures are printed: ctest -R common_corotation_test -V.
@@ -165,7 +165,7 @@ TEST(Corotation, RingRotationsOfARigidMotionAreThatRotation) {
   }
 }
 
-// Issue 16, "rigid motion is free": the organ and its fixed set turned by up to 90 degrees and moved, the grasped
+// "Rigid motion is free": the organ and its fixed set turned by up to 90 degrees and moved, the grasped
 // patch held where the motion carries it. The corotational force is <= 1 % of a 10 % indentation's (here ~0); the
 // linear path, which reads the motion as strain, gives a force of the order of the indentation's or more.
 TEST(Corotation, RigidMotionWithTheFixedSetCostsNoForceOnlyWhenCorotational) {

@@ -1,4 +1,4 @@
-// The patch solve (issue 14, part 2) against the full solve of the same constraint: K_ff u = C mu with C^T u = b,
+// The patch solve against the full solve of the same constraint: K_ff u = C mu with C^T u = b,
 // i.e. mu = (C^T K_ff^-1 C)^-1 b by a direct CHOLMOD solve of the assembled stiffness, no tensors. The patch solve
 // reads the same compliance from the precomputed "haptic" block, so they agree to the storage precision; the error
 // is printed (ctest -R common_liver_test -V).
@@ -138,7 +138,7 @@ TEST(PatchSolve, EqualsTheFullSolveOfTheSameConstraint) {
   EXPECT_EQ(allocations, 0);
 }
 
-// Issue 19: a held contact keeps its union nodes from tick to tick and a second instrument appends its own: prepare()
+// A held contact keeps its union nodes from tick to tick and a second instrument appends its own: prepare()
 // reads G only for the nodes that are new or moved, and the compliances are bit-identical to a fresh full read.
 TEST(PatchSolve, ReadsGOnlyForNewNodesAndGivesTheFullReadBitForBit) {
   const auto organ = test::box_organ(8, 6, 4);

@@ -172,7 +172,7 @@ TEST(Precompute, IsDeterministic) {
   EXPECT_EQ(0, std::memcmp(ga.data(), gb.data(), sizeof(double) * static_cast<std::size_t>(ga.size())));
 }
 
-// Issue 17: G on every contact column at every node (0 on fixed components), from CHOLMOD's own blocked solve.
+// G on every contact column at every node (0 on fixed components), from CHOLMOD's own blocked solve.
 Eigen::MatrixXd full_g(const test::Organ& organ, const std::vector<int>& contacts) {
   std::vector<int> sorted = contacts;
   std::sort(sorted.begin(), sorted.end());

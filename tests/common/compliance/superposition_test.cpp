@@ -303,8 +303,7 @@ TEST(SuperpositionFloat, FloatTensorsAgreeToStoragePrecision) {
   EXPECT_LT(test::rel_error(sol.tool_force, Eigen::Vector3d(-r.total_reaction)), 1e-4);
 }
 
-
-// --- The near-singular guard (issue 14, part 7): rcond is a real estimate of 1 / cond_1(G_CC). ---
+// --- The near-singular guard: rcond is a real estimate of 1 / cond_1(G_CC). ---
 
 // Tensors whose "haptic" block is the given symmetric 3N x 3N matrix, every node a contact node and a row.
 Tensors synthetic_tensors(const Eigen::MatrixXd& g) {

@@ -176,7 +176,7 @@ TEST_F(TensorCacheTest, LoadOrBuildRebuildsStaleAndCorruptFiles) {
   EXPECT_EQ(load_tensor_cache(path_, key_, back).status, CacheStatus::kOk);
 }
 
-// Issue 17: the packed symmetric haptic half in float, written and read back bit for bit.
+// The packed symmetric haptic half in float, written and read back bit for bit.
 TEST_F(TensorCacheTest, SymmetricFloatRoundTrip) {
   PrecomputeOptions opts;
   opts.precision = Precision::kFloat;

@@ -102,7 +102,7 @@ TEST(CholmodSolver, ReciprocalConditionEstimate) {
   EXPECT_NEAR(solver.rcond(), 0.01, 1e-15);
 }
 
-// Issue 17: the selected unit-column solves on the shared supernodal factor.
+// The selected unit-column solves on the shared supernodal factor.
 TEST(CholmodSolver, UnitColumnsMatchTheFullSolveAtTheNeededRows) {
   auto organ = test::box_organ(5, 4, 3);
   const auto& k = organ->model.k_ff;

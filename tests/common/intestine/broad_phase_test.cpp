@@ -82,7 +82,7 @@ TEST(BroadPhaseTest, SameContactsAsBruteForceWhilePairsSleep) {
   EXPECT_EQ(broad.detect(state.x, found).asleep, 0);
 }
 
-// Issue 15: a block pair whose boxes overlap but whose element pairs all sleep sleeps as a whole (for the smallest of
+// A block pair whose boxes overlap but whose element pairs all sleep sleeps as a whole (for the smallest of
 // their slacks), so on a body that has not moved none of its element pairs is looked at again.
 TEST(BroadPhaseTest, BlockPairsWhoseElementPairsAllSleepAreNotLookedAt) {
   const IntestineModel model(IntestineParams{});

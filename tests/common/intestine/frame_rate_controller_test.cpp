@@ -87,7 +87,7 @@ StepResult load_step(const FrameRateParams& p, double s0, double s1, double nois
   return r;
 }
 
-// Issue 15: within 1 s of a load change (a step of 3x up or down), at every target; the band it settles in is the
+// Settles within 1 s of a load change (a step of 3x up or down), at every target; the band it settles in is the
 // two levels around the target (the finest that meets it and the next), no wider.
 TEST(FrameRateControllerTest, SettlesWithinOneSecondOfALoadStep) {
   for (double target : {30.0, 60.0, 100.0, 150.0, 200.0}) {

@@ -1,4 +1,4 @@
-// Issue 15: one instrument pushes a loop's mesentery until it folds onto the intestine of the next loop, while a
+// One instrument pushes a loop's mesentery until it folds onto the intestine of the next loop, while a
 // second one holds that mesentery's own intestine in place. The contact is between a segment and the membrane, never
 // between two segments: the brute-force reference, the broad phase live in the step and the stochastic detector with
 // its intestine-mesentery pairs (three seeds) find it; the paper's detector of segment pairs alone finds nothing.

@@ -214,7 +214,7 @@ TEST(TubeGeometryTest, LevelsOfDetailGrowFromARoundTubeToTheFinest) {
   }
 }
 
-// Issue 15: the tube looks round at every level the frame-rate controller may choose, the coarsest included (live
+// The tube looks round at every level the frame-rate controller may choose, the coarsest included (live
 // next to the haptic node it chooses 0-2). On the shipped rest shape, at every LOD: around every ring of the body
 // adjacent vertices' normals are at most 26.5 degrees apart, so the interpolated shading turns smoothly across the
 // sides, and the middle of every side edge lies within 2.5 % of the radius of the ring's circle, so the outline is a

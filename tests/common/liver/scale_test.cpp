@@ -1,6 +1,7 @@
-// Issue 17 at a proportional size (a 21k-node precompute does not fit the suite's time on 2 cores; liver_bench and
-// node_bench measure that size): a generated liver of ~3000 nodes stored as the scenes store it (the haptic block as
-// one packed half, the visual rows that can move, float when large), against the full double computation.
+// The scenes' storage of patient-size livers, at a proportional size (a 21k-node precompute does not fit the suite's
+// time on 2 cores; liver_bench and node_bench measure that size): a generated liver of ~3000 nodes stored as the
+// scenes store it (the haptic block as one packed half, the visual rows that can move, float when large), against the
+// full double computation.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -45,7 +46,7 @@ class LiverScale : public ::testing::Test {
     organ_->fixed = fixed_set_from_region(organ_->mesh, underside);
     organ_->model = std::make_unique<ElasticModel>(build_elastic_model(organ_->mesh, organ_->material, organ_->fixed));
     organ_->contacts = contactable_nodes(organ_->mesh, organ_->fixed);
-    PrecomputeOptions full;  // the layout before issue 17: dense double, every boundary node a visual row
+    PrecomputeOptions full;  // the plain layout: dense double, every boundary node a visual row
     full.memory_limit_mb = 0;
     full_ = new Tensors(precompute_tensors(*organ_->model, organ_->contacts,
                                            standard_row_sets(organ_->mesh, organ_->contacts), full));

@@ -1,4 +1,4 @@
-// Multirate non-linear contact (issue 16, nonlinear/multirate.h) on a liver-sized box clamped on its bottom face: the
+// Multirate non-linear contact (nonlinear/multirate.h) on a liver-sized box clamped on its bottom face: the
 // tracker converges to HyperelasticSolver::solve's reactions for a press and a lift, the local model's force a small
 // step beyond its snapshot matches Newton (and would not with S = K_cc, the tangent's contact block without the Schur
 // complement), and the 1 kHz evaluation allocates nothing and falls back to the linear model on a bad snapshot.

@@ -1,4 +1,4 @@
-// Organ curves (issue 16, part 2, nonlinear/organ_curves.h) on a clamped wedge: a liver-sized box whose thickness grows
+// Organ curves (nonlinear/organ_curves.h) on a clamped wedge: a liver-sized box whose thickness grows
 // from 4 cm (x = 0) to 8 cm (x = 0.16 m), so that the Newton / linear force ratio of a punch differs over the surface
 // as it does on the liver. The law reproduces the indentations it was fitted on, holds at a site it was not fitted
 // on (where one Q for the organ does not), and the cache is keyed by the tensors' key (a new material is never served

@@ -1,4 +1,4 @@
-// CPU placement (issue 15): the haptic node keeps one CPU for its loop and every other thread off it.
+// CPU placement: the haptic node keeps one CPU for its loop and every other thread off it.
 #include "os/cpu_affinity.h"
 
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// The CPU wake-up latency request (issue 15): granted while held, withdrawn when the object goes.
+// The CPU wake-up latency request: granted while held, withdrawn when the object goes.
 #include "os/cpu_latency.h"
 
 #include <gtest/gtest.h>

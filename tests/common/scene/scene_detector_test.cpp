@@ -1,4 +1,4 @@
-// intestine.detector (issue 15): the scene chooses the self-collision detector the haptic step runs; the stochastic
+// intestine.detector: the scene chooses the self-collision detector the haptic step runs; the stochastic
 // one by default, the exact broad phase on request; a bad value names the key and the choices; it enters the hash.
 #include <gtest/gtest.h>
 

@@ -101,7 +101,7 @@ TEST(SceneLoad, MinimalSceneGetsHeaderDefaults) {
   EXPECT_EQ(s.tools[0].jaw_length, tool.jaw_length);
   EXPECT_EQ(s.tools[0].force_limit, tool.force_limit);
   EXPECT_EQ(s.tools[0].contact_capacity, tool.contact_capacity);
-  EXPECT_EQ(s.tools[0].contact_model, ContactModel::kPatch);  // issue 14: the smooth patch contact by default
+  EXPECT_EQ(s.tools[0].contact_model, ContactModel::kPatch);  // the smooth patch contact by default
   EXPECT_EQ(s.tools[0].tip_radius, 0.0);                     // 0: 2.5 mean surface edges
   EXPECT_EQ(s.tools[0].friction, 0.0);                       // frictionless
   EXPECT_EQ(s.haptic.rate_hz, haptic.rate_hz);
@@ -281,7 +281,7 @@ TEST(SceneLoad, IntestineKeysFillTheModelParameters) {
   EXPECT_NO_THROW(intestine::IntestineModel model(p));  // what the scene says, the model accepts
 }
 
-// Several instruments (issue 19): a `tools:` list, each with its own settings; the single `tool:` key is one
+// Several instruments: a `tools:` list, each with its own settings; the single `tool:` key is one
 // instrument named "tool".
 TEST(SceneTools, ListGivesEachInstrumentItsOwnSettings) {
   const fs::path dir = test_dir();
@@ -454,7 +454,7 @@ TEST(ShippedScenes, TrajectoriesReachTheStatedDepth) {
   }
 }
 
-// Two hands (issue 19): config/liver_two_tools.yaml and its trajectory against the scene's own mesh (generated, from
+// Two hands: config/liver_two_tools.yaml and its trajectory against the scene's own mesh (generated, from
 // the test cache). Each tip is followed along its shaft: it goes below the rest surface when the shaft's ray from the
 // trocar meets the boundary before the tip.
 struct RayHit {
@@ -614,7 +614,8 @@ TEST(SceneHash, EveryInstrumentEntersTheHash) {
   const std::uint64_t one = load_scene(write(dir / "one.yaml", base + "tools: [" + a + "]\n")).hash();
   const std::uint64_t two = load_scene(write(dir / "two.yaml", base + "tools: [" + a + ", " + b + "]\n")).hash();
   EXPECT_NE(one, two);
-  // One instrument hashes as the single `tool:` key does (its name aside): scenes from before issue 19 keep theirs.
+  // One instrument hashes as the single `tool:` key does (its name aside): scenes written for a single
+  // `tool:` key keep theirs.
   EXPECT_EQ(one, load_scene(write(dir / "tool.yaml", base + "tool: {trocar: [0, 0, 0.2]}\n")).hash());
   // The second instrument's settings, its name and the order count.
   EXPECT_NE(two, load_scene(write(dir / "f.yaml", base + "tools: [" + a + ", {name: b, trocar: [0.05, 0, 0.2], "

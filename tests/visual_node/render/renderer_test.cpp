@@ -248,7 +248,7 @@ TEST(OsMesaRenderer, ToolShaftAndJawsAreDrawn) {
   }
 }
 
-// Several instruments are told apart by colour (issue 19): two tools side by side, one in instrument 0's colour
+// Several instruments are told apart by colour: two tools side by side, one in instrument 0's colour
 // (grey), one in instrument 1's (blue).
 TEST(OsMesaRenderer, InstrumentColoursTellToolsApart) {
   // The palette: distinct colours, cycling beyond the fourth instrument.

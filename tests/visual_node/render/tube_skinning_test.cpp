@@ -1,5 +1,6 @@
-// GPU two-matrix skinning of the intestine tube (OsMesaRenderer::draw_skinned_tube, DESIGN.md 4.4) against the CPU
-// skinning of TubeBuilder: the transformed vertices read back by transform feedback, and the pictures of both paths.
+// GPU two-matrix skinning of the intestine tube (OsMesaRenderer::draw_skinned_tube, docs/DESIGN.md, section 'Intestine
+// rendering') against the CPU skinning of TubeBuilder: the transformed vertices read back by transform feedback, and
+// the pictures of both paths.
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -113,7 +113,7 @@ TEST(IntestineView, RefusesWrongCountsAndNonFiniteValues) {
   EXPECT_EQ(view.stats()["body_states_rejected"].get<int>(), 2);
 }
 
-// The probes drawn with the intestine are those of the body state shown (issue 19: one probe per instrument, in step
+// The probes drawn with the intestine are those of the body state shown (one probe per instrument, in step
 // with the body); a refused state keeps the previous ones.
 TEST(IntestineView, KeepsTheInstrumentsOfTheBodyStateShown) {
   const Scene scene = shipped_intestine();
@@ -216,7 +216,7 @@ TEST(IntestineView, OsMesaFrameShowsAShadedMesenteryAPinkTubeAndTheCavity) {
   EXPECT_GT(cavity, n / 20) << "a dark red-brown cavity around the organ";
 }
 
-// Issue 15: the shipped camera looks like a laparoscope through the abdominal wall at the bowel, and nothing crosses
+// The shipped camera looks like a laparoscope through the abdominal wall at the bowel, and nothing crosses
 // right in front of the lens. For the rest shape and the shape it hangs in after 1.5 s under gravity (what the
 // shipped runs show before the probe arrives), of the tube's vertices (CPU skinning, LOD 3): at least 70 % are in
 // the picture (the loops fill the view; the ends along the root may leave it), their outline spans at least 60 % of

@@ -1,4 +1,4 @@
-// LiverView with liver.deformation multirate (issue 16), without DDS or GL: the tracker's shape given as a BodyState
+// LiverView with liver.deformation multirate, without DDS or GL: the tracker's shape given as a BodyState
 // (a known displacement field on the boundary nodes, SurfaceMesh order) is what is drawn, on the boundary and on an
 // embedded finer surface; states of another scene, with another point count or with a NaN are ignored and counted by
 // reason (one stderr line each); before the first state the linear deformer draws the contact frame. On the shipped

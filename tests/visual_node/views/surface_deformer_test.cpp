@@ -124,7 +124,7 @@ TEST_F(SurfaceDeformerTest, BadFrameKeepsTheLastShape) {
   EXPECT_EQ(deformer.positions(), before);
 }
 
-// Several instruments (issue 19): the contacts of all instruments deform the surface together (the linear sum), and
+// Several instruments: the contacts of all instruments deform the surface together (the linear sum), and
 // the non-linear law bends each instrument's share about that instrument's own direction.
 TEST_F(SurfaceDeformerTest, EachInstrumentsShareIsBentAboutItsOwnDirection) {
   NonlinearSpec spec;  // the shipped liver's curves (E 3000 Pa, nu 0.45, as this block)

@@ -1,4 +1,4 @@
-// surgsim-web's rules without sockets (issue 18): paths and tokens, the page's messages (malformed ones refused with
+// surgsim-web's rules without sockets: paths and tokens, the page's messages (malformed ones refused with
 // a reason), the virtual device's range and slew limit, and one driver at a time.
 #include "web_logic.h"
 
