@@ -128,6 +128,7 @@ class HapticApp {
     std::uint32_t wall_ns = 0;  // the tick's wall time
     std::uint32_t cpu_ns = 0;   // the loop thread's CPU time during it
     std::uint32_t misses = 0;   // missed deadlines counted up to this tick's wake-up (a late tick k shows at k + 1)
+    std::array<std::uint32_t, contact::kContactStages> stage_ns{};  // the contact step's stages (0: none, intestine)
   };
   std::vector<TickTrace> tick_trace_;
   std::FILE* tick_trace_file_ = nullptr;

@@ -30,7 +30,8 @@ int main(int argc, char** argv) {
   cli.add_option("--speed", speed, "Replay speed factor, or 'max' (as fast as possible, tick-exact)")->capture_default_str();
   cli.add_option("--log", o.log, "Per-tick CSV: tick,t,fx,fy,fz,contacts");
   cli.add_option("--tick-trace", o.tick_trace, "Per-tick timing CSV written after the loop: tick,due_us,wake_late_us,"
-                 "tick_us,tick_cpu_us,misses (what made a tick late)");
+                 "tick_us,tick_cpu_us,misses, then the contact step's stages track_points_us,build_patches_us,"
+                 "solve_active_set_us,friction_us,distribute_forces_us (0 for the intestine): what made a tick late");
   cli.add_option("--stats", o.stats, "Write a JSON summary here on exit");
   cli.add_option("--cache", o.cache_dir, "Cache folder for generated meshes and tensors (default $SURGSIM_CACHE_DIR or ~/.cache/surgsim)");
   cli.add_option("--domain", o.domain, "DDS domain id (default $SURGSIM_DOMAIN or 0)");

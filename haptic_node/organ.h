@@ -73,6 +73,9 @@ class HapticOrgan {
   /// Contact entries the ContactFrame carries this tick (at most msg::kMaxContacts), and entry l of them.
   virtual int contact_entries() const noexcept { return 0; }
   virtual ContactEntry contact_entry(int l) const noexcept { return {}; }
+  /// The time each stage of the last step's contact solve took (contact::ContactStage order), or null for an organ
+  /// without them (the intestine): the --tick-trace columns.
+  virtual const contact::ContactStageTimes* stage_times() const noexcept { return nullptr; }
 
   /// Identity both nodes compare (SceneInfo): hash of the tetrahedral mesh (0 without one) and of the tensors.
   virtual std::uint64_t mesh_hash() const { return 0; }

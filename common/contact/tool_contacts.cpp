@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/clock.h"
 #include "core/error.h"
 #include "nonlinear/nonlinear_law.h"
 #include "nonlinear/multirate_contacts.h"
@@ -195,6 +196,27 @@ Eigen::Vector3d ToolContacts::corrected(int l) const noexcept {
   return haptic_.block3(r, c) * solution_.lambda[static_cast<std::size_t>(l)];
 }
 
+namespace {
+// Times the stages of one step into a ContactStageTimes: each lap() is the time since the previous one (or since the
+// clock started). Stages without a lap keep 0.
+class StageClock {
+ public:
+  explicit StageClock(ContactStageTimes& times) noexcept : times_(times), last_(core::monotonic_ns()) {
+    times_.ns.fill(0);
+  }
+  void lap(ContactStage stage) noexcept {
+    const std::uint64_t now = core::monotonic_ns();
+    times_.ns[static_cast<std::size_t>(stage)] =
+        static_cast<std::uint32_t>(std::min<std::uint64_t>(now - last_, UINT32_MAX));
+    last_ = now;
+  }
+
+ private:
+  ContactStageTimes& times_;
+  std::uint64_t last_;
+};
+}  // namespace
+
 void ToolContacts::step(const InstrumentInput* inputs, int count, ContactTick* out, double dt) noexcept {
   status_ = ContactStatus::kOk;
   count_ = std::clamp(count, 0, instruments());
@@ -236,8 +258,10 @@ void ToolContacts::step(const InstrumentInput* inputs, int count, ContactTick* o
   if (multirate_ != nullptr) multirate_->hand_over(solution_, h);
 }
 
+// The triangle model's tick in the same stages as the patch model's (it has no friction stage: that time stays 0).
 void ToolContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
-  // --- detection and contact update, per instrument and tool point (tip first) ---
+  StageClock clock(stage_times_);
+  // --- track points: detection and contact update, per instrument and tool point (tip first) ---
   for (int t = 0; t < count_; ++t) {
     const ToolGeometry* geometry = geometry_[static_cast<std::size_t>(t)];
     if (geometry == nullptr) continue;
@@ -297,7 +321,9 @@ void ToolContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
     have_previous_[static_cast<std::size_t>(t)] = true;
   }
 
-  // --- constraints: each contact's displacement spread over its triangle, alpha_v = k_v / sum k^2 ---
+  clock.lap(ContactStage::kTrackPoints);
+
+  // --- build patches: each contact's displacement spread over its triangle, alpha_v = k_v / sum k^2 ---
   int m = 0;
   std::array<Eigen::Vector3d, kMaxInstruments> dir_sum;
   for (auto& d : dir_sum) d.setZero();
@@ -350,13 +376,16 @@ void ToolContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
     }
   }
 
-  // --- lambda = G_CC^-1 u* for every instrument's constraints at once; each instrument's force = -sum of the
+  clock.lap(ContactStage::kBuildPatches);
+
+  // --- solve: lambda = G_CC^-1 u* for every instrument's constraints at once; each instrument's force = -sum of the
   // lambdas of its nodes ---
   if (m == 0) {
     drop_solution();
     return;
   }
   status_ = superposition_.solve(requests_.data(), m, solution_);
+  clock.lap(ContactStage::kSolveActiveSet);
   const ContactStatus status = status_;
   if (status != ContactStatus::kOk) {
     for (int t = 0; t < count_; ++t) {
@@ -388,6 +417,7 @@ void ToolContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
     if (geometry_[static_cast<std::size_t>(t)] == nullptr) continue;
     finish(t, force[static_cast<std::size_t>(t)], dir_sum[static_cast<std::size_t>(t)], out[t]);
   }
+  clock.lap(ContactStage::kDistributeForces);
 }
 
 void ToolContacts::finish(int t, Eigen::Vector3d force, const Eigen::Vector3d& dir_sum, ContactTick& out) noexcept {
@@ -483,19 +513,51 @@ void ToolContacts::track(const ToolGeometry& geometry, int i, int g, bool resume
   }
 }
 
-void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
-  // Every tool point of every instrument in one pass: point g = t * kMaxShaftPoints + i (instrument t, point i).
-  // An instrument without geometry this tick (lost, not finite) has no point here.
-  const auto each_point = [&](auto&& f) {
-    for (int t = 0; t < count_; ++t) {
-      const ToolGeometry* geometry = geometry_[static_cast<std::size_t>(t)];
-      if (geometry == nullptr) continue;
-      for (int i = 0; i < geometry->point_count; ++i) f(t, i, t * kMaxShaftPoints + i, *geometry);
-    }
-  };
-  const int capacity = superposition_.capacity();  // the union of all instruments' nodes
+// The tool points of every instrument in one pass: point g = t * kMaxShaftPoints + i (instrument t, point i). An
+// instrument without geometry this tick (lost, not finite) has no point here.
+template <class F>
+void ToolContacts::each_point(F&& f) {
+  for (int t = 0; t < count_; ++t) {
+    const ToolGeometry* geometry = geometry_[static_cast<std::size_t>(t)];
+    if (geometry == nullptr) continue;
+    for (int i = 0; i < geometry->point_count; ++i) f(t, i, t * kMaxShaftPoints + i, *geometry);
+  }
+}
 
-  // --- 1. where each point is relative to the rest surface; grasps closing and opening ---
+Eigen::Vector3d ToolContacts::patch_force(int p_index) const noexcept {
+  const PatchConstraints& k = *constraints_;
+  Eigen::Vector3d f = Eigen::Vector3d::Zero();
+  for (int r = 0; r < k.row_count; ++r)
+    if (k.row_patch[static_cast<std::size_t>(r)] == p_index)
+      f += mu_[static_cast<std::size_t>(r)] * k.row_direction[static_cast<std::size_t>(r)];
+  return f;
+}
+
+void ToolContacts::disable_patch(int p_index) noexcept {
+  const PatchConstraints& k = *constraints_;
+  for (int r = 0; r < k.row_count; ++r)
+    if (k.row_patch[static_cast<std::size_t>(r)] == p_index) enabled_[static_cast<std::size_t>(r)] = 0;
+}
+
+// The patch model's tick as its stages, each timed (stage_times()). A stage that does not run (nothing to solve, a
+// failed solve) takes 0.
+void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
+  StageClock clock(stage_times_);
+  track_points();
+  clock.lap(ContactStage::kTrackPoints);
+  build_patches(dt, out);
+  clock.lap(ContactStage::kBuildPatches);
+  const bool solved = solve_active_set(dt, out);
+  clock.lap(ContactStage::kSolveActiveSet);
+  if (!solved) return;
+  apply_friction();
+  clock.lap(ContactStage::kFriction);
+  distribute_forces(dt, out);
+  clock.lap(ContactStage::kDistributeForces);
+}
+
+// Stage 1: where each point is relative to the rest surface; grasps closing and opening.
+void ToolContacts::track_points() noexcept {
   each_point([&](int t, int i, int g, const ToolGeometry& geometry) {
     const auto si = static_cast<std::size_t>(g);
     const double jaw = jaw_[static_cast<std::size_t>(t)];
@@ -543,8 +605,11 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
       previous_[static_cast<std::size_t>(t * kMaxShaftPoints + i)] = geometry->points[static_cast<std::size_t>(i)];
     have_previous_[static_cast<std::size_t>(t)] = true;
   }
+}
 
-  // --- 2. one patch per contact (or candidate), its rows and their imposed values ---
+// Stage 2: one patch per contact (or candidate), its rows and their imposed values.
+void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
+  const int capacity = superposition_.capacity();  // the union of all instruments' nodes
   PatchConstraints& k = *constraints_;
   k.clear();
   std::array<int, kMaxInstruments> dropped{};
@@ -681,8 +746,12 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
       dropped_nodes_ += dropped[static_cast<std::size_t>(t)];
     }
   }
+}
 
-  // --- 3. the solve, with an active set for the unilateral contacts and the friction cone for sticking ones ---
+// Stage 3: the solve, with an active set for the unilateral contacts (false: nothing to solve or the solve failed;
+// the solution is dropped).
+bool ToolContacts::solve_active_set(double dt, ContactTick* out) noexcept {
+  PatchConstraints& k = *constraints_;
   each_point([&](int, int, int g, const ToolGeometry&) { points_[static_cast<std::size_t>(g)].force.setZero(); });
   if (k.row_count == 0) {
     each_point([&](int, int, int g, const ToolGeometry&) {
@@ -691,7 +760,7 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
       if (!c.grasp) c.active = false;
     });
     drop_solution();
-    return;
+    return false;
   }
   const auto flag_all = [&](bool ContactTick::*flag) {
     for (int t = 0; t < count_; ++t)
@@ -706,19 +775,8 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
   if (status_ != ContactStatus::kOk) {
     if (status_ == ContactStatus::kNonFinite) flag_all(&ContactTick::nonfinite);
     drop_solution();
-    return;
+    return false;
   }
-  const auto patch_force = [&](int p_index) {  // force on the ORGAN from patch p (N)
-    Eigen::Vector3d f = Eigen::Vector3d::Zero();
-    for (int r = 0; r < k.row_count; ++r)
-      if (k.row_patch[static_cast<std::size_t>(r)] == p_index)
-        f += mu_[static_cast<std::size_t>(r)] * k.row_direction[static_cast<std::size_t>(r)];
-    return f;
-  };
-  const auto disable = [&](int p_index) {
-    for (int r = 0; r < k.row_count; ++r)
-      if (k.row_patch[static_cast<std::size_t>(r)] == p_index) enabled_[static_cast<std::size_t>(r)] = 0;
-  };
   bool solved = false;
   for (int iteration = 0; iteration <= k.patch_count; ++iteration) {
     status_ = patch_solver_->factor(k, enabled_.data());
@@ -731,7 +789,7 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
         if (patch_of_point_[static_cast<std::size_t>(g)] == p_dep)
           bilateral = kind_[static_cast<std::size_t>(g)] == kGrasp || kind_[static_cast<std::size_t>(g)] == kFading;
       if (bilateral) break;
-      disable(p_dep);
+      disable_patch(p_dep);
       continue;
     }
     if (status_ != ContactStatus::kOk) break;
@@ -754,7 +812,7 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
       }
     }
     if (worst >= 0) {
-      disable(worst);
+      disable_patch(worst);
       continue;
     }
     solved = true;
@@ -763,8 +821,14 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
   if (!solved) {
     if (status_ == ContactStatus::kOk) status_ = ContactStatus::kNearSingular;
     drop_solution();
-    return;
+    return false;
   }
+  return true;
+}
+
+// Stage 4: Coulomb friction on the sticking patches.
+void ToolContacts::apply_friction() noexcept {
+  const PatchConstraints& k = *constraints_;
   // Coulomb: a sticking patch whose tangential force exceeds mu_eff F_n slides: its tangential offset shrinks until
   // |F_t| = mu_eff F_n (a few fixed-point steps on the factored system: the normal-tangential coupling is weak).
   for (int iteration = 0; iteration < 4; ++iteration) {
@@ -791,8 +855,11 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
     if (!changed) break;
     patch_solver_->solve(b_.data(), mu_.data());
   }
+}
 
-  // --- 4. node forces (the ContactFrame entries), per-point forces and states ---
+// Stage 5: node forces (the ContactFrame entries), per-point forces and states, each instrument's force.
+void ToolContacts::distribute_forces(double dt, ContactTick* out) noexcept {
+  const PatchConstraints& k = *constraints_;
   patch_solver_->node_forces(k, mu_.data(), lambda_.data());
   ContactSolution& s = solution_;
   s = ContactSolution{};
@@ -862,7 +929,7 @@ void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
       }
     }
   });
-  // One instrument: the solve's own sum over the union nodes (bit-identical to before issue 19; the per-point sum
+  // One instrument: the solve's own sum over the union nodes (as a one-instrument solve adds them; the per-point sum
   // above is the same force in another order of additions).
   if (count_ == 1) force[0] = s.tool_force;
   // Multirate: the nodes' forces from the tracker's local model where its snapshot covers them; each instrument's

@@ -185,11 +185,24 @@ class ToolContacts {
   Eigen::Vector3d corrected(int l) const noexcept;
   /// Deformed position of a surface node under the current solution (rest for nodes without a column).
   Eigen::Vector3d deformed(int node) const noexcept;
+  /// The time each stage of the last step() took.
+  const ContactStageTimes& stage_times() const noexcept { return stage_times_; }
 
  private:
   static void deformed_cb(const void* self, int node, Eigen::Vector3d& out);
   void step_triangle(double dt, ContactTick* out) noexcept;
+  /// The patch model's step: its stages in order (ContactStage), each a function.
   void step_patch(double dt, ContactTick* out) noexcept;
+  void track_points() noexcept;
+  void build_patches(double dt, ContactTick* out) noexcept;
+  bool solve_active_set(double dt, ContactTick* out) noexcept;
+  void apply_friction() noexcept;
+  void distribute_forces(double dt, ContactTick* out) noexcept;
+  template <class F>
+  void each_point(F&& f);
+  /// Force on the organ from patch p of the last solve (N), and its rows switched off.
+  Eigen::Vector3d patch_force(int p_index) const noexcept;
+  void disable_patch(int p_index) noexcept;
   void track(const tool::ToolGeometry& geometry, int i, int g, bool resume) noexcept;
   /// Instrument t's force from its contacts: the law along dir_sum, the clamp to its device limit.
   void finish(int t, Eigen::Vector3d force, const Eigen::Vector3d& dir_sum, ContactTick& out) noexcept;
@@ -233,6 +246,7 @@ class ToolContacts {
   std::array<unsigned char, compliance::kMaxPatchRows> enabled_{};
   std::array<Eigen::Vector3d, compliance::kMaxContacts> lambda_{};
   long dropped_nodes_ = 0;
+  ContactStageTimes stage_times_{};
   // --- corotational (issue 16) ---
   struct RotationInput {  // loop -> refresh_rotations(): the last solution's forces (world frame)
     int count = 0;

@@ -43,6 +43,7 @@ class LiverOrgan final : public HapticOrgan {
   int contacts() const noexcept override { return contacts_->solution().count; }
   int instrument_contacts(int i) const noexcept override { return contacts_->instrument_nodes(i); }
   int contact_entries() const noexcept override { return contacts_->solution().count; }
+  const contact::ContactStageTimes* stage_times() const noexcept override { return &contacts_->stage_times(); }
   ContactEntry contact_entry(int l) const noexcept override;
   std::uint64_t mesh_hash() const override { return mesh_hash_; }
   std::uint64_t tensor_hash() const override { return tensor_hash_; }

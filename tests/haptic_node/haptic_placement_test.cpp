@@ -1,8 +1,9 @@
-// Issue 15: where the haptic node's threads run and what its loop records about late ticks, on a real paced run of
-// the intestine scene (real Fast DDS, no visual node).
+// Where the haptic node's threads run and what its loop records about late ticks, on a real paced run of the
+// intestine scene (real Fast DDS, no visual node); the liver's contact stages in the tick trace.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -77,18 +78,34 @@ TEST(HapticPlacement, ACpuTheProcessMayNotUseIsRefusedWithTheChoices) {
 
 // --tick-trace: one row per tick with its deadline, wake-up lateness, wall and CPU time; the stats give the CPU time
 // beside the wall time and the loop thread's context switches and page faults.
-// Reads a tick trace; checks a row per tick, times from the loop's start within `run_us`, deadlines rising.
-void expect_trace(const std::string& path, int ticks, double run_us) {
+// The contact step's stage columns after the timing columns (contact::ContactStage order).
+constexpr int kStageColumns = 5;
+
+// Reads a tick trace; checks a row per tick, times from the loop's start within `run_us`, deadlines rising; returns
+// the sum of each contact stage's column over the run (us).
+std::array<double, kStageColumns> expect_trace(const std::string& path, int ticks, double run_us) {
+  std::array<double, kStageColumns> stage_sum{};
   std::ifstream in(path);
   std::string line;
-  ASSERT_TRUE(std::getline(in, line));
-  EXPECT_EQ(line, "tick,due_us,wake_late_us,tick_us,tick_cpu_us,misses");
+  EXPECT_TRUE(std::getline(in, line));
+  EXPECT_EQ(line,
+            "tick,due_us,wake_late_us,tick_us,tick_cpu_us,misses,track_points_us,build_patches_us,"
+            "solve_active_set_us,friction_us,distribute_forces_us");
   int rows = 0;
   double last_due = -1;
   while (std::getline(in, line)) {
     std::stringstream s(line);
-    std::string f[6];
+    std::string f[6 + kStageColumns];
     for (auto& v : f) std::getline(s, v, ',');
+    double stages = 0;
+    for (int c = 0; c < kStageColumns; ++c) {
+      const double us = std::stod(f[6 + c]);
+      EXPECT_GE(us, 0.0) << "tick " << rows << " stage " << c;
+      stage_sum[static_cast<std::size_t>(c)] += us;
+      stages += us;
+    }
+    // The stages are timed inside the tick: together never longer than it (each column is rounded to 1 ns).
+    EXPECT_LE(stages, std::stod(f[3]) + 0.01) << "tick " << rows;
     EXPECT_EQ(std::stoi(f[0]), rows);
     const double due = std::stod(f[1]);
     EXPECT_GT(due, last_due);
@@ -100,12 +117,14 @@ void expect_trace(const std::string& path, int ticks, double run_us) {
     ++rows;
   }
   EXPECT_EQ(rows, ticks);
+  return stage_sum;
 }
 
 TEST(HapticPlacement, TickTraceHasEveryTick) {
   HapticOptions o = paced_intestine("trace");
   const nlohmann::json j = run(o);
-  expect_trace(o.tick_trace, 50, 60e6);  // the whole run, start-up included, is far below a minute
+  const auto stages = expect_trace(o.tick_trace, 50, 60e6);  // the whole run, start-up included, is far below a minute
+  for (const double us : stages) EXPECT_EQ(us, 0.0);  // the intestine has no contact stages
   EXPECT_EQ(j.at("tick_cpu_us").at("count").get<int>(), 50);
   EXPECT_TRUE(j.contains("loop_involuntary_switches"));
   EXPECT_TRUE(j.contains("loop_page_faults"));
@@ -119,6 +138,19 @@ TEST(HapticPlacement, TickTraceOfAnUnpacedRunGivesTheTicksStart) {
   o.speed = 0;
   run(o);
   expect_trace(o.tick_trace, 50, 60e6);
+}
+
+// The liver's contact step is timed stage by stage: a poke that presses in spends time tracking points, building
+// patches, solving and distributing forces (the friction stage has nothing to do without friction: any time >= 0).
+TEST(HapticPlacement, TickTraceTimesTheLiversContactStages) {
+  HapticOptions o = paced_intestine("trace_liver");
+  o.scene = "liver";
+  o.replay = std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/liver_poke.csv";
+  o.speed = 0;
+  o.duration = 2.5;  // 2500 ticks: the tip enters the organ at about 1.3 s
+  run(o);
+  const auto stages = expect_trace(o.tick_trace, 2500, 60e6);
+  for (const int c : {0, 1, 2, 4}) EXPECT_GT(stages[static_cast<std::size_t>(c)], 0.0) << "stage " << c << " never ran";
 }
 
 }  // namespace
