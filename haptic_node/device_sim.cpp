@@ -1,4 +1,4 @@
-// surgsim-device-sim: a stand-in for the haptic devices of every instrument of a scene (issue 19: one device per
+// surgsim-device-sim: a stand-in for the haptic devices of every instrument of a scene (one device per
 // instrument). Publishes one ToolCommand per instrument per tick at a fixed rate (the DDS key `instrument` is the
 // index in the scene's tools list) from a trajectory file or a scripted motion, and reads ForceFeedback back, per
 // instrument (received, largest force, saturations, non-finite, last force), so that the haptic node's live input

@@ -1,4 +1,4 @@
-// The last stage before the device (issue 14, part 5): a contact damper (the virtual coupling) and a passivity
+// The last stage before the device: a contact damper (the virtual coupling) and a passivity
 // observer / passivity controller (Hannaford & Ryu 2002, "Time-domain passivity control of haptic interfaces") on the
 // force sent. Organ-independent: it sees only the tool's tip and ContactTick::device_force, so it serves the liver and
 // the intestine alike.

@@ -172,8 +172,8 @@ HapticApp::HapticApp(const HapticOptions& options)
   popt.body_points = organ_->output_points();
   popt.lossless = options_.speed <= 0;
   popt.samples = static_cast<std::size_t>(total_ticks_) + 16;
-  // SURGSIM_HAPTIC_PUBLISHER=inline: the writes on the loop thread as before issue 14, to measure against (stats
-  // publisher_mode "inline (loop thread)"); anything else: the publisher thread.
+  // SURGSIM_HAPTIC_PUBLISHER=inline: the writes on the loop thread as before the publisher thread existed, to
+  // measure against (stats publisher_mode "inline (loop thread)"); anything else: the publisher thread.
   const char* pub_env = std::getenv("SURGSIM_HAPTIC_PUBLISHER");
   popt.inline_writes = pub_env != nullptr && std::string(pub_env) == "inline";
   publisher_ = std::make_unique<Publisher>(*dds_, popt);
@@ -539,7 +539,7 @@ void HapticApp::shutdown() {
   j["model_built"] = organ_->model_name();
   // "force_stage": instrument 0's energy observed, dissipated by the controller, ticks it acted.
   instruments_[0].force_stage.add_stats(j);
-  // Per instrument (issue 19), besides the totals above.
+  // Per instrument (a scene may have several), besides the totals above.
   nlohmann::json tools = nlohmann::json::array();
   for (int i = 0; i < instrument_count_; ++i) {
     const Instrument& in = instruments_[static_cast<std::size_t>(i)];

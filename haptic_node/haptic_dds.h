@@ -1,8 +1,8 @@
-// The haptic node's DDS entities (DESIGN.md 5): the participant, the ContactFrame, ForceFeedback and SceneInfo
-// writers, the ToolCommand reader (live input) and the VisualStatus reader (round-trip echoes), with their samples
-// allocated once. Init allocates; write_force(), write_frame() (the publisher thread, publisher.h: never the loop)
-// and latest_command() (the loop) allocate nothing (the listeners run on DDS threads; the loop only try-locks the
-// newest command, it never waits on them).
+// The haptic node's DDS entities (docs/DESIGN.md, section 'Topics'): the participant, the ContactFrame, ForceFeedback
+// and SceneInfo writers, the ToolCommand reader (live input) and the VisualStatus reader (round-trip echoes), with
+// their samples allocated once. Init allocates; write_force(), write_frame() (the publisher thread, publisher.h: never
+// the loop) and latest_command() (the loop) allocate nothing (the listeners run on DDS threads; the loop only try-locks
+// the newest command, it never waits on them).
 #pragma once
 #include <atomic>
 #include <cstdint>

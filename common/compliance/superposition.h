@@ -1,6 +1,7 @@
-// Superposition of precomputed elementary responses (DESIGN.md 4.1): for m contacts C = {k_1..k_m} with imposed
-// displacements u*, lambda_C = G_CC^-1 u* (3m x 3m), the displacement of any node n is u_n = sum_l G(n, k_l) lambda_l
-// and the force the tool feels is -sum_l lambda_l. Exact linear elasticity up to the storage precision.
+// Superposition of precomputed elementary responses (docs/DESIGN.md, section 'Liver: precomputed linear elasticity'):
+// for m contacts C = {k_1..k_m} with imposed displacements u*, lambda_C = G_CC^-1 u* (3m x 3m), the displacement of
+// any node n is u_n = sum_l G(n, k_l) lambda_l and the force the tool feels is -sum_l lambda_l. Exact linear
+// elasticity up to the storage precision.
 //
 // Callers:
 //   haptic loop (>= 300 Hz): Superposition on the "haptic" block; solve() for the contacts, then displacement() of

@@ -1,4 +1,5 @@
-// The liver's bucket grid: collision detection between the tool and the organ surface (paper section 5, DESIGN.md 4.2).
+// The liver's bucket grid: collision detection between the tool and the organ surface (paper section 5;
+// docs/DESIGN.md, section 'Collision (liver)').
 //
 // A bucket grid over the organ's bounding box with an open-addressing hash table (cell -> surface nodes, CSR),
 // node -> incident triangles (CSR). A query walks the cells along the tool segment [p_prev, p_cur], gathers the

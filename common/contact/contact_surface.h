@@ -1,4 +1,4 @@
-// The rest surface as a tool of finite radius sees it (issue 14, parts 2 and 4): area-weighted vertex normals, a
+// The rest surface as a tool of finite radius sees it, for the liver's patch contact: area-weighted vertex normals, a
 // LOCAL closest-point search that walks from the previous triangle to its neighbours (so a contact slides with the
 // tool and never jumps to another face because that face became closer: a straight press keeps its anchor and its
 // depth grows monotonically), and the patch of a contact: the free surface nodes within the tip radius r of the

@@ -1,9 +1,10 @@
-// The intestine scene in the haptic node (DESIGN.md 4.3, issue 6): the mass-spring intestine and mesentery stepped
-// every tick with one probe per instrument (issue 19: a sphere of scene.intestine.probe_radius at each tool tip, its
-// force clamped to that instrument's force_limit), each probe's force for its own device, and the body's positions
-// published as BodyState for the visual node with every instrument's state. All probes push the same body in one
-// step, so one hand's press moves what the other touches. A liver scene never builds one (make_haptic_organ makes it
-// for model "intestine" only), and an intestine scene builds no mesh, tensors or bucket grid.
+// The intestine scene in the haptic node (docs/DESIGN.md, section 'Intestine: mass-spring + stochastic collisions'):
+// the mass-spring intestine and mesentery stepped every tick with one probe per instrument (a sphere of
+// scene.intestine.probe_radius at each tool tip, its force clamped to that instrument's force_limit), each probe's
+// force for its own device, and the body's positions published as BodyState for the visual node with every instrument's
+// state. All probes push the same body in one step, so one hand's press moves what the other touches. A liver scene
+// never builds one (make_haptic_organ makes it for model "intestine" only), and an intestine scene builds no mesh,
+// tensors or bucket grid.
 //
 // Phases: the constructor and create_writer() allocate (model, state, step-time storage, the DDS writer and its
 // sample sized once to the body's node count); step() and fill_outputs() (loop thread) and write() (publisher

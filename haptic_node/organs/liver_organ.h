@@ -1,11 +1,11 @@
-// The liver in the haptic node (Cotin 1998, DESIGN.md 4.1-4.2): the scene's tetrahedral mesh, the "haptic" block of
-// the precomputed tensors (from the cache both nodes share), the quasi non-linear law and the contact model
-// (ToolContacts: bucket grid, unilateral contacts and grasps, mutual-influence correction, device clamp).
-// With liver.deformation multirate (issue 16) it also owns the scene's liver as a neo-Hookean organ tracked on a
-// thread of its own (nonlinear/multirate_contacts.h), whose snapshots give the contact forces, and publishes the tracker's
-// surface as BodyState (the wire protocol: one sample per new surface, at most the scene's visual rate; positions[k]
-// = rest + displacement of surface node k; sim_time of the targets it was computed for; the instruments of that
-// tick), written by the publisher thread, never the loop.
+// The liver in the haptic node (Cotin 1998; docs/DESIGN.md, sections 'Liver: precomputed linear elasticity' and
+// 'Collision (liver)'): the scene's tetrahedral mesh, the "haptic" block of the precomputed tensors (from the cache
+// both nodes share), the quasi non-linear law and the contact model (ToolContacts: bucket grid, unilateral contacts and
+// grasps, mutual-influence correction, device clamp). With liver.deformation multirate (large deformation) it also owns
+// the scene's liver as a neo-Hookean organ tracked on a thread of its own (nonlinear/multirate_contacts.h), whose
+// snapshots give the contact forces, and publishes the tracker's surface as BodyState (the wire protocol: one sample
+// per new surface, at most the scene's visual rate; positions[k] = rest + displacement of surface node k; sim_time of
+// the targets it was computed for; the instruments of that tick), written by the publisher thread, never the loop.
 #pragma once
 #include <array>
 #include <atomic>
@@ -77,7 +77,7 @@ class LiverOrgan final : public HapticOrgan {
   std::unique_ptr<nonlinear::NonlinearLaw> law_;      // identity when the scene has no curves
   std::unique_ptr<nonlinear::MultirateContacts> multirate_;  // multirate only (before contacts_: it outlives the pointer there)
   std::unique_ptr<contact::ToolContacts> contacts_;
-  // Corotational (issue 16): every surface node's rotation refreshed off the loop thread.
+  // liver.deformation corotational: every surface node's rotation refreshed off the loop thread.
   static constexpr double kRotationRefreshHz = 200;
   std::atomic<bool> stop_rotations_{false};
   std::thread rotation_thread_;

@@ -6,7 +6,7 @@ import os
 from report.budgets import BUDGETS
 from report.document import budget_table, embed_log_table, first_key, number, verdict
 
-TITLE = "Benchmarks against the budgets of DESIGN.md section 8"
+TITLE = "Benchmarks against the budgets of docs/DESIGN.md, section 'Budgets'"
 
 
 def write(rep):

@@ -1,4 +1,4 @@
-// The force stage (haptic_node/force_stage.h, issue 14 part 5): the passivity observer sees an environment that adds
+// The force stage (haptic_node/force_stage.h): the passivity observer sees an environment that adds
 // energy and the controller keeps the observed energy >= 0; the contact damper adds no drag while sliding, never pulls
 // the tool in and starts from zero at contact onset; the force sent stays finite and within the device limit, with no
 // allocation; and the shipped liver, closed through a simulated device in this process (deterministic, no DDS),

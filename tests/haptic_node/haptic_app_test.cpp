@@ -49,7 +49,7 @@ TEST(HapticApp, TickAllocatesNothingOnceWarm) {
   EXPECT_EQ(allocations_once_warm(app, warm), 0) << "ticks " << warm << ".." << app.total_ticks();
 }
 
-// Two instruments (issue 19): the shipped grasper and probe, one solve, two force stages, two ForceFeedback writes,
+// Two instruments: the shipped grasper and probe, one solve, two force stages, two ForceFeedback writes,
 // per-instrument log columns and the v2 recording; warm once the grasper holds (t 1.7 s = tick 510 at 300 Hz), then
 // counted over the probe's press and both releases.
 TEST(HapticApp, TwoInstrumentTickAllocatesNothingOnceWarm) {
@@ -73,7 +73,7 @@ TEST(HapticApp, IntestineTickAllocatesNothingOnceWarm) {
   EXPECT_EQ(allocations_once_warm(app, warm), 0) << "ticks " << warm << ".." << app.total_ticks();
 }
 
-// Nothing but physics on the loop thread (issue 14): tick() hands its outputs over and the publisher thread makes
+// Nothing but physics on the loop thread: tick() hands its outputs over and the publisher thread makes
 // every DDS write. Every tick's ForceFeedback is written before its ContactFrame (--speed max keeps all of them), the
 // intestine's BodyState after both, and finish_publishing() ends with a zero force (seq = last tick + 1).
 void expect_no_dds_write_on_the_loop_thread(const std::string& scene, double duration, int per_tick) {

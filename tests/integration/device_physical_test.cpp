@@ -1,8 +1,8 @@
-// The haptic loop closed through a simulated device over DDS (issue 14, part 5): the real haptic_node on the shipped
+// The haptic loop closed through a simulated device over DDS: the real haptic_node on the shipped
 // liver at 1 kHz and the real surgsim-device-sim --physical (a mass along the shaft with its own damping and a
 // constant hand force, integrating the ForceFeedback it receives) on a private domain. At the corners of the grid
 // (mass 0.05-0.2 kg, damping 0.1-1 N s/m, hand force 0.5-3 N) the tool must come to rest, without sustained
-// oscillation, pressing with the hand's force (within 10 %). With two instruments (issue 19) each device closes its
+// oscillation, pressing with the hand's force (within 10 %). With two instruments each device closes its
 // loop with its own instrument's force: each rests pressing with its own hand's force.
 //
 // Robust to a loaded 2-core machine: the device integrates in simulated time (a late wake-up delays a step, it does
@@ -101,7 +101,7 @@ class DevicePhysical : public testing::NodeTest {
   }
 };
 
-// Light, barely damped, pushed hard: the corner most prone to ring (the issue's 44 mm overshoot case).
+// Light, barely damped, pushed hard: the corner most prone to ring (the 44 mm overshoot case).
 TEST_F(DevicePhysical, LightUndampedHardPushComesToRest) { expect_rest(0.05, 0.1, 3.0, "light"); }
 
 // Heavy, damped, pushed gently: a small force on a large mass.
@@ -110,7 +110,7 @@ TEST_F(DevicePhysical, HeavyDampedGentlePushComesToRest) { expect_rest(0.2, 1.0,
 // Heavy and barely damped, pushed hard: the most momentum at contact.
 TEST_F(DevicePhysical, HeavyUndampedHardPushComesToRest) { expect_rest(0.2, 0.1, 3.0, "heavy_hard"); }
 
-// Two instruments (issue 19), 6 cm apart on the liver's top, one device each with its own hand force (1 N and 2.5 N)
+// Two instruments, 6 cm apart on the liver's top, one device each with its own hand force (1 N and 2.5 N)
 // and damping: each closes its loop with its own instrument's ForceFeedback, so each comes to rest pressing with its
 // own hand's force. Had a device read the other's force (or the one instance of a keyless topic), neither could.
 TEST_F(DevicePhysical, TwoInstrumentsEachRestWithTheirOwnHandForce) {

@@ -1,4 +1,4 @@
-// The two-instrument scene of the surgsim-device-sim tests (issue 19): the shipped liver (same mesh, material, fixed
+// The two-instrument scene of the surgsim-device-sim tests: the shipped liver (same mesh, material, fixed
 // set and curves, so its cached tensors serve) with two straight probes coming down onto its top, 6 cm apart:
 // "left" over x = 0 (top surface near z = 0.040) and "right" over x = 0.06 (near z = 0.042). At insertion 0.155 both
 // tips are 3-5 mm above the surface, as the shipped liver's single tool.

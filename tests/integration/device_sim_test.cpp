@@ -1,4 +1,4 @@
-// surgsim-device-sim driving several instruments (issue 19). Over DDS with the real haptic node on a two-probe liver
+// surgsim-device-sim driving several instruments. Over DDS with the real haptic node on a two-probe liver
 // (tests/integration/device_sim_scene.h): a v2 trajectory drives each probe, one probe's device is silenced for a
 // second (--silence) and the file says the other's input was lost for 0.4 s; the node's live recording must show each
 // instrument lost once, for that long, while the other's input went on, and the lost one's force zero. Without a
@@ -107,7 +107,7 @@ std::pair<std::size_t, std::size_t> longest_lost(const std::vector<Row>& rows, i
   return best;
 }
 
-// The issue's "one instrument lost, the other unaffected", from the device side: 'left' silenced from 0.8 s to
+// One instrument lost, the other unaffected, from the device side: 'left' silenced from 0.8 s to
 // 1.8 s of the device's run, 'right' lost in the file from 2.2 s to 2.6 s. The node (input timeout 0.1 s) sees
 // each lost once, about 0.9 s and 0.3 s, never both at once, and zeroes only the lost one's force.
 TEST_F(DeviceSim, TrajectoryDrivesEachInstrumentAndLosesOnlyTheSilencedOne) {

@@ -1,4 +1,4 @@
-// Faults between real processes on one host (issue 7): kill -9 of the visual node and its restart, kill -9 of the
+// Faults between real processes on one host: kill -9 of the visual node and its restart, kill -9 of the
 // haptic node seen by the visual node (ContactFrame deadline and liveliness QoS in config/dds/profiles.xml), and a
 // device driver killed mid-press (the force goes to exactly zero; no stale force is sent).
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// The multirate liver in the real haptic node (issue 16): config/liver_multirate.yaml replaying its grasp-and-lift
+// The multirate liver in the real haptic node: config/liver_multirate.yaml replaying its grasp-and-lift
 // trajectory at 1 kHz in real time (the tracker thread beside the loop, real CHOLMOD, real Fast DDS): the stats show
 // ticks on the non-linear model, body states published and no non-finite force, the tracker thread is among the
 // threads --cpu keeps off the loop's CPU, and the force differs from the same scene with deformation linear on the

@@ -71,7 +71,7 @@ TEST_F(HapticProcess, RecordThenReplayGivesTheSameLog) {
   EXPECT_GT(lines, 1000);
 }
 
-// Issue 19: the shipped two-instrument liver (a grasper holding the free lobe, a probe pressing beside it) replays
+// The shipped two-instrument liver (a grasper holding the free lobe, a probe pressing beside it) replays
 // bit-identically at --speed max, both instruments touch, the stats list each instrument, and --record writes a v2
 // trajectory (one column group per instrument) whose replay logs the same ticks.
 TEST_F(HapticProcess, TwoInstrumentReplayIsBitIdenticalAndItsRecordingReplays) {

@@ -1,4 +1,4 @@
-// The intestine scene driven live (issue 6): the real haptic_node with --scene intestine --input device and the real
+// The intestine scene driven live: the real haptic_node with --scene intestine --input device and the real
 // surgsim-device-sim playing the push trajectory. While commands flow the probe pushes the folds and a force goes
 // back to the device; when the device stops, after --input-timeout the force sent is exactly zero every tick, the
 // tool (the probe's position) is held, nothing turns NaN, the node keeps stepping and publishing and exits cleanly.

@@ -1,4 +1,4 @@
-// The intestine scene (issue 6) with both real nodes as processes over Fast DDS: the haptic node steps the
+// The intestine scene with both real nodes as processes over Fast DDS: the haptic node steps the
 // mass-spring intestine with the tool tip as the probe and publishes BodyState, the visual node draws the skinned tube
 // and the mesentery; and a liver run of both nodes builds no intestine objects.
 #include <png.h>

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# SURGSIM_HAPTIC_CPU=N scripts/run_local.sh (issue 15): the haptic node gets --cpu N and the visual node the other
+# SURGSIM_HAPTIC_CPU=N scripts/run_local.sh: the haptic node gets --cpu N and the visual node the other
 # CPUs, also when HAPTIC_ARGS carries another option that starts with --cpu (--cpu-latency-us used to be taken for
 # --cpu, and then nothing was pinned). Usage: run_local_placement_test.sh SOURCE_DIR BUILD_DIR OUT_DIR
 set -euo pipefail

@@ -1,4 +1,4 @@
-// DDS Security (issue 7): with the credentials of scripts/make_dds_security.sh (test CA, PKI-DH authentication,
+// DDS Security: with the credentials of scripts/make_dds_security.sh (test CA, PKI-DH authentication,
 // signed governance and permissions, AES-GCM), the secure nodes talk; a participant without credentials on the same
 // domain can neither read contact frames nor inject tool commands; an authenticated identity cannot use a topic its
 // permissions do not grant.

@@ -1,4 +1,4 @@
-// Separate machines (issue 7): scripts/run_two_hosts.sh puts the haptic node and the visual node in two network
+// Separate machines: scripts/run_two_hosts.sh puts the haptic node and the visual node in two network
 // namespaces joined by a veth pair (UDPv4 only, the visual side with its own /dev/shm), or through surgsim-netem with
 // delay, jitter and loss. Needs root: where the machine refuses a namespace, a link or a TAP device, the script says
 // which and the test fails with that reason; it never passes without running.

@@ -1,5 +1,5 @@
 // Both real nodes as processes on one host over Fast DDS: frames arrive, PNGs with the organ are written,
-// stats files have the keys of DESIGN.md section 9.
+// stats files have the keys of docs/DESIGN.md, section 'Programs and their stable interface'.
 #include <fcntl.h>
 #include <png.h>
 
@@ -42,7 +42,7 @@ TEST_F(TwoNodes, FramesArriveAndOrganIsRendered) {
   visual.signal(SIGINT);
   ASSERT_EQ(visual.wait(60), 0) << testing::read_file((dir_ / "visual.log").string());
 
-  // Haptic stats: every tick of the run, the keys of DESIGN.md section 9.
+  // Haptic stats: every tick of the run, the keys of docs/DESIGN.md, section 'Programs and their stable interface'.
   const auto h = nlohmann::json::parse(testing::read_file((dir_ / "haptic.json").string()));
   for (const char* key : {"rate_hz", "ticks", "achieved_hz", "tick_us", "deadline_misses", "contacts_max",
                           "force_max_n", "nonfinite_rejected"}) {

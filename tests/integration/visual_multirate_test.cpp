@@ -1,4 +1,4 @@
-// The multirate liver in the real visual node (issue 16): with liver.deformation multirate the node subscribes to
+// The multirate liver in the real visual node: with liver.deformation multirate the node subscribes to
 // BodyState and draws the tracker's shape it carries (one position per boundary surface node, SurfaceMesh order).
 //  - RealNodeDrawsTheBodyStatesItIsSent: this test stands in for the haptic node over real Fast DDS (SceneInfo,
 //    ContactFrames, BodyStates written with the generated types): the contact frame is drawn by the linear deformer

@@ -1,11 +1,11 @@
-// The real visual_node process driven by this test's own DDS participant (issue 14, part 7): the test stands in for
+// The real visual_node process driven by this test's own DDS participant: the test stands in for
 // the haptic node, publishing SceneInfo and ContactFrames with the generated types, and reads the node's
 // VisualStatus back.
 //  - VisualStatus.fps is the measured frame rate, not the configured one: with a --rate the OSMesa renderer cannot
 //    keep up with, the fps the node sends matches frames_rendered / time as seen in the status samples themselves.
 //  - Contact frames are not drawn before SceneInfo confirmed the scene, and a frame whose scene_hash is not the
 //    node's is never drawn, but counted (stats frames_wrong_scene) with one stderr line naming both hashes.
-//  - Several instruments (issue 19): a SceneInfo whose instrument_count is not the scene's tool count refuses the
+//  - Several instruments: a SceneInfo whose instrument_count is not the scene's tool count refuses the
 //    frames (one stderr line naming the scene file, exit 3); in a two-tool scene every frame draws both instruments,
 //    each in its own colour, in the PNGs the node writes, and states of instruments the scene lacks are ignored.
 // The frame the node draws is VisualStatus.last_seq_shown of its per-frame status (echoed_stamp_ns == 0; the echo
@@ -325,7 +325,7 @@ TEST_F(VisualNode, DrawsOnlyFramesOfTheConfirmedScene) {
   EXPECT_EQ(log.find(line, at + 1), std::string::npos) << "one line per foreign hash\n" << log;
 }
 
-// A haptic node that drives another number of instruments than the scene has tools (issue 19): its frames are never
+// A haptic node that drives another number of instruments than the scene has tools: its frames are never
 // drawn, one stderr line names both counts and this node's scene file, and the node exits with 3 as for a foreign
 // scene.
 TEST_F(VisualNode, RefusesFramesWhenTheInstrumentCountDiffers) {

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The web view in a real browser (issue 18): headless Debian chromium through selenium against the three real
+"""The web view in a real browser: headless Debian chromium through selenium against the three real
 processes (haptic node, visual node streaming JPEG frames, surgsim-web).
 
   watch: the page loads, frames arrive and change while the liver_poke trajectory plays, the scene's name and hashes

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""surgsim-web refuses bad requests and counts them, and nothing crashes (issue 18): an unknown path (404), a wrong
+"""surgsim-web refuses bad requests and counts them, and nothing crashes: an unknown path (404), a wrong
 or missing token (403) on the page, /stats and the WebSocket, a method other than GET (405), a malformed request
 (400), an oversized header (413), a WebSocket message above the limit (the socket is closed with 1009 "too big"),
 malformed messages and poses from a page that does not drive (ignored, counted), more pages than --max-clients.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# scripts/run_local.sh liver --web TRAJECTORY (issue 18): the three processes start, the URL is printed with its token,
+# scripts/run_local.sh liver --web TRAJECTORY: the three processes start, the URL is printed with its token,
 # surgsim-web receives the visual node's frames and the haptic node's contact frames while the trajectory replays, and
 # everything stops cleanly at the end. Usage: web_run_local_test.sh SOURCE_DIR BUILD_DIR OUT_DIR
 set -euo pipefail

@@ -1,4 +1,4 @@
-"""What the web view's tests share (issue 18): the three real processes on a private DDS domain, surgsim-web's URL and
+"""What the web view's tests share: the three real processes on a private DDS domain, surgsim-web's URL and
 /stats, a headless Debian chromium through selenium, and waiting for a condition with a timeout (never a speed
 assertion). Usage from a test: `with Run(bin_dir, out_dir, ...) as run: ...`."""
 import json

@@ -53,11 +53,12 @@ for i, line in enumerate(lines):
 # The frame of the web view: keyless (one stream), its JPEG a bounded octet sequence.
 frame = re.search(r'struct\s+Frame\s*\{(.*?)\};', text, re.S)
 if frame is None:
-    bad.append(f'{path}: struct Frame (surgsim/frame, issue 18) is missing')
+    bad.append(f'{path}: struct Frame (topic surgsim/frame: the JPEG stream of the web view) is missing')
 elif not re.search(r'sequence\s*<\s*octet\s*,\s*\w+\s*>\s+jpeg\s*;', frame.group(1)):
     bad.append(f'{path}: struct Frame must carry its JPEG as `sequence<octet, kMaxFrameBytes> jpeg;` (bounded)')
 if not re.search(r'module\s+v2\b', text):
-    bad.append(f'{path}: the types must be in module surgsim::msg::v2 (the wire version of issue 19)')
+    bad.append(f'{path}: the types must be in module surgsim::msg::v2 (the wire version keyed by instrument; '
+               'a peer of another version never matches its topics)')
 print('\n'.join(bad) if bad else f'check_idl_final: {structs} structs, all @final; keyed by instrument: '
       + ', '.join(sorted(KEYED)))
 sys.exit(1 if bad or structs == 0 else 0)

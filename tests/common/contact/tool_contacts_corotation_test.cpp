@@ -1,4 +1,4 @@
-// The liver's corotational contacts (issue 16, ToolContacts with LiverDeformation::kCorotational) on a 20 x 20 x 4
+// The liver's corotational contacts (ToolContacts with LiverDeformation::kCorotational) on a 20 x 20 x 4
 // cm slab fixed on its bottom face: a shallow press feels as the linear one, a grasp dragged far sideways turns its
 // patch and the contact nodes' rotations follow it, and the tick allocates nothing once warm (the background
 // refresh runs between ticks here, as LiverOrgan's thread does beside them). ctest -R haptic_liver_corotation -V.

@@ -1,8 +1,8 @@
-// What the hand feels from the liver's patch contact (issue 14, parts 2, 3, 4, 6), on a flat 20 x 20 x 4 cm slab
+// What the hand feels from the liver's patch contact (smooth, frictionless or Coulomb), on a flat 20 x 20 x 4 cm slab
 // of 1 cm cells fixed on its bottom face: ripple while sliding at constant depth (grid-aligned and at an irrational
 // angle), the tangential force of a frictionless slide, Coulomb stick and slip, the force step at contact onset and at
-// a grasp release, and a tool found again inside the organ after a reset. Each figure is printed (the issue's
-// closing note quotes them): ctest -R haptic_liver_patch_test -V.
+// a grasp release, and a tool found again inside the organ after a reset. Each figure is printed (so the measured
+// values can be quoted): ctest -R haptic_liver_patch_test -V.
 #include <gtest/gtest.h>
 
 #include <algorithm>

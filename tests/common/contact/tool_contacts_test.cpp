@@ -72,7 +72,7 @@ TEST_F(ToolContactsTest, PokePushesBackAndReleases) {
     EXPECT_LT(std::abs(t.force.x()) + std::abs(t.force.y()), 0.2 * t.force.z());
     previous = t.force.z();
   }
-  // The imposed displacement holds once the onset ramp is over (issue 14: the patch contact): the weighted mean of
+  // The imposed displacement holds once the onset ramp is over (the patch contact): the weighted mean of
   // the patch's deformed nodes is at the tip's depth along the patch normal.
   for (int k = 0; k < 30; ++k) step(c, pose_at_depth(0.008));
   const PointPatch& pp = c.patch(0);
@@ -169,7 +169,7 @@ TEST_F(ToolContactsTest, FastStabWithShaftPointsFeelsLikeASlowOne) {
   ToolContacts fast(*mesh_, *surface_, *tensors_, spec_);
   step(fast, pose_at_depth(-0.005));
   ContactTick t_fast = step(fast, pose_at_depth(0.01));  // 15 mm in one tick: three points cross together
-  // Issue 14: the fast stab's initial penetration is blended in over the onset ramp; compare once both have settled.
+  // The patch contact blends the fast stab's initial penetration in over the onset ramp; compare once both settled.
   for (int k = 0; k < 30; ++k) {
     t_fast = step(fast, pose_at_depth(0.01));
     t_slow = step(slow, pose_at_depth(0.01));

@@ -1,4 +1,4 @@
-// Two instruments on one liver (issue 19), on the flat 20 x 20 x 4 cm slab of 1 cm cells fixed on its bottom face:
+// Two instruments on one liver, on the flat 20 x 20 x 4 cm slab of 1 cm cells fixed on its bottom face:
 // all contacts of both instruments are one constrained solve, so each instrument's force equals a direct solve of the
 // elasticity with BOTH instruments' constraints (here: K_ff factored by Eigen's sparse LDLT from the assembled
 // stiffness, independently of the precomputed tensors and of CHOLMOD) and differs from what the same instrument feels

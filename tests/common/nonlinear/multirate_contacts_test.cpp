@@ -1,4 +1,4 @@
-// The multirate liver in the haptic node (issue 16, liver.deformation: multirate; nonlinear/multirate_contacts.h) on the
+// The multirate liver in the haptic node (liver.deformation: multirate; nonlinear/multirate_contacts.h) on the
 // shipped scene config/liver_multirate.yaml (the 1.4k liver, tensors from the cache), with the tool moved over the
 // thick part of the liver (liver.yaml's trocar) and a device limit out of the way. The tracker runs without its
 // thread: the test cycles it with cycle_once() between ticks, so every figure is deterministic.

@@ -1,4 +1,4 @@
-// The intestine organ with several instruments (issue 19): one probe per instrument at its tool tip, each with its own
+// The intestine organ with several instruments: one probe per instrument at its tool tip, each with its own
 // force (clamped to its own device limit) and contact count; a lost instrument has no probe and zero force, the
 // others go on as if it were not there; the step allocates nothing; BodyState carries every instrument's state.
 #include "organs/intestine_organ.h"

@@ -1,7 +1,7 @@
-// The shipped liver (config/liver.yaml, tensors from the cache) under a straight press and an input loss (issue 14,
-// parts 4 and 6): the force grows monotonically with depth until the device limit (it fell from 3.36 to 1.43 N in
-// one tick at 33 mm when the contact re-anchored on another face), the onset at 0.1 m/s and 1 kHz has no step, and a
-// tool still inside when input returns gets its force back in the first tick.
+// The shipped liver (config/liver.yaml, tensors from the cache) under a straight press and an input loss: the force
+// grows monotonically with depth until the device limit (it fell from 3.36 to 1.43 N in one tick at 33 mm when the
+// contact re-anchored on another face), the onset at 0.1 m/s and 1 kHz has no step, and a tool still inside when
+// input returns gets its force back in the first tick.
 #include "organs/liver_organ.h"
 
 #include <gtest/gtest.h>
