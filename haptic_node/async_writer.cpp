@@ -6,8 +6,7 @@ namespace surgsim {
 
 AsyncLineWriter::AsyncLineWriter(std::FILE* file, bool wait_when_full, std::size_t slots, std::size_t slot_bytes,
                                  int flush_ms)
-    : file_(file), wait_when_full_(wait_when_full), slots_(slots), slot_bytes_(slot_bytes), flush_ms_(flush_ms), data_(slots * slot_bytes),
-      length_(slots, 0) {
+    : file_(file), wait_when_full_(wait_when_full), flush_ms_(flush_ms), ring_(slots, slot_bytes) {
   thread_ = std::thread([this] {
     while (!stop_.load(std::memory_order_acquire)) {
       drain();
@@ -28,36 +27,24 @@ void AsyncLineWriter::finish() {
 AsyncLineWriter::~AsyncLineWriter() { finish(); }
 
 char* AsyncLineWriter::begin_line() noexcept {
-  const std::uint64_t head = head_.load(std::memory_order_relaxed);
-  while (head - tail_.load(std::memory_order_acquire) >= slots_) {
+  for (;;) {
+    if (char* slot = ring_.claim()) return slot;
     if (!wait_when_full_ || stop_.load(std::memory_order_relaxed)) {
       dropped_.fetch_add(1, std::memory_order_relaxed);
       return nullptr;
     }
     std::this_thread::yield();
   }
-  return data_.data() + (head % slots_) * slot_bytes_;
 }
 
-void AsyncLineWriter::commit_line(std::size_t length) noexcept {
-  const std::uint64_t head = head_.load(std::memory_order_relaxed);
-  length_[head % slots_] = static_cast<std::uint32_t>(length < slot_bytes_ ? length : slot_bytes_);
-  head_.store(head + 1, std::memory_order_release);
-}
+void AsyncLineWriter::commit_line(std::size_t length) noexcept { ring_.publish(length); }
 
 // Consumer: write every committed slot in order, then flush once.
 void AsyncLineWriter::drain() noexcept {
-  const std::uint64_t head = head_.load(std::memory_order_acquire);
-  std::uint64_t tail = tail_.load(std::memory_order_relaxed);
-  if (tail == head) return;
-  for (; tail != head; ++tail) {
-    const std::size_t slot = tail % slots_;
-    const std::size_t n = length_[slot];
-    if (std::fwrite(data_.data() + slot * slot_bytes_, 1, n, file_) != n) {
-      write_errors_.fetch_add(1, std::memory_order_relaxed);
-    }
-    tail_.store(tail + 1, std::memory_order_release);
-  }
+  const std::size_t taken = ring_.consume([this](const char* data, std::size_t n) {
+    if (std::fwrite(data, 1, n, file_) != n) write_errors_.fetch_add(1, std::memory_order_relaxed);
+  });
+  if (taken == 0) return;
   if (std::fflush(file_) != 0) write_errors_.fetch_add(1, std::memory_order_relaxed);
 }
 

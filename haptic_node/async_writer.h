@@ -8,6 +8,8 @@
 #include <thread>
 #include <vector>
 
+#include "concurrency/spsc_slot_ring.h"
+
 namespace surgsim {
 
 class AsyncLineWriter {
@@ -28,7 +30,7 @@ class AsyncLineWriter {
   char* begin_line() noexcept;
   /// Publishes the slot taken by begin_line with `length` bytes (<= slot_bytes).
   void commit_line(std::size_t length) noexcept;
-  std::size_t slot_bytes() const { return slot_bytes_; }
+  std::size_t slot_bytes() const { return ring_.slot_bytes(); }
   std::uint64_t dropped() const { return dropped_.load(std::memory_order_relaxed); }
   std::uint64_t write_errors() const { return write_errors_.load(std::memory_order_relaxed); }
 
@@ -37,13 +39,8 @@ class AsyncLineWriter {
 
   std::FILE* file_;
   bool wait_when_full_;
-  std::size_t slots_;
-  std::size_t slot_bytes_;
   int flush_ms_;
-  std::vector<char> data_;
-  std::vector<std::uint32_t> length_;
-  std::atomic<std::uint64_t> head_{0};  // next slot the producer fills
-  std::atomic<std::uint64_t> tail_{0};  // next slot the consumer writes
+  concurrency::SpscSlotRing ring_;  // the loop's lines to the writer thread
   std::atomic<std::uint64_t> dropped_{0};
   std::atomic<std::uint64_t> write_errors_{0};
   std::atomic<bool> stop_{false};

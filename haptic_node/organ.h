@@ -16,6 +16,7 @@
 #include <string>
 
 #include "scene/scene.h"
+#include "compliance/superposition.h"
 #include "contact/contact_types.h"
 #include "tool/tool.h"
 
@@ -35,8 +36,9 @@ struct ContactEntry {
                                                       // the node's imposed displacement this tick)
 };
 
-/// Contact entries a tick carries at most (msg::kMaxContacts; haptic_dds.cpp checks they agree).
-inline constexpr int kMaxContactEntries = 64;
+/// Contact entries a tick carries at most: the solve's capacity (compliance::kMaxContacts, its one definition; the
+/// IDL's msg::kMaxContacts is the wire's, and haptic_dds.cpp checks they agree).
+inline constexpr int kMaxContactEntries = compliance::kMaxContacts;
 
 /// What an organ publishes for one tick, copied out on the loop thread (fill_outputs) and written on the publisher
 /// thread (write): fixed size, no allocation. `points` is storage the hand-off owns (3 * point_capacity doubles).

@@ -41,15 +41,15 @@ double overrun_scale(std::uint64_t missed, std::uint64_t period_ns, std::uint64_
 Publisher::Publisher(TickSink& sink, const PublisherOptions& options)
     : sink_(sink),
       options_(options),
-      slots_(std::max<std::size_t>(options.slots, 4)),
-      points_(slots_.size() * static_cast<std::size_t>(std::max(options.body_points, 0)) * 3),
+      ring_(std::max<std::size_t>(options.slots, 4)),
+      points_(ring_.size() * static_cast<std::size_t>(std::max(options.body_points, 0)) * 3),
       copy_points_(2 * static_cast<std::size_t>(std::max(options.body_points, 0)) * 3 + 3),
       write_us_(options.samples),
       latency_us_(options.samples) {
   const std::size_t per = static_cast<std::size_t>(std::max(options_.body_points, 0)) * 3;
-  for (std::size_t s = 0; s < slots_.size(); ++s) {
-    slots_[s].record.organ.points = per > 0 ? points_.data() + s * per : nullptr;
-    slots_[s].record.organ.point_capacity = options_.body_points;
+  for (std::size_t s = 0; s < ring_.size(); ++s) {
+    ring_.slot(s).record.organ.points = per > 0 ? points_.data() + s * per : nullptr;
+    ring_.slot(s).record.organ.point_capacity = options_.body_points;
   }
   back_pressure_.store(options_.lossless || options_.back_pressure);
   if (!options_.inline_writes) thread_ = std::thread([this] { run(); });
@@ -58,8 +58,8 @@ Publisher::Publisher(TickSink& sink, const PublisherOptions& options)
 Publisher::~Publisher() { finish(); }
 
 TickRecord& Publisher::begin() noexcept {
-  const std::uint64_t i = head_.load(std::memory_order_relaxed);
-  const std::size_t n = slots_.size();
+  const std::uint64_t i = ring_.head(std::memory_order_relaxed);
+  const std::size_t n = ring_.size();
   if (back_pressure_.load(std::memory_order_relaxed)) {
     // Back-pressure (not real time): wait until the publisher is done with the record this slot held.
     for (int spins = 0; i - consumed_.load(std::memory_order_acquire) >= n; ++spins) {
@@ -71,21 +71,17 @@ TickRecord& Publisher::begin() noexcept {
       }
     }
   }
-  Slot& s = slots_[i % n];
-  s.version.store(2 * i + 1, std::memory_order_relaxed);
-  std::atomic_thread_fence(std::memory_order_release);
-  TickRecord& r = s.record;
+  TickRecord& r = ring_.begin().record;
   r.organ.contact_count = 0;
   r.organ.point_count = 0;
   return r;
 }
 
 void Publisher::commit() noexcept {
-  const std::uint64_t i = head_.load(std::memory_order_relaxed);
-  Slot& s = slots_[i % slots_.size()];
+  const std::uint64_t i = ring_.head(std::memory_order_relaxed);
+  Entry& s = ring_.writing();
   s.commit_ns = monotonic_ns();
-  s.version.store(2 * (i + 1), std::memory_order_release);
-  head_.store(i + 1, std::memory_order_release);
+  ring_.commit();
   if (options_.inline_writes) {  // measurement only: the writes on the loop thread, as before issue 14
     const std::uint64_t t0 = monotonic_ns();
     write_record_force(s.record, s.commit_ns);
@@ -115,21 +111,17 @@ void Publisher::finish() {
 }
 
 bool Publisher::read(std::uint64_t i, TickRecord& out, double* points, std::uint64_t& commit_ns) const noexcept {
-  const Slot& s = slots_[i % slots_.size()];
-  const std::uint64_t v1 = s.version.load(std::memory_order_acquire);
-  if (v1 != 2 * (i + 1)) return false;
-  // A sequence lock: the copy may race with the loop overwriting the slot; the version check below discards it.
-  out = s.record;
-  const int count = std::min(std::max(out.organ.point_count, 0), options_.body_points);
-  if (count > 0 && points != nullptr) {
-    std::memcpy(points, s.record.organ.points, static_cast<std::size_t>(count) * 3 * sizeof(double));
-  }
-  out.organ.point_count = count;
-  out.organ.point_capacity = options_.body_points;
-  out.organ.points = points;
-  commit_ns = s.commit_ns;
-  std::atomic_thread_fence(std::memory_order_acquire);
-  return s.version.load(std::memory_order_relaxed) == v1;
+  return ring_.read(i, [&](const Entry& e) {
+    out = e.record;
+    const int count = std::min(std::max(out.organ.point_count, 0), options_.body_points);
+    if (count > 0 && points != nullptr) {
+      std::memcpy(points, e.record.organ.points, static_cast<std::size_t>(count) * 3 * sizeof(double));
+    }
+    out.organ.point_count = count;
+    out.organ.point_capacity = options_.body_points;
+    out.organ.points = points;
+    commit_ns = e.commit_ns;
+  });
 }
 
 void Publisher::write_zero(const TickRecord* last) noexcept {
@@ -159,7 +151,7 @@ void Publisher::write_record_force(const TickRecord& r, std::uint64_t commit_ns)
 void Publisher::wait_for(std::uint64_t seen_head, std::uint64_t deadline_ns) noexcept {
   const std::uint32_t expected = futex_.load(std::memory_order_seq_cst);
   sleepers_.fetch_add(1, std::memory_order_seq_cst);
-  if (head_.load(std::memory_order_seq_cst) == seen_head && !stop_.load(std::memory_order_seq_cst)) {
+  if (ring_.head(std::memory_order_seq_cst) == seen_head && !stop_.load(std::memory_order_seq_cst)) {
     futex_wait(&futex_, expected, deadline_ns);
   }
   sleepers_.fetch_sub(1, std::memory_order_seq_cst);
@@ -178,10 +170,10 @@ void Publisher::run() noexcept {
   bool watch = false;            // the watchdog is armed for the last force
   std::uint64_t missed_sent = 0;  // missed periods already answered for it
   TickRecord last;
-  const std::size_t lag_limit = slots_.size() / 2;
+  const std::size_t lag_limit = ring_.size() / 2;
 
   for (;;) {
-    const std::uint64_t h = head_.load(std::memory_order_acquire);
+    const std::uint64_t h = ring_.head(std::memory_order_acquire);
     if (h > next_frame || h > force_done) {
       const std::uint64_t t0 = monotonic_ns();
       std::uint64_t commit_ns = 0;
@@ -242,7 +234,7 @@ void Publisher::run() noexcept {
     }
 
     if (stop_.load(std::memory_order_acquire)) {
-      if (head_.load(std::memory_order_acquire) != h) continue;  // committed just before the stop
+      if (ring_.head(std::memory_order_acquire) != h) continue;  // committed just before the stop
       // The final zero: the device is released when the node exits.
       write_zero(have_last ? &last : nullptr);
       final_zero_.store(true, std::memory_order_relaxed);

@@ -35,6 +35,7 @@
 #include <thread>
 #include <vector>
 
+#include "concurrency/seqlock_ring.h"
 #include "core/stats.h"
 #include "organ.h"
 #include "tool/trajectory.h"
@@ -121,7 +122,7 @@ class Publisher {
   void finish();
 
   // Counters (exact after finish()).
-  std::uint64_t committed() const { return head_.load(std::memory_order_relaxed); }
+  std::uint64_t committed() const { return ring_.head(std::memory_order_relaxed); }
   std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }   // frames written
   std::uint64_t skipped() const { return skipped_.load(std::memory_order_relaxed); }   // frames never written
   std::uint64_t forces_written() const { return forces_written_.load(std::memory_order_relaxed); }
@@ -138,8 +139,7 @@ class Publisher {
   core::Percentiles force_latency_us() const { return latency_us_.summary(); }
 
  private:
-  struct Slot {
-    std::atomic<std::uint64_t> version{0};  // 2i+1 while record i is written, 2(i+1) once committed
+  struct Entry {  // one slot of the hand-off ring
     std::uint64_t commit_ns = 0;
     TickRecord record;
   };
@@ -153,10 +153,9 @@ class Publisher {
 
   TickSink& sink_;
   PublisherOptions options_;
-  std::vector<Slot> slots_;
+  concurrency::SeqlockRing<Entry> ring_;  // the loop's records, read by the publisher thread (a sequence lock per slot)
   std::vector<double> points_;       // slots * body_points * 3, the slots' organ positions
   std::vector<double> copy_points_;  // the publisher's copies: [0] the frame record, [1] the newest (force)
-  alignas(64) std::atomic<std::uint64_t> head_{0};       // records committed
   alignas(64) std::atomic<std::uint32_t> futex_{0};      // head_'s low bits, the publisher sleeps on it
   std::atomic<std::uint32_t> sleepers_{0};
   alignas(64) std::atomic<std::uint64_t> consumed_{0};   // records the publisher is done with (lossless back-pressure)

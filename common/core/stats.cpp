@@ -9,10 +9,14 @@
 
 namespace surgsim::core {
 
-SampleRecorder::SampleRecorder(std::size_t capacity) : samples_(capacity, 0.0) {}
+SampleRecorder::SampleRecorder(std::size_t capacity, Keep keep) : samples_(capacity, 0.0), keep_(keep) {}
 
 void SampleRecorder::add(double value) noexcept {
-  if (stored_ < samples_.size()) samples_[stored_++] = value;
+  if (stored_ < samples_.size()) {
+    samples_[stored_++] = value;
+  } else if (keep_ == Keep::kNewest && !samples_.empty()) {
+    samples_[count_ % samples_.size()] = value;  // the oldest kept sample (the window is full)
+  }
   if (count_ == 0 || value > max_) max_ = value;
   sum_ += value;
   ++count_;
@@ -39,6 +43,14 @@ Percentiles SampleRecorder::summary() const {
   p.max = max_;
   p.mean = sum_ / static_cast<double>(count_);
   return p;
+}
+
+double SampleRecorder::percentile(double q) const {
+  if (stored_ == 0) return 0;
+  std::vector<double> v(samples_.begin(), samples_.begin() + static_cast<std::ptrdiff_t>(stored_));
+  std::sort(v.begin(), v.end());
+  const double clamped = std::clamp(q, 0.0, 1.0);
+  return v[std::min(v.size() - 1, static_cast<std::size_t>(clamped * static_cast<double>(v.size() - 1) + 0.5))];
 }
 
 nlohmann::json to_json(const Percentiles& p) {

@@ -13,17 +13,24 @@ struct Percentiles {
   std::size_t count = 0;
 };
 
-/// Keeps up to `capacity` samples (later ones only update count/max/mean: never allocates after construction).
+/// A window of up to `capacity` samples for percentiles at the end: never allocates after construction (the haptic
+/// loop and the multirate tracker record into it).
 class SampleRecorder {
  public:
-  explicit SampleRecorder(std::size_t capacity = 1 << 20);
+  /// Which samples the window keeps once `capacity` is reached: the first ones (a run's statistics) or the newest
+  /// ones (a long-running thread's recent behaviour). count, max and mean cover every sample either way.
+  enum class Keep { kFirst, kNewest };
+  explicit SampleRecorder(std::size_t capacity = 1 << 20, Keep keep = Keep::kFirst);
   void add(double value) noexcept;
   std::size_t count() const { return count_; }
   Percentiles summary() const;  // allocates (a sorted copy); call outside real-time code
+  /// The q-quantile (q in [0, 1]) of the samples kept, 0 without any; allocates (a sorted copy).
+  double percentile(double q) const;
   void clear() noexcept;
 
  private:
   std::vector<double> samples_;
+  Keep keep_ = Keep::kFirst;
   std::size_t stored_ = 0;
   std::size_t count_ = 0;
   double max_ = 0;

@@ -18,15 +18,6 @@ using namespace surgsim::compliance;
 
 namespace surgsim::nonlinear {
 
-double SampleRing::percentile(double q) const {
-  const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(count_, values_.size()));
-  if (n == 0) return 0;
-  std::vector<double> v(values_.begin(), values_.begin() + static_cast<std::ptrdiff_t>(n));
-  std::sort(v.begin(), v.end());
-  const auto k = static_cast<std::size_t>(std::llround(std::clamp(q, 0.0, 1.0) * static_cast<double>(n - 1)));
-  return v[k];
-}
-
 MultirateOptions MultirateContacts::node_options() {
   MultirateOptions o;
   o.iterations_per_cycle = 1;

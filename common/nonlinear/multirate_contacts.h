@@ -42,6 +42,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/stats.h"
 #include "compliance/corotation.h"
 #include "fem/fem.h"
 #include "fem/fixed_set.h"
@@ -71,23 +72,6 @@ struct TrackerSurface {
 
 /// Where a tick's forces came from (apply()).
 enum class MultirateUse : std::uint8_t { kNoContact = 0, kNonlinear, kPartial, kLinearFallback };
-
-/// Fixed-size ring of samples (a preallocated window of the newest `capacity`); percentiles at shutdown.
-class SampleRing {
- public:
-  explicit SampleRing(std::size_t capacity) : values_(capacity, 0.0) {}
-  void add(double v) noexcept {
-    values_[static_cast<std::size_t>(count_ % values_.size())] = v;
-    ++count_;
-  }
-  std::uint64_t count() const { return count_; }
-  /// q in [0, 1] over the samples kept (0 without any). Allocates.
-  double percentile(double q) const;
-
- private:
-  std::vector<double> values_;
-  std::uint64_t count_ = 0;
-};
 
 class MultirateContacts {
  public:
@@ -190,10 +174,10 @@ class MultirateContacts {
   std::array<std::uint64_t, 4> ticks_{};        // by MultirateUse
   std::uint64_t blended_ = 0;
   double weight_ = 0;                           // the local model's weight (trust region, rate-limited)
-  SampleRing age_ms_{1 << 16};
-  SampleRing stale_ms_{1 << 16};
+  core::SampleRecorder age_ms_{1 << 16, core::SampleRecorder::Keep::kNewest};
+  core::SampleRecorder stale_ms_{1 << 16, core::SampleRecorder::Keep::kNewest};
   std::uint64_t stale_cycle_ = 0, exact_tick_ = 0;
-  SampleRing extrapolation_mm_{1 << 16};
+  core::SampleRecorder extrapolation_mm_{1 << 16, core::SampleRecorder::Keep::kNewest};
 
   // --- tracker thread ---
   int numeric_threads_ = 1;
@@ -204,7 +188,7 @@ class MultirateContacts {
   bool last_converged_ = false;
   double last_cycle_s_ = 0;
   ContactTargets predicted_;
-  SampleRing cycle_ms_{1 << 14};
+  core::SampleRecorder cycle_ms_{1 << 14, core::SampleRecorder::Keep::kNewest};
   std::atomic<std::uint64_t> cycles_{0}, published_{0}, failures_{0}, idle_{0};
   std::atomic<bool> stop_{false};
   std::thread thread_;
