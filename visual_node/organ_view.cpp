@@ -2,6 +2,7 @@
 
 #include "views/intestine_view.h"
 #include "views/liver_view.h"
+#include "core/error.h"
 
 using namespace surgsim::mesh;
 using namespace surgsim::scene;
@@ -18,7 +19,10 @@ std::unique_ptr<OrganView> make_organ_view(const Scene& scene, const OrganViewOp
   if (scene.model == "intestine") {
     return std::make_unique<IntestineOrganView>(scene, visual_scene_hash(scene, 0), options.tube_skinning);
   }
-  return std::make_unique<LiverView>(scene, options);
+  if (scene.model == "liver") return std::make_unique<LiverView>(scene, options);
+  // An organ this node cannot draw is refused, as the haptic node refuses one it cannot simulate (it used to be drawn
+  // as a liver).
+  core::throw_error(scene.file, ": key 'model': '", scene.model, "' is not built into this visual node yet");
 }
 
 }  // namespace surgsim

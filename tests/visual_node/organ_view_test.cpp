@@ -83,6 +83,21 @@ TEST(OrganView, IntestineSceneGetsTheIntestineView) {
   EXPECT_NE(summary.str().find("0 body states received"), std::string::npos) << summary.str();
 }
 
+// An organ the visual node cannot draw is refused with the file and the key, as the haptic node's factory refuses one
+// it cannot simulate (it used to be drawn as a liver).
+TEST(OrganView, UnknownModelIsRefusedWithTheFileAndKey) {
+  Scene scene = shipped("plate.yaml");
+  scene.model = "spleen";
+  try {
+    make_organ_view(scene, test_options());
+    FAIL() << "model 'spleen' was given a view";
+  } catch (const std::exception& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("plate.yaml: key 'model': 'spleen' is not built into this visual node"), std::string::npos)
+        << what;
+  }
+}
+
 TEST(OrganView, CpuSkinningIsPassedThrough) {
   OrganViewOptions o = test_options();
   o.tube_skinning = intestine::TubeSkinning::kCpu;
