@@ -26,28 +26,28 @@ namespace surgsim {
 
 LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread,
                        int tracker_threads) {
-  mesh_ = load_scene_mesh(scene, cache_dir, progress);
-  surface_ = boundary_surface(mesh_);
+  TetMesh mesh = load_scene_mesh(scene, cache_dir, progress);
   const bool multirate = scene.liver.deformation == LiverDeformation::kMultirate;
-  if (multirate && surface_.nodes.size() > static_cast<std::size_t>(msg::kMaxBodyPoints)) {
-    throw_error(scene.file, ": liver.deformation multirate: the liver's surface has ", surface_.nodes.size(),
-                " nodes, a BodyState carries at most ", msg::kMaxBodyPoints,
-                ": use a coarser mesh (mesh.target_nodes) or liver.deformation linear");
+  if (multirate) {
+    const std::size_t surface_nodes = boundary_surface(mesh).nodes.size();
+    if (surface_nodes > static_cast<std::size_t>(msg::kMaxBodyPoints)) {
+      throw_error(scene.file, ": liver.deformation multirate: the liver's surface has ", surface_nodes,
+                  " nodes, a BodyState carries at most ", msg::kMaxBodyPoints,
+                  ": use a coarser mesh (mesh.target_nodes) or liver.deformation linear");
+    }
   }
-  mesh_hash_ = surgsim::mesh::mesh_hash(mesh_);
-  const LiverTensorSetup setup = liver_tensor_setup(scene.material, scene.fixed, mesh_, cache_dir, scene.file);
-  tensors_ = load_liver_tensors(setup, mesh_, scene.material, {"haptic"}, progress, nullptr, scene.file);
-  tensor_hash_ = setup.key.combined();
-  law_ = std::make_unique<NonlinearLaw>(
-      scene.liver.organ_curves
-          ? load_organ_law(mesh_, scene.material, setup.fixed, tensor_hash_, cache_dir, progress)
-          : load_nonlinear_law(scene.nonlinear, scene.material));
-  contacts_ = std::make_unique<ToolContacts>(mesh_, surface_, tensors_, scene.tools,
-                                              law_->identity() ? nullptr : law_.get(), scene.liver.deformation);
+  tools_ = scene.tools;
+  deformation_ = scene.liver.deformation;
+  const LiverModelSource source{scene.material, scene.fixed, scene.nonlinear, scene.liver.organ_curves, scene.file};
+  instance_ = std::make_unique<LiverInstance>(build_liver_model(std::move(mesh), source, cache_dir, progress), tools_,
+                                              deformation_);
+  contacts_ = &instance_->contacts();
+  const LiverModel& model = instance_->model();
   if (multirate) {
     // The neo-Hookean organ on the tensors' own mesh, material and fixed set; its tracker thread is started from
     // this (the main) thread, so with --cpu N it inherits the CPUs the haptic app left to everything but the loop.
-    multirate_ = std::make_unique<MultirateContacts>(mesh_, scene.material, setup.fixed, surface_.nodes, scene.file);
+    multirate_ = std::make_unique<MultirateContacts>(model.mesh, scene.material, model.fixed, model.surface.nodes,
+                                                     scene.file);
     contacts_->attach_multirate(multirate_.get());
     instruments_at_.resize(kInstrumentTicks);
     min_period_ns_ = scene.visual.rate_hz > 0 ? static_cast<std::uint64_t>(1e9 / scene.visual.rate_hz) : 0;
@@ -78,13 +78,27 @@ LiverOrgan::~LiverOrgan() {
   if (multirate_ != nullptr) multirate_->stop();
 }
 
+void LiverOrgan::post_model(std::shared_ptr<const LiverModel> next) {
+  if (deformation_ != LiverDeformation::kLinear) {
+    throw_error("liver: a model swap between ticks needs liver.deformation linear (this liver is ",
+                to_string(deformation_), ": its rotation or tracker thread is bound to the current model)");
+  }
+  if (next == nullptr) throw_error("liver: a model swap needs a model (got none)");
+  collect_retired();
+  if (incoming_.full()) throw_error("liver: the previous model swap has not been taken by the loop yet");
+  auto instance = std::make_unique<LiverInstance>(std::move(next), tools_, deformation_);
+  incoming_.post(instance);
+}
+
+bool LiverOrgan::collect_retired() { return retired_.take() != nullptr; }
+
 void LiverOrgan::create_writers(dds::Participant& participant, std::uint64_t scene_hash) {
   if (multirate_ == nullptr) return;
   writer_ = participant.writer(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()),
                                dds::kStreamWriter);
   sample_.scene_hash(scene_hash);
   // The only allocations of the sample: write() changes values only.
-  sample_.positions().resize(surface_.nodes.size());
+  sample_.positions().resize(surface().nodes.size());
   sample_.instruments().resize(static_cast<std::size_t>(contacts_->instruments()));
 }
 
@@ -105,13 +119,15 @@ void LiverOrgan::write(const TickRecord& r, std::uint64_t stamp_ns) noexcept {
   scratch_.instruments = then.seq == s.tick ? then.instruments : r.instruments;
   fill_instruments(scratch_, sample_.instruments());
   auto& out = sample_.positions();
-  const std::size_t n = std::min(out.size(), surface_.nodes.size());
+  const TetMesh& mesh = this->mesh();
+  const SurfaceMesh& surface = this->surface();
+  const std::size_t n = std::min(out.size(), surface.nodes.size());
   for (std::size_t k = 0; k < n; ++k) {
-    const Eigen::Index node = surface_.nodes[k];
+    const Eigen::Index node = surface.nodes[k];
     const Eigen::Index i = 3 * static_cast<Eigen::Index>(k);
-    out[k].x(mesh_.nodes(node, 0) + s.u[i]);
-    out[k].y(mesh_.nodes(node, 1) + s.u[i + 1]);
-    out[k].z(mesh_.nodes(node, 2) + s.u[i + 2]);
+    out[k].x(mesh.nodes(node, 0) + s.u[i]);
+    out[k].y(mesh.nodes(node, 1) + s.u[i + 1]);
+    out[k].z(mesh.nodes(node, 2) + s.u[i + 2]);
   }
   sample_.seq(++body_seq_);
   sample_.sim_time(s.sim_time);
@@ -160,6 +176,14 @@ void LiverOrgan::print_summary(std::ostream& out) const {
 }
 
 void LiverOrgan::step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept {
+  // A model swap, at the tick boundary: the new instance in, the old one out to be freed off the loop (only when the
+  // previous one was collected, so the hand-off never fails and nothing is freed here).
+  if (incoming_.full() && !retired_.full()) {
+    std::unique_ptr<LiverInstance> next = incoming_.take();
+    retired_.post(instance_);
+    instance_ = std::move(next);
+    contacts_ = &instance_->contacts();
+  }
   // An instrument whose input is lost drops its own contacts and gets zero force; the others are solved as usual.
   contacts_->step(inputs, count, out, dt);
 }
@@ -177,8 +201,8 @@ ContactEntry LiverOrgan::contact_entry(int l) const noexcept {
 }
 
 std::string LiverOrgan::describe() const {
-  return std::to_string(mesh_.nodes.rows()) + " nodes, " + std::to_string(mesh_.tets.rows()) + " tets, " +
-         std::to_string(surface_.nodes.size()) + " surface nodes; " + to_string(contacts_->deformation()) + "; ";
+  return std::to_string(mesh().nodes.rows()) + " nodes, " + std::to_string(mesh().tets.rows()) + " tets, " +
+         std::to_string(surface().nodes.size()) + " surface nodes; " + to_string(contacts_->deformation()) + "; ";
 }
 
 }  // namespace surgsim

@@ -12,6 +12,8 @@
 #include <memory>
 #include <thread>
 
+#include "concurrency/hand_off.h"
+#include "liver/liver_model.h"
 #include "nonlinear/nonlinear_law.h"
 #include "compliance/precompute.h"
 #include "mesh/mesh.h"
@@ -45,11 +47,11 @@ class LiverOrgan final : public HapticOrgan {
   int contact_entries() const noexcept override { return contacts_->solution().count; }
   const contact::ContactStageTimes* stage_times() const noexcept override { return &contacts_->stage_times(); }
   ContactEntry contact_entry(int l) const noexcept override;
-  std::uint64_t mesh_hash() const override { return mesh_hash_; }
-  std::uint64_t tensor_hash() const override { return tensor_hash_; }
-  std::uint32_t node_count() const override { return static_cast<std::uint32_t>(mesh_.nodes.rows()); }
-  std::uint32_t surface_node_count() const override { return static_cast<std::uint32_t>(surface_.nodes.size()); }
-  bool nonlinear_law() const override { return !law_->identity(); }
+  std::uint64_t mesh_hash() const override { return instance_->model().mesh_hash; }
+  std::uint64_t tensor_hash() const override { return instance_->model().tensor_hash; }
+  std::uint32_t node_count() const override { return static_cast<std::uint32_t>(mesh().nodes.rows()); }
+  std::uint32_t surface_node_count() const override { return static_cast<std::uint32_t>(surface().nodes.size()); }
+  bool nonlinear_law() const override { return !instance_->model().law.identity(); }
   std::string describe() const override;
 
   /// Multirate: the BodyState writer and its preallocated sample (nothing otherwise).
@@ -61,22 +63,36 @@ class LiverOrgan final : public HapticOrgan {
   void add_stats(nlohmann::json& stats) const override;
   void print_summary(std::ostream& out) const override;
 
-  const mesh::TetMesh& mesh() const { return mesh_; }
-  const mesh::SurfaceMesh& surface() const { return surface_; }
+  const mesh::TetMesh& mesh() const { return instance_->model().mesh; }
+  const mesh::SurfaceMesh& surface() const { return instance_->model().surface; }
+  /// The model the loop steps (its topology generation: model().generation).
+  const liver::LiverModel& model() const { return instance_->model(); }
+
+  /// Off the loop thread (allocates): a new instance on `next` (e.g. the model after a cut) is built and handed to
+  /// the loop, which swaps it in at the start of its next step() without allocating or freeing; the instance it
+  /// replaces is freed here at the next call, by collect_retired() or by the destructor. The new instance starts
+  /// without contacts: a tool inside the organ is found again in that first tick (as after an input loss). Throws
+  /// surgsim::core::Error for a corotational or multirate liver (their threads are bound to the current instance)
+  /// and while the previous model has not been taken yet.
+  void post_model(std::shared_ptr<const liver::LiverModel> next);
+  /// Off the loop thread: frees the instance the last swap replaced; true if there was one.
+  bool collect_retired();
+  /// Whether a posted model waits for the loop's next step().
+  bool model_pending() const { return incoming_.full(); }
   /// Multirate (null otherwise).
   nonlinear::MultirateContacts* multirate() const { return multirate_.get(); }
   std::uint64_t body_states_published() const { return body_published_.load(std::memory_order_relaxed); }
   const contact::ToolContacts& liver_contacts() const { return *contacts_; }
 
  private:
-  mesh::TetMesh mesh_;
-  mesh::SurfaceMesh surface_;
-  std::uint64_t mesh_hash_ = 0;
-  compliance::Tensors tensors_;                        // "haptic" block only
-  std::uint64_t tensor_hash_ = 0;
-  std::unique_ptr<nonlinear::NonlinearLaw> law_;      // identity when the scene has no curves
+  std::vector<tool::ToolSpec> tools_;
+  compliance::LiverDeformation deformation_ = compliance::LiverDeformation::kLinear;
   std::unique_ptr<nonlinear::MultirateContacts> multirate_;  // multirate only (before contacts_: it outlives the pointer there)
-  std::unique_ptr<contact::ToolContacts> contacts_;
+  std::unique_ptr<liver::LiverInstance> instance_;  // the model and the contact state the loop steps
+  contact::ToolContacts* contacts_ = nullptr;       // &instance_->contacts()
+  // Model swaps: a new instance from post_model() to the loop, the replaced one back to be freed off the loop.
+  concurrency::HandOff<liver::LiverInstance> incoming_;
+  concurrency::HandOff<liver::LiverInstance> retired_;
   // liver.deformation corotational: every surface node's rotation refreshed off the loop thread.
   static constexpr double kRotationRefreshHz = 200;
   std::atomic<bool> stop_rotations_{false};
