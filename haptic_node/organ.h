@@ -1,4 +1,4 @@
-// The haptic node's one organ interface (issue 13): what the loop needs from an organ, whatever its model. The liver
+// The haptic node's one organ interface: what the loop needs from an organ, whatever its model. The liver
 // (precomputed FEM contacts, organs/liver_organ.h) and the intestine (mass-spring body, organs/intestine_organ.h) are
 // its two implementations; make_haptic_organ() is the only place that looks at the scene's model.
 //

@@ -82,7 +82,7 @@ void Publisher::commit() noexcept {
   Entry& s = ring_.writing();
   s.commit_ns = monotonic_ns();
   ring_.commit();
-  if (options_.inline_writes) {  // measurement only: the writes on the loop thread, as before issue 14
+  if (options_.inline_writes) {  // measurement only: the writes on the loop thread (no publisher thread)
     const std::uint64_t t0 = monotonic_ns();
     write_record_force(s.record, s.commit_ns);
     sink_.write_frame(s.record, monotonic_ns());

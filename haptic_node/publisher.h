@@ -1,4 +1,4 @@
-// The haptic node's publisher thread (issue 14, part 1: nothing but physics on the loop thread). The loop fills one
+// The haptic node's publisher thread (nothing but physics on the loop thread). The loop fills one
 // fixed-size tick record per tick into a preallocated ring and goes on; a publisher thread (SCHED_FIFO below the
 // loop, like the DDS threads) writes ForceFeedback first, then ContactFrame, then the organ's own topics (the
 // intestine's BodyState). The loop makes no DDS call and no allocation.

@@ -6,13 +6,13 @@
 // once (the schedule catches up, so an occasional slow frame, e.g. a PNG, does not lower the mean rate), one later
 // than that restarts the schedule from now (no burst of frames after a stall).
 //
-// Frame trace (issue 15): one row per frame, written at shutdown to OUT/frame_trace.csv (--out; nothing when
+// Frame trace: one row per frame, written at shutdown to OUT/frame_trace.csv (--out; nothing when
 // headless): the time since the first frame shown, the LOD drawn, the frame's work (organ update, draw, end_frame: what
 // the LOD controller is fed, the pacing sleep and the PNG excluded), the interval since the previous frame, the
 // measured rate (1 s window) and whether the synthetic load is on. Rows are preallocated (kTraceCapacity); later
 // frames are counted, not kept.
 //
-// Synthetic load (issue 15, for showing the controller live around a load change): SURGSIM_VISUAL_LOAD_STEP=AT:FOR:X
+// Synthetic load (for showing the controller live around a load change): SURGSIM_VISUAL_LOAD_STEP=AT:FOR:X
 // makes every frame's work X times longer (a busy wait of (X - 1) x its measured work, counted as work) from AT s
 // after the first frame shown, for FOR s. Unset: no extra load.
 #pragma once

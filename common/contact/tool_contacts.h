@@ -1,7 +1,8 @@
-// Tool-organ contacts for the liver (paper sections 4-5, DESIGN.md 4.1-4.2; issue 14): the quasi non-linear force
+// Tool-organ contacts for the liver (paper sections 4-5; docs/DESIGN.md, sections 'Liver: precomputed linear
+// elasticity' and 'Collision (liver)'): the quasi non-linear force
 // law and the device clamp over one of two contact models (ToolSpec::contact_model).
 //
-// patch (default, issue 14): a tool point is a tip of radius r (tool.tip_radius). While it is below the REST surface
+// patch (default): a tool point is a tip of radius r (tool.tip_radius). While it is below the REST surface
 // (found by a continuous segment query, or after a reset from the trocar along the shaft, so a tool already inside
 // is found again at once) its closest rest point is followed by a local walk (contact/contact_surface.h): a straight
 // press keeps its anchor and its depth grows monotonically. Its contact is one scalar constraint along the patch
@@ -21,7 +22,7 @@
 // triangle (the paper's model): continuous detection against the deformed surface, each contact displacement
 // distributed over the three vertices of its triangle (alpha_v d, all three components), lambda = G_CC^-1 u*.
 //
-// Several instruments (issue 19): every tool point of every instrument is a contact of ONE constrained solve (the
+// Several instruments: every tool point of every instrument is a contact of ONE constrained solve (the
 // patch rows, or the triangle model's G_CC, of all instruments together), so the mutual-influence correction couples
 // them exactly as one direct solve with every constraint would. Instrument t's force is the sum of its own points'
 // contact forces, put through the law along its own mean imposed displacement and clamped to its own device limit.
@@ -29,12 +30,12 @@
 // kMaxContacts (64) nodes. A node shared by two instruments' patches is reported (ContactEntry::instrument) as the
 // first one's. An instrument whose input is lost (or whose pose is not finite) drops only its own contacts.
 //
-// Corotational (issue 16, scene key liver.deformation, patch model only): the patch solve's compliance is warped by
+// Corotational (scene key liver.deformation, patch model only): the patch solve's compliance is warped by
 // the union nodes' rotations, W = R_i G R_j^T (compliance/corotation.h), the rotations recomputed every tick from the
 // previous solution's rest-frame response and a background field of every surface node that refresh_rotations()
 // (LiverOrgan's 200 Hz thread) hands over lock-free. The onset gap and deformed() stay linear.
 //
-// Multirate (issue 16, liver.deformation: multirate, both contact models): after the tick's linear solve, the
+// Multirate (liver.deformation: multirate, both contact models): after the tick's linear solve, the
 // solution's nodes and displacements are handed to a MultirateContacts (attach_multirate(); nonlinear/multirate_contacts.h) as
 // its tracker's targets, and the forces applied come from its newest snapshot's local model f_c + S du (nodes the
 // snapshot does not hold keep the linear lambda); each instrument's force is the sum over its own nodes, through the
@@ -42,7 +43,8 @@
 // The solution keeps the applied lambdas, so the ContactFrame carries them and deformed() (the onset gap, the triangle
 // model's detection) sees their linear response G lambda.
 //
-// step() allocates nothing and never returns a non-finite force.
+// step() runs the stages of ContactStage in order (each timed: stage_times()), allocates nothing and never returns a
+// non-finite force.
 #pragma once
 #include <Eigen/Core>
 #include <array>
@@ -247,7 +249,7 @@ class ToolContacts {
   std::array<Eigen::Vector3d, compliance::kMaxContacts> lambda_{};
   long dropped_nodes_ = 0;
   ContactStageTimes stage_times_{};
-  // --- corotational (issue 16) ---
+  // --- corotational ---
   struct RotationInput {  // loop -> refresh_rotations(): the last solution's forces (world frame)
     int count = 0;
     std::array<int, compliance::kMaxContacts> nodes{};
@@ -274,7 +276,7 @@ class ToolContacts {
   std::unique_ptr<compliance::NodeRotations> worker_rotations_;   // refresh_rotations()' thread
   Eigen::MatrixX3d worker_u_;
   std::array<Eigen::Vector3d, compliance::kMaxContacts> worker_rest_lambda_{};
-  // --- multirate (issue 16) ---
+  // --- multirate ---
   nonlinear::MultirateContacts* multirate_ = nullptr;
 };
 

@@ -1,4 +1,4 @@
-// The multirate non-linear liver in the haptic node (issue 16, scene key liver.deformation: multirate): the scene's
+// The multirate non-linear liver in the haptic node (scene key liver.deformation: multirate): the scene's
 // liver as a neo-Hookean organ (fem/hyperelastic.h: same mesh, material and fixed set as the tensors) tracked by a
 // NonlinearTracker (nonlinear/multirate.h) on a thread of its own, and the 1 kHz side that turns the tracker's snapshots
 // into the contact forces of the tick.

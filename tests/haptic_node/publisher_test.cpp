@@ -296,7 +296,7 @@ TEST(Publisher, NoHoldAfterTheLastTick) {
   EXPECT_EQ(order, "F0 C0 F1 ");
 }
 
-// Issue 19: each instrument's force goes out as its own ForceFeedback (its key), in instrument order before the frame;
+// Several instruments: each instrument's force goes out as its own ForceFeedback (its key), in instrument order before the frame;
 // an overrun holds and fades every instrument's force, and the final zero releases every device.
 TEST(Publisher, EveryInstrumentGetsItsOwnForceHoldAndFinalZero) {
   RecordingSink sink;
