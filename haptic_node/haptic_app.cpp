@@ -405,10 +405,12 @@ int HapticApp::run() {
     tick_us_.add(static_cast<double>(t1 - t0) * 1e-3);
     if (k < tick_trace_.size()) {
       // Unpaced, a tick has no deadline: its start stands for it.
-      tick_trace_[k] = TickTrace{(paced ? tick_due_ns_ : t0) - loop_start_ns_, static_cast<std::uint32_t>(late_ns),
+      tick_trace_[k] = TickTrace{(paced ? tick_due_ns_ : t0) - loop_start_ns_,
+                                 static_cast<std::uint32_t>(late_ns),
                                  static_cast<std::uint32_t>(std::min<std::uint64_t>(t1 - t0, UINT32_MAX)),
                                  static_cast<std::uint32_t>(std::min<std::uint64_t>(c1 - c0, UINT32_MAX)),
-                                 static_cast<std::uint32_t>(timer.misses()), {}};
+                                 static_cast<std::uint32_t>(timer.misses()),
+                                 {}};
       if (const contact::ContactStageTimes* st = organ_->stage_times()) tick_trace_[k].stage_ns = st->ns;
     }
     ticks_done_ = k + 1;

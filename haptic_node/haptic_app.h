@@ -79,8 +79,8 @@ class HapticApp {
   /// Per-instrument state and statistics (preallocated; index = the scene's tools).
   struct Instrument {
     int track = 0;                          // replay: its column group in the trajectory
-    tool::Pose5 held_pose;                        // last good pose (held while its input is lost)
-    tool::Pose5 last_command;                     // newest device command, its arrival (monotonic ns), commands so far
+    tool::Pose5 held_pose;                  // last good pose (held while its input is lost)
+    tool::Pose5 last_command;               // newest device command, its arrival (monotonic ns), commands so far
     std::uint64_t last_command_ns = 0;
     std::uint64_t commands_received = 0;
     ForceStage force_stage;                 // contact damper + passivity observer/controller on its force
@@ -120,7 +120,7 @@ class HapticApp {
 
   // Tick statistics (preallocated).
   core::SampleRecorder tick_us_;
-  core::SampleRecorder tick_cpu_us_;             // the loop thread's CPU time per tick (tick_us_ is wall time)
+  core::SampleRecorder tick_cpu_us_;  // the loop thread's CPU time per tick (tick_us_ is wall time)
   /// --tick-trace: one row per tick, kept in memory during the loop (preallocated) and written after it.
   struct TickTrace {
     std::uint64_t due_ns = 0;   // the tick's deadline from the loop's start

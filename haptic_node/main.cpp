@@ -29,7 +29,8 @@ int main(int argc, char** argv) {
   cli.add_option("--record", o.record, "Write the tool input used to this trajectory file");
   cli.add_option("--speed", speed, "Replay speed factor, or 'max' (as fast as possible, tick-exact)")->capture_default_str();
   cli.add_option("--log", o.log, "Per-tick CSV: tick,t,fx,fy,fz,contacts");
-  cli.add_option("--tick-trace", o.tick_trace, "Per-tick timing CSV written after the loop: tick,due_us,wake_late_us,"
+  cli.add_option("--tick-trace", o.tick_trace,
+                 "Per-tick timing CSV written after the loop: tick,due_us,wake_late_us,"
                  "tick_us,tick_cpu_us,misses, then the contact step's stages track_points_us,build_patches_us,"
                  "solve_active_set_us,friction_us,distribute_forces_us (0 for the intestine): what made a tick late");
   cli.add_option("--stats", o.stats, "Write a JSON summary here on exit");

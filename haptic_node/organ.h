@@ -61,7 +61,8 @@ class HapticOrgan {
   /// 1..kMaxInstruments). inputs[i].tool is instrument i's geometry, or null while its device input is lost (the
   /// organ drops that instrument's contacts and gives it zero force; the others go on; a dynamic body keeps moving).
   /// out[i] receives instrument i's force (from its own contacts, clamped to its own device limit) and flags.
-  virtual void step(const contact::InstrumentInput* inputs, int count, double dt, contact::ContactTick* out) noexcept = 0;
+  virtual void step(const contact::InstrumentInput* inputs, int count, double dt,
+                    contact::ContactTick* out) noexcept = 0;
   /// One instrument: step(&{tool, jaw}, 1, dt, &out).
   void step(const tool::ToolGeometry* tool, double jaw, double dt, contact::ContactTick& out) noexcept {
     const contact::InstrumentInput in{tool, jaw};
@@ -118,10 +119,10 @@ struct OrganBuildOptions {
 };
 
 /// Builds the organ the scene names. `cache_dir` holds generated meshes and tensors, `ticks` the run's length (for
-/// per-tick storage), `progress` receives mesh and precompute progress (null: silent). Throws surgsim::core::Error naming
-/// the scene file for a model this node does not build.
-std::unique_ptr<HapticOrgan> make_haptic_organ(const scene::Scene& scene, const std::string& cache_dir, std::uint64_t ticks,
-                                               std::ostream* progress,
+/// per-tick storage), `progress` receives mesh and precompute progress (null: silent). Throws surgsim::core::Error
+/// naming the scene file for a model this node does not build.
+std::unique_ptr<HapticOrgan> make_haptic_organ(const scene::Scene& scene, const std::string& cache_dir,
+                                               std::uint64_t ticks, std::ostream* progress,
                                                const OrganBuildOptions& build = OrganBuildOptions());
 
 }  // namespace surgsim

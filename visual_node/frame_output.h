@@ -53,9 +53,9 @@ class FrameOutput {
   }
   /// Writes `image` as frame_NNNNNN.png (NNNNNN = `frame`), the organ's VTK beside it when asked, and the index row
   /// (contact frame `seq`, its `sim_time`, the organ's contacts and largest displacement, the `instruments` drawn).
-  /// A surgsim::core::Error on the way is counted (png_errors) and the frame skipped; the first is printed. Returns once the
-  /// picture is copied (the PNG, its index row and the counters follow on the writer thread; flush() waits for them);
-  /// the VTK is written before it returns.
+  /// A surgsim::core::Error on the way is counted (png_errors) and the frame skipped; the first is printed. Returns
+  /// once the picture is copied (the PNG, its index row and the counters follow on the writer thread; flush() waits for
+  /// them); the VTK is written before it returns.
   void write(const Image& image, std::uint64_t frame, std::uint64_t seq, double sim_time, const OrganView& organ,
              int instruments);
   /// Shutdown: waits for the queued PNGs, then the video, when asked and more than one PNG was written (says where,
@@ -88,7 +88,7 @@ class FrameOutput {
   };
   void writer_loop();
   void write_slot(const Slot& slot);  // on the writer thread
-  void count_error(const core::Error& e);   // png_errors (PNG or VTK), the first printed on stderr
+  void count_error(const core::Error& e);  // png_errors (PNG or VTK), the first printed on stderr
 
   FrameOutputOptions options_;
   int png_every_ = 0;

@@ -46,6 +46,7 @@ void take_instruments(const std::vector<msg::InstrumentState>& states, int tools
 
 /// Draws every present instrument i < tools.size() with tools[i]: tool_geometry(tools[i], pose[i]), its shaft radius,
 /// colour instrument_rgb(i). Returns the number of draw_tool calls.
-int draw_instruments(Renderer& renderer, const std::vector<tool::ToolSpec>& tools, const InstrumentPoses& poses) noexcept;
+int draw_instruments(Renderer& renderer, const std::vector<tool::ToolSpec>& tools,
+                     const InstrumentPoses& poses) noexcept;
 
 }  // namespace surgsim

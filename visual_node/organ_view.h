@@ -93,8 +93,8 @@ struct OrganViewOptions {
 /// The scene identity both nodes compare: the scene's hash mixed with its mesh's (0 without a tetrahedral mesh).
 std::uint64_t visual_scene_hash(const scene::Scene& scene, std::uint64_t mesh_hash);
 
-/// The view of scene.model (the only switch on it in the visual node). Throws surgsim::core::Error when the organ cannot
-/// be built (mesh, tensors, law, embedded surface).
+/// The view of scene.model (the only switch on it in the visual node). Throws surgsim::core::Error when the organ
+/// cannot be built (mesh, tensors, law, embedded surface).
 std::unique_ptr<OrganView> make_organ_view(const scene::Scene& scene, const OrganViewOptions& options);
 
 }  // namespace surgsim

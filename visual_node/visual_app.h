@@ -137,7 +137,7 @@ class VisualApp {
   double wall_seconds_ = 0;
   core::SampleRecorder deform_us_{1 << 18};
   core::SampleRecorder render_ms_{1 << 18};
-  core::SampleRecorder interval_ms_{1 << 18};           // between frame ends
+  core::SampleRecorder interval_ms_{1 << 18};     // between frame ends
   std::uint64_t frames_late_ = 0;                 // ended after the next frame was due
   std::uint64_t schedule_restarts_ = 0;           // frames that ended more than a period late: schedule reset
   // Synthetic load (SURGSIM_VISUAL_LOAD_STEP) and the frame trace.

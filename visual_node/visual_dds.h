@@ -35,7 +35,7 @@ class VisualDds {
   /// Frames whose scene_hash was not this node's (dropped); `last_hash` is the newest such hash (0: none).
   std::uint64_t frames_wrong_scene(std::uint64_t& last_hash);
   std::uint64_t last_receive_ns();  // monotonic, of the newest frame (0: none yet)
-  core::Percentiles latency();            // one-way, us (same-host clocks)
+  core::Percentiles latency();      // one-way, us (same-host clocks)
 
   /// The haptic node's SceneInfo when one was received (copied into `out`; true then).
   bool scene_info(msg::SceneInfo& out);

@@ -54,7 +54,8 @@ inline std::vector<int> parse_index_list(const std::string& text, const std::str
 /// "a,b,c,..." with exactly n numbers.
 inline std::vector<double> parse_numbers(const std::string& text, std::size_t n, const std::string& what) {
   const auto parts = split(text, ',');
-  if (parts.size() != n) core::throw_error(what, ": '", text, "' needs ", n, " comma-separated numbers, got ", parts.size());
+  if (parts.size() != n)
+    core::throw_error(what, ": '", text, "' needs ", n, " comma-separated numbers, got ", parts.size());
   std::vector<double> v;
   for (const auto& p : parts) v.push_back(parse_number(p, what));
   return v;
@@ -97,7 +98,8 @@ inline fem::FixedRegion fixed_region(const FixedOptions& o) {
     r.has_plane = true;
     r.plane_point = Eigen::Vector3d(v[0], v[1], v[2]);
     r.plane_normal = Eigen::Vector3d(v[3], v[4], v[5]);
-    if (r.plane_normal.norm() == 0) core::throw_error("--fixed-plane: the normal (last three numbers) must not be zero");
+    if (r.plane_normal.norm() == 0)
+      core::throw_error("--fixed-plane: the normal (last three numbers) must not be zero");
   }
   for (const auto& b : o.boxes) {
     const auto v = parse_numbers(b, 6, "--fixed-box");

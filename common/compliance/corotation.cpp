@@ -9,13 +9,10 @@ namespace surgsim::compliance {
 
 const char* to_string(LiverDeformation deformation) {
   switch (deformation) {
-    case LiverDeformation::kCorotational:
-      return "corotational";
-    case LiverDeformation::kMultirate:
-      return "multirate";
+    case LiverDeformation::kCorotational: return "corotational";
+    case LiverDeformation::kMultirate: return "multirate";
     case LiverDeformation::kLinear:
-    default:
-      return "linear";
+    default: return "linear";
   }
 }
 
@@ -52,8 +49,7 @@ int extract_rotation(const Eigen::Matrix3d& a_in, Eigen::Quaterniond& q, int max
   int it = 0;
   for (; it < max_iterations; ++it) {
     const Eigen::Matrix3d r = q.toRotationMatrix();
-    const Eigen::Vector3d num =
-        r.col(0).cross(a.col(0)) + r.col(1).cross(a.col(1)) + r.col(2).cross(a.col(2));
+    const Eigen::Vector3d num = r.col(0).cross(a.col(0)) + r.col(1).cross(a.col(1)) + r.col(2).cross(a.col(2));
     const double den = std::abs(r.col(0).dot(a.col(0)) + r.col(1).dot(a.col(1)) + r.col(2).dot(a.col(2))) + 1e-9;
     const Eigen::Vector3d omega = num / den;
     const double w = omega.norm();

@@ -66,13 +66,10 @@ enum class RotationHalves : std::uint8_t {
 inline Eigen::Matrix3d warp_block(const Eigen::Matrix3d& ra, const Eigen::Matrix3d& g, const Eigen::Matrix3d& rb,
                                   RotationHalves halves = RotationHalves::kBoth) noexcept {
   switch (halves) {
-    case RotationHalves::kResponseOnly:
-      return ra * g;
-    case RotationHalves::kConstraintsOnly:
-      return g * rb.transpose();
+    case RotationHalves::kResponseOnly: return ra * g;
+    case RotationHalves::kConstraintsOnly: return g * rb.transpose();
     case RotationHalves::kBoth:
-    default:
-      return ra * g * rb.transpose();
+    default: return ra * g * rb.transpose();
   }
 }
 

@@ -30,7 +30,8 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c, const Eigen::Matri
   prepared_nodes_ = 0;
   w_ = &guu_;
   const int n = c.node_count;
-  if (n < 0 || n > kMaxContacts || c.patch_count < 0 || c.patch_count > kMaxPatches) return ContactStatus::kOverCapacity;
+  if (n < 0 || n > kMaxContacts || c.patch_count < 0 || c.patch_count > kMaxPatches)
+    return ContactStatus::kOverCapacity;
   for (int u = 0; u < n; ++u) {
     const ContactStatus st = contact_node_status(tensors_, block_, c.nodes[static_cast<std::size_t>(u)]);
     if (st != ContactStatus::kOk) return st;

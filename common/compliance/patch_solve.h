@@ -21,14 +21,14 @@
 
 namespace surgsim::compliance {
 
-constexpr int kMaxPatches = 128;                     // patches per solve (one per tool point: 4 instruments x 32)
-constexpr int kMaxPatchRows = 3 * kMaxPatches;       // scalar rows per solve
+constexpr int kMaxPatches = 128;                // patches per solve (one per tool point: 4 instruments x 32)
+constexpr int kMaxPatchRows = 3 * kMaxPatches;  // scalar rows per solve
 constexpr int kMaxPatchEntries = kMaxPatches * kMaxContacts;  // (patch, node) weights per solve
 
 /// The constraints of one solve. Plain data, fixed capacity: lives in the caller's preallocated state.
 struct PatchConstraints {
-  int node_count = 0;                              // distinct nodes (the union of the patches)
-  std::array<int, kMaxContacts> nodes{};           // mesh node indices
+  int node_count = 0;                     // distinct nodes (the union of the patches)
+  std::array<int, kMaxContacts> nodes{};  // mesh node indices
   int patch_count = 0;
   std::array<int, kMaxPatches + 1> patch_start{};  // entries of patch p: [patch_start[p], patch_start[p + 1])
   std::array<int, kMaxPatchEntries> entry_node{};  // index into nodes
@@ -51,8 +51,8 @@ class PatchSolver {
   /// Run phase: reads G of the union nodes (symmetrized, 3x3 blocks) and the patch compliances
   /// M_pq = sum_i sum_j w_pi w_qj G_ij (m/N). G is read only for the nodes that are not the previous successful
   /// prepare()'s first nodes in the same order (a held or pressing contact keeps its nodes: nothing is read again; a
-  /// second instrument's new nodes are read alone); the values are those a full read gives, bit for bit. Refuses fixed, interior, non-row or out-of-range nodes, non-finite or
-  /// negative weights (the status; nothing is usable then).
+  /// second instrument's new nodes are read alone); the values are those a full read gives, bit for bit. Refuses fixed,
+  /// interior, non-row or out-of-range nodes, non-finite or negative weights (the status; nothing is usable then).
   ContactStatus prepare(const PatchConstraints& c) noexcept { return prepare(c, nullptr); }
   /// Corotational (compliance/corotation.h): as prepare(c), then every block is warped, W_ab = R_a G_ab R_b^T
   /// with rotations[u] the rotation of union node u (null: G unwarped, as prepare(c)). Everything after it
@@ -72,9 +72,7 @@ class PatchSolver {
   /// Displacement (m) of union node u under node forces lambda (union order), from the G read by prepare().
   Eigen::Vector3d union_displacement(int u, const Eigen::Vector3d* lambda, int n) const noexcept;
   /// Patch compliance M_pq (m/N) from the last prepare().
-  Eigen::Matrix3d compliance(int p, int q) const noexcept {
-    return m_[static_cast<std::size_t>(p * kMaxPatches + q)];
-  }
+  Eigen::Matrix3d compliance(int p, int q) const noexcept { return m_[static_cast<std::size_t>(p * kMaxPatches + q)]; }
   /// G block (m/N) between union nodes a and b from the last prepare().
   Eigen::Matrix3d g(int a, int b) const noexcept;
   int dependent_row() const { return dependent_row_; }
@@ -83,11 +81,11 @@ class PatchSolver {
  private:
   const Tensors& tensors_;
   const TensorBlock& block_;
-  Eigen::MatrixXd guu_;   // 3 kMaxContacts square
-  Eigen::MatrixXd wuu_;   // 3 kMaxContacts square: the warped blocks (corotational prepare)
+  Eigen::MatrixXd guu_;               // 3 kMaxContacts square
+  Eigen::MatrixXd wuu_;               // 3 kMaxContacts square: the warped blocks (corotational prepare)
   const Eigen::MatrixXd* w_ = &guu_;  // the blocks in use: guu_ or wuu_
   std::array<Eigen::Matrix3d, kMaxPatches * kMaxPatches> m_;
-  Eigen::MatrixXd a_;     // kMaxPatchRows square: A, then its factor
+  Eigen::MatrixXd a_;                       // kMaxPatchRows square: A, then its factor
   std::array<int, kMaxPatchRows> order_{};  // enabled rows in order
   int enabled_count_ = 0;
   int row_count_ = 0;
@@ -95,7 +93,7 @@ class PatchSolver {
   int prepared_nodes_ = 0;
   std::array<int, kMaxContacts> g_nodes_{};  // the union nodes whose G is in guu_, in order
   int g_count_ = 0;
-  std::uint64_t g_blocks_read_ = 0;          // 3x3 blocks of G read from the tensors since construction
+  std::uint64_t g_blocks_read_ = 0;  // 3x3 blocks of G read from the tensors since construction
 
  public:
   /// 3x3 blocks of G read from the tensors since construction (the others were reused).

@@ -78,7 +78,8 @@ std::vector<RowSet> standard_row_sets(const TetMesh& mesh, const std::vector<int
   return {RowSet{"haptic", contacts}, RowSet{"visual", boundary_surface(mesh).nodes}};
 }
 
-std::vector<RowSet> standard_row_sets(const TetMesh& mesh, const FixedSet& fixed, const std::vector<int>& contact_nodes) {
+std::vector<RowSet> standard_row_sets(const TetMesh& mesh, const FixedSet& fixed,
+                                      const std::vector<int>& contact_nodes) {
   std::vector<RowSet> sets = standard_row_sets(mesh, contact_nodes);
   auto& visual = sets[1].nodes;
   visual.erase(std::remove_if(visual.begin(), visual.end(), [&](int n) { return fixed.mask(n) == 7; }), visual.end());
@@ -180,12 +181,13 @@ void check_nodes(const ElasticModel& model, const std::vector<int>& nodes, const
 
 }  // namespace
 
-std::size_t estimate_tensor_bytes(int contact_count, const std::vector<RowSet>& rows, const PrecomputeOptions& options) {
+std::size_t estimate_tensor_bytes(int contact_count, const std::vector<RowSet>& rows,
+                                  const PrecomputeOptions& options) {
   return tensor_bytes(contact_count, rows, options);
 }
 
-MemoryEstimate estimate_precompute_memory(const ElasticModel& model, int contact_count,
-                                          const std::vector<RowSet>& rows, const PrecomputeOptions& options) {
+MemoryEstimate estimate_precompute_memory(const ElasticModel& model, int contact_count, const std::vector<RowSet>& rows,
+                                          const PrecomputeOptions& options) {
   MemoryEstimate m = base_estimate(model, contact_count, rows, options);
   if (options.method == SolveMethod::kDirect) {
     CholmodSolver solver;
@@ -248,12 +250,14 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
     b.name = set.name;
     b.row_nodes = set.nodes;
     b.row_of_node.assign(static_cast<std::size_t>(n), -1);
-    for (std::size_t r = 0; r < set.nodes.size(); ++r) b.row_of_node[static_cast<std::size_t>(set.nodes[r])] = static_cast<int>(r);
+    for (std::size_t r = 0; r < set.nodes.size(); ++r)
+      b.row_of_node[static_cast<std::size_t>(set.nodes[r])] = static_cast<int>(r);
     const Eigen::Index rr = 3 * static_cast<Eigen::Index>(set.nodes.size());
     // Every entry is written by store() below (zeros for fixed rows): no need to clear.
     b.symmetric = packs_symmetric(set, options);
     if (b.symmetric && set.nodes != t.contact_nodes)
-      throw_error("precompute: row set '", set.name, "' is to be stored as one symmetric half, but its nodes are not the ",
+      throw_error("precompute: row set '", set.name,
+                  "' is to be stored as one symmetric half, but its nodes are not the ",
                   "contact nodes in ascending order");
     const std::size_t packed = 9 * set.nodes.size() * (set.nodes.size() + 1) / 2;
     if (b.symmetric && options.precision == Precision::kDouble)
@@ -270,7 +274,8 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
   std::vector<std::vector<int>> row_free(t.blocks.size());
   for (std::size_t k = 0; k < t.blocks.size(); ++k)
     for (int node : t.blocks[k].row_nodes)
-      for (int c = 0; c < 3; ++c) row_free[k].push_back(model.fixed.free_index()[static_cast<std::size_t>(3 * node + c)]);
+      for (int c = 0; c < 3; ++c)
+        row_free[k].push_back(model.fixed.free_index()[static_cast<std::size_t>(3 * node + c)]);
 
   // Copies solved column j (x: the solution, entry f at x[perm(f)], perm = identity when null) into every block.
   // A symmetric block takes rows 3c.. only (c = j / 3, the node column), the rest being the other half.
@@ -302,7 +307,8 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
     }
   };
   const auto free_of_column = [&](Eigen::Index j) {
-    return model.fixed.free_index()[static_cast<std::size_t>(3 * t.contact_nodes[static_cast<std::size_t>(j / 3)] + j % 3)];
+    return model.fixed
+        .free_index()[static_cast<std::size_t>(3 * t.contact_nodes[static_cast<std::size_t>(j / 3)] + j % 3)];
   };
   const auto ts = Clock::now();
   auto report_progress = [&](Eigen::Index done) {
@@ -326,7 +332,8 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
     std::vector<int> order(static_cast<std::size_t>(cols)), pos(static_cast<std::size_t>(cols));
     for (Eigen::Index j = 0; j < cols; ++j) pos[static_cast<std::size_t>(j)] = solver.permuted_row(free_of_column(j));
     std::iota(order.begin(), order.end(), 0);
-    std::sort(order.begin(), order.end(), [&](int a, int b) { return pos[static_cast<std::size_t>(a)] < pos[static_cast<std::size_t>(b)]; });
+    std::sort(order.begin(), order.end(),
+              [&](int a, int b) { return pos[static_cast<std::size_t>(a)] < pos[static_cast<std::size_t>(b)]; });
     // The rows any block stores: the backward solves visit their supernodes and ancestors only.
     std::vector<int> needed_rows;
     for (const auto& rf : row_free)

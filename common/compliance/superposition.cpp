@@ -271,7 +271,8 @@ ContactStatus Superposition::displacement(int node, const int* contact_nodes, co
   u.setZero();
   if (node < 0 || node >= tensors_.node_count) return ContactStatus::kInvalidNode;
   const int r = block_.row_of_node[static_cast<std::size_t>(node)];
-  if (r < 0) return tensors_.fixed_mask[static_cast<std::size_t>(node)] == 7 ? ContactStatus::kOk : ContactStatus::kNotInBlock;
+  if (r < 0)
+    return tensors_.fixed_mask[static_cast<std::size_t>(node)] == 7 ? ContactStatus::kOk : ContactStatus::kNotInBlock;
   for (int l = 0; l < m; ++l) {
     const int k = contact_nodes[l];
     if (k < 0 || k >= tensors_.node_count) return ContactStatus::kInvalidNode;
@@ -336,8 +337,7 @@ ContactStatus Superposition::lambda_from_corrected(const int* contact_nodes, con
 }
 
 PaperTensors::PaperTensors(const Tensors& tensors, const std::string& block_name)
-    : tensors_(tensors),
-      block_([&]() -> const TensorBlock& {
+    : tensors_(tensors), block_([&]() -> const TensorBlock& {
         const TensorBlock* b = tensors.find(block_name);
         if (!b) throw_error("paper tensors: the tensors have no block '", block_name, "'");
         return *b;
@@ -365,8 +365,8 @@ PaperTensors::Solution PaperTensors::solve(const std::vector<Contact>& contacts)
   std::vector<int> nodes(contacts.size()), counts(contacts.size());
   std::vector<Eigen::Vector3d> disp(contacts.size());
   Merge r;
-  out.status = merge_contacts(tensors_, block_, contacts.data(), m, std::max(m, 1), nodes.data(), disp.data(),
-                              counts.data(), r);
+  out.status =
+      merge_contacts(tensors_, block_, contacts.data(), m, std::max(m, 1), nodes.data(), disp.data(), counts.data(), r);
   if (out.status != ContactStatus::kOk) return out;
   nodes.resize(static_cast<std::size_t>(r.count));
   disp.resize(static_cast<std::size_t>(r.count));

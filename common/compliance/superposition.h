@@ -50,15 +50,15 @@ struct Contact {
 /// Result of Superposition::solve(). Fixed capacity, no heap: lives in the caller's preallocated state.
 struct ContactSolution {
   ContactStatus status = ContactStatus::kOk;
-  int count = 0;                                          // distinct contact nodes after merging (0 on error)
-  std::array<int, kMaxContacts> nodes{};                  // contact node indices, in first-seen input order
+  int count = 0;                                           // distinct contact nodes after merging (0 on error)
+  std::array<int, kMaxContacts> nodes{};                   // contact node indices, in first-seen input order
   std::array<Eigen::Vector3d, kMaxContacts> displacement;  // m, the imposed u* per node (mean of merged requests)
   std::array<Eigen::Vector3d, kMaxContacts> lambda;        // N, force on the organ at nodes[l]
   std::array<Eigen::Vector3d, kMaxContacts> corrected;     // m, the paper's corrected constraint u~_l = G_kk lambda_l
-  Eigen::Vector3d tool_force = Eigen::Vector3d::Zero();   // N, force on the tool = -sum lambda (0 on error)
-  int merged_duplicates = 0;        // input contacts folded into an earlier one with the same node
-  double duplicate_spread = 0;      // m, largest distance between a merged request and the mean it was merged into
-  int bad_input = -1;               // index of the offending input contact when status != kOk (else -1)
+  Eigen::Vector3d tool_force = Eigen::Vector3d::Zero();    // N, force on the tool = -sum lambda (0 on error)
+  int merged_duplicates = 0;    // input contacts folded into an earlier one with the same node
+  double duplicate_spread = 0;  // m, largest distance between a merged request and the mean it was merged into
+  int bad_input = -1;           // index of the offending input contact when status != kOk (else -1)
   // Reciprocal condition number of G_CC in the 1-norm, 1 / (||G_CC||_1 est||G_CC^-1||_1), estimated from its
   // Cholesky factor as LAPACK's dpocon (Hager / Higham, a few O(m^2) solves, no allocation). The estimate of
   // ||G_CC^-1||_1 is a lower bound, so rcond is never below the exact value and in practice within a factor of 3
@@ -112,8 +112,8 @@ class Superposition {
   const TensorBlock& block_;
   int capacity_;
   double near_singular_rcond_;
-  Eigen::MatrixXd gcc_;     // 3 capacity x 3 capacity: G_CC, then its Cholesky factor in place
-  Eigen::VectorXd rhs_;     // 3 capacity
+  Eigen::MatrixXd gcc_;  // 3 capacity x 3 capacity: G_CC, then its Cholesky factor in place
+  Eigen::VectorXd rhs_;  // 3 capacity
   std::array<int, kMaxContacts> merged_count_{};
 };
 
@@ -125,10 +125,10 @@ class PaperTensors {
  public:
   struct Solution {
     ContactStatus status = ContactStatus::kOk;
-    std::vector<int> nodes;                   // merged contact nodes (same order as Superposition::solve)
-    std::vector<Eigen::Vector3d> displacement;  // m, u*
-    std::vector<Eigen::Vector3d> corrected;     // m, u~
-    std::vector<Eigen::Vector3d> lambda;        // N, T^f u~
+    std::vector<int> nodes;                                // merged contact nodes (same order as Superposition::solve)
+    std::vector<Eigen::Vector3d> displacement;             // m, u*
+    std::vector<Eigen::Vector3d> corrected;                // m, u~
+    std::vector<Eigen::Vector3d> lambda;                   // N, T^f u~
     Eigen::Vector3d tool_force = Eigen::Vector3d::Zero();  // N
   };
 
@@ -141,7 +141,8 @@ class PaperTensors {
 
   Solution solve(const std::vector<Contact>& contacts) const;
   /// u (3R, as Superposition::displacements) from corrected constraints u~ on contact nodes.
-  Eigen::VectorXd displacements(const std::vector<int>& contact_nodes, const std::vector<Eigen::Vector3d>& corrected) const;
+  Eigen::VectorXd displacements(const std::vector<int>& contact_nodes,
+                                const std::vector<Eigen::Vector3d>& corrected) const;
 
  private:
   const Tensors& tensors_;

@@ -157,7 +157,9 @@ class PayloadWriter {
     bytes_ += n;
   }
   template <typename T>
-  void put(const T& v) { write(&v, sizeof(T)); }
+  void put(const T& v) {
+    write(&v, sizeof(T));
+  }
   std::uint64_t bytes() const { return bytes_; }
   std::uint64_t checksum() const { return sum_.digest(); }
 
@@ -181,7 +183,9 @@ class PayloadReader {
     return true;
   }
   template <typename T>
-  bool get(T& v) { return read(&v, sizeof(T)); }
+  bool get(T& v) {
+    return read(&v, sizeof(T));
+  }
   bool skip(std::uint64_t n) {
     std::vector<unsigned char> buf(static_cast<std::size_t>(std::min<std::uint64_t>(n, 1 << 20)));
     while (n > 0) {
@@ -286,7 +290,8 @@ void save_tensor_cache(const std::string& path, const Tensors& tensors, const Te
       for (int r : b.row_nodes) w.put<std::int32_t>(r);
       w.put<std::uint32_t>(b.symmetric ? 1u : 0u);
       const auto rows = static_cast<std::size_t>(b.row_count());
-      const std::size_t entries = b.symmetric ? 9 * rows * (rows + 1) / 2 : 9 * rows * static_cast<std::size_t>(tensors.column_count());
+      const std::size_t entries =
+          b.symmetric ? 9 * rows * (rows + 1) / 2 : 9 * rows * static_cast<std::size_t>(tensors.column_count());
       if (b.symmetric) {
         const std::size_t have = tensors.precision == Precision::kDouble ? b.packed.size() : b.packed_float.size();
         if (have != entries || b.row_count() != tensors.column_count())
@@ -296,10 +301,12 @@ void save_tensor_cache(const std::string& path, const Tensors& tensors, const Te
         else
           w.write(b.packed_float.data(), entries * sizeof(float));
       } else if (tensors.precision == Precision::kDouble) {
-        if (static_cast<std::size_t>(b.g.size()) != entries) throw_error("tensor cache: block '", b.name, "' has the wrong size");
+        if (static_cast<std::size_t>(b.g.size()) != entries)
+          throw_error("tensor cache: block '", b.name, "' has the wrong size");
         w.write(b.g.data(), entries * sizeof(double));
       } else {
-        if (static_cast<std::size_t>(b.g_float.size()) != entries) throw_error("tensor cache: block '", b.name, "' has the wrong size");
+        if (static_cast<std::size_t>(b.g_float.size()) != entries)
+          throw_error("tensor cache: block '", b.name, "' has the wrong size");
         w.write(b.g_float.data(), entries * sizeof(float));
       }
     }
@@ -334,7 +341,8 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
   std::array<unsigned char, kHeaderBytes> raw{};
   if (file_size < kHeaderBytes || !f.read(reinterpret_cast<char*>(raw.data()), kHeaderBytes))
     return result(CacheStatus::kCorrupt, "truncated header (" + std::to_string(file_size) + " bytes)");
-  if (std::memcmp(raw.data(), kMagic, 8) != 0) return result(CacheStatus::kCorrupt, "not a surgsim tensor cache (bad magic)");
+  if (std::memcmp(raw.data(), kMagic, 8) != 0)
+    return result(CacheStatus::kCorrupt, "not a surgsim tensor cache (bad magic)");
   HeaderReader hr(raw.data() + 8);
   Header h;
   h.version = hr.get<std::uint32_t>();
@@ -366,8 +374,9 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
   // Identity.
   std::string differ;
   auto cmp = [&](const char* what, std::uint64_t file, std::uint64_t want) {
-    if (file != want) differ += std::string(differ.empty() ? "" : "; ") + what + " hash differs (file " + hex(file) +
-                                ", expected " + hex(want) + ")";
+    if (file != want)
+      differ += std::string(differ.empty() ? "" : "; ") + what + " hash differs (file " + hex(file) + ", expected " +
+                hex(want) + ")";
   };
   cmp("mesh", h.key.mesh, expected.mesh);
   cmp("material", h.key.material, expected.material);
@@ -382,7 +391,8 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
     return result(CacheStatus::kCorrupt, "bad counts in header");
   if (file_size != kHeaderBytes + h.payload_bytes)
     return result(CacheStatus::kCorrupt, "file is " + std::to_string(file_size) + " bytes, header says " +
-                                             std::to_string(kHeaderBytes + h.payload_bytes) + " (truncated or extended)");
+                                             std::to_string(kHeaderBytes + h.payload_bytes) +
+                                             " (truncated or extended)");
 
   // Payload, checksummed while read; parsed with bounds checks.
   Tensors t;
@@ -413,12 +423,15 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
     std::int64_t rows = 0;
     if (!r.get(rows) || rows < 0 || rows > h.nodes) return corrupt("bad row count in block '" + b.name + "'");
     b.row_nodes.resize(static_cast<std::size_t>(rows));
-    if (!r.read(b.row_nodes.data(), b.row_nodes.size() * sizeof(int))) return corrupt("truncated rows of '" + b.name + "'");
+    if (!r.read(b.row_nodes.data(), b.row_nodes.size() * sizeof(int)))
+      return corrupt("truncated rows of '" + b.name + "'");
     std::uint32_t layout = 0;
     if (!r.get(layout) || layout > 1) return corrupt("bad layout of block '" + b.name + "'");
-    if (layout == 1 && rows != h.contacts) return corrupt("symmetric block '" + b.name + "' is not contacts x contacts");
+    if (layout == 1 && rows != h.contacts)
+      return corrupt("symmetric block '" + b.name + "' is not contacts x contacts");
     const auto urows = static_cast<std::uint64_t>(rows);
-    const std::uint64_t entries = layout == 1 ? 9ull * urows * (urows + 1) / 2 : 9ull * urows * static_cast<std::uint64_t>(h.contacts);
+    const std::uint64_t entries =
+        layout == 1 ? 9ull * urows * (urows + 1) / 2 : 9ull * urows * static_cast<std::uint64_t>(h.contacts);
     const std::uint64_t bytes = entries * h.precision;
     if (bytes > r.left()) return corrupt("block '" + b.name + "' runs past the end of the file");
     const bool keep = blocks.empty() || std::find(blocks.begin(), blocks.end(), b.name) != blocks.end();
@@ -460,8 +473,8 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
 }
 
 Tensors load_or_build_tensors(const std::string& path, const ElasticModel& model, const std::vector<int>& contact_nodes,
-                              const std::vector<RowSet>& rows, const PrecomputeOptions& options,
-                              CacheOutcome* outcome, PrecomputeReport* report) {
+                              const std::vector<RowSet>& rows, const PrecomputeOptions& options, CacheOutcome* outcome,
+                              PrecomputeReport* report) {
   CacheOutcome local;
   CacheOutcome& o = outcome ? *outcome : local;
   o = CacheOutcome();

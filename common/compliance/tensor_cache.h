@@ -68,8 +68,9 @@ struct CacheOutcome {
 
 /// Loads `path` if valid for these inputs; otherwise precomputes (reporting through options.progress) and rewrites
 /// it. An empty path only precomputes. Throws what precompute_tensors throws.
-Tensors load_or_build_tensors(const std::string& path, const fem::ElasticModel& model, const std::vector<int>& contact_nodes,
-                              const std::vector<RowSet>& rows, const PrecomputeOptions& options,
-                              CacheOutcome* outcome = nullptr, PrecomputeReport* report = nullptr);
+Tensors load_or_build_tensors(const std::string& path, const fem::ElasticModel& model,
+                              const std::vector<int>& contact_nodes, const std::vector<RowSet>& rows,
+                              const PrecomputeOptions& options, CacheOutcome* outcome = nullptr,
+                              PrecomputeReport* report = nullptr);
 
 }  // namespace surgsim::compliance

@@ -57,8 +57,8 @@ class SpscSlotRing {
   std::size_t slot_bytes_;
   std::vector<char> data_;
   std::vector<std::uint32_t> length_;
-  alignas(64) std::atomic<std::uint64_t> head_{0};  // slots published (the producer's counter)
-  alignas(64) std::atomic<std::uint64_t> tail_{0};  // slots consumed (the consumer's counter)
+  alignas(64) std::atomic<std::uint64_t> head_{0};          // slots published (the producer's counter)
+  alignas(64) std::atomic<std::uint64_t> tail_{0};          // slots consumed (the consumer's counter)
   char pad_[64 - sizeof(std::atomic<std::uint64_t>)] = {};  // nothing after tail_ shares its line
 };
 

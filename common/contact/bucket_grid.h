@@ -20,11 +20,11 @@ namespace surgsim::contact {
 /// Result of a segment query: the first surface crossing along the segment.
 struct SurfaceHit {
   bool hit = false;
-  int triangle = -1;                  // row of the surface's tris
-  std::array<int, 3> nodes{{-1, -1, -1}};  // mesh node indices of that triangle
-  Eigen::Vector3d bary = Eigen::Vector3d::Zero();  // (k1, k2, k3), sum 1
-  Eigen::Vector3d point = Eigen::Vector3d::Zero(); // m, crossing point on the deformed surface
-  double s = 0;                       // parameter along the segment in [0, 1]
+  int triangle = -1;                                // row of the surface's tris
+  std::array<int, 3> nodes{{-1, -1, -1}};           // mesh node indices of that triangle
+  Eigen::Vector3d bary = Eigen::Vector3d::Zero();   // (k1, k2, k3), sum 1
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();  // m, crossing point on the deformed surface
+  double s = 0;                                     // parameter along the segment in [0, 1]
 };
 
 /// Closest point on the (rest or deformed) surface near a point.
@@ -33,16 +33,16 @@ struct SurfaceProjection {
   int triangle = -1;
   std::array<int, 3> nodes{{-1, -1, -1}};
   Eigen::Vector3d bary = Eigen::Vector3d::Zero();
-  Eigen::Vector3d point = Eigen::Vector3d::Zero();   // m
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // outward unit normal of the triangle
-  double distance = 0;                               // m
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();    // m
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // outward unit normal of the triangle
+  double distance = 0;                                // m
 };
 
 class BucketGrid {
  public:
-  static constexpr int kMaxCandidates = 512;   // surface nodes examined per query
-  static constexpr double kFacingCos = -0.5;    // project_rest(facing): cos 120 degrees
-  static constexpr int kMaxTriangles = 2048;   // triangles examined per query
+  static constexpr int kMaxCandidates = 512;  // surface nodes examined per query
+  static constexpr double kFacingCos = -0.5;  // project_rest(facing): cos 120 degrees
+  static constexpr int kMaxTriangles = 2048;  // triangles examined per query
 
   /// Builds the grid over the surface nodes at rest. `cell_size` <= 0 chooses about 2x the mean surface edge.
   /// `margin` (m) enlarges the bounding box so that deformed nodes and the tool near the organ stay inside.
@@ -60,7 +60,8 @@ class BucketGrid {
   /// (1 = the 27 cells around p). With `facing`, only triangles whose outward normal is within 120 degrees of it
   /// count (cosine above kFacingCos): a contact may slide round an edge onto a side face, but does not jump to the
   /// opposite face when the tool goes deeper than half the organ's thickness. Allocates nothing.
-  SurfaceProjection project_rest(const Eigen::Vector3d& p, int radius = 1, const Eigen::Vector3d* facing = nullptr) const;
+  SurfaceProjection project_rest(const Eigen::Vector3d& p, int radius = 1,
+                                 const Eigen::Vector3d* facing = nullptr) const;
 
   /// Surface nodes in the cell of p and its 26 neighbours (for tests and the nearest-node step).
   int candidates_near(const Eigen::Vector3d& p, int* out, int capacity) const;

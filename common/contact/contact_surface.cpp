@@ -39,7 +39,8 @@ ContactSurface::ContactSurface(const TetMesh& mesh, const SurfaceMesh& surface,
   if (surface.tris.rows() == 0) throw_error("contact surface: the organ has no surface triangles");
   if (!(radius > 0) || !std::isfinite(radius)) throw_error("contact surface: tip radius must be > 0, got ", radius);
   const auto nv = static_cast<std::size_t>(mesh.nodes.rows());
-  if (free_.size() != nv) throw_error("contact surface: free-node mask has ", free_.size(), " entries for ", nv, " nodes");
+  if (free_.size() != nv)
+    throw_error("contact surface: free-node mask has ", free_.size(), " entries for ", nv, " nodes");
   const auto nf = static_cast<std::size_t>(surface.tris.rows());
   vertex_normals_.assign(nv, Eigen::Vector3d::Zero());
   face_normals_.resize(nf);
@@ -91,7 +92,8 @@ RestPoint ContactSurface::on_triangle(const Eigen::Vector3d& p, int f) const noe
   return r;
 }
 
-RestPoint ContactSurface::closest_local(const Eigen::Vector3d& p, int start, const Eigen::Vector3d* facing) const noexcept {
+RestPoint ContactSurface::closest_local(const Eigen::Vector3d& p, int start,
+                                        const Eigen::Vector3d* facing) const noexcept {
   RestPoint best = on_triangle(p, start);
   if (!best.found) return best;
   for (int step = 0; step < kMaxWalk; ++step) {

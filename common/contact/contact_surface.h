@@ -40,8 +40,8 @@ class ContactSurface {
 
   /// `free_node`: per mesh node, non-zero when the node may carry a constraint (free surface node with a tensor
   /// column). `radius` > 0 (m). Throws surgsim::core::Error on an empty surface or a bad radius.
-  ContactSurface(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, const std::vector<std::uint8_t>& free_node,
-                 double radius);
+  ContactSurface(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface,
+                 const std::vector<std::uint8_t>& free_node, double radius);
 
   /// Mean edge length of the surface (m).
   static double mean_edge(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface);
@@ -55,8 +55,8 @@ class ContactSurface {
   /// Local closest point: from `start`, moves to the closest triangle among those sharing a vertex with the current
   /// one while that is strictly closer. Continuous in p, and it stays on the face it started from unless the
   /// surface itself leads elsewhere. With `facing`, only triangles whose outward normal
-  /// are entered within 60 degrees of it (a tip pressed deeper than the curvature radius of a convex face does not slide round the organ to
-  /// the opposite face).
+  /// are entered within 60 degrees of it (a tip pressed deeper than the curvature radius of a convex face does not
+  /// slide round the organ to the opposite face).
   RestPoint closest_local(const Eigen::Vector3d& p, int start, const Eigen::Vector3d* facing = nullptr) const noexcept;
 
   /// Patch of a contact at rest point `c` (on triangle `triangle`) with gating normal `normal`: up to `capacity`
@@ -75,8 +75,8 @@ class ContactSurface {
   double radius_;
   std::vector<Eigen::Vector3d> vertex_normals_;  // per mesh node (zero off the surface)
   std::vector<Eigen::Vector3d> face_normals_;
-  mesh::NodeTriangles node_tris_;                      // node -> incident triangles
-  std::vector<int> cand_start_, cand_nodes_;     // triangle -> candidate patch nodes (CSR), free or fixed
+  mesh::NodeTriangles node_tris_;             // node -> incident triangles
+  std::vector<int> cand_start_, cand_nodes_;  // triangle -> candidate patch nodes (CSR), free or fixed
   std::vector<std::uint8_t> free_;
 };
 

@@ -16,15 +16,15 @@ struct ContactTick {
   Eigen::Vector3d direction = Eigen::Vector3d::Zero();     // unit mean imposed displacement (0 without contact)
   bool saturated = false;
   bool over_capacity = false;
-  bool nonfinite = false;      // a non-finite value was refused this tick (force zeroed)
+  bool nonfinite = false;  // a non-finite value was refused this tick (force zeroed)
   bool grasp = false;
-  int points_in_contact = 0;   // tool points (liver) or body elements (intestine) the tool touches
+  int points_in_contact = 0;  // tool points (liver) or body elements (intestine) the tool touches
 };
 
 /// One instrument's input for a tick (an organ is stepped with every instrument of the scene at once).
 struct InstrumentInput {
   const tool::ToolGeometry* tool = nullptr;  // the instrument's geometry, or null while its device input is lost
-  double jaw = 0;                      // rad, jaw opening
+  double jaw = 0;                            // rad, jaw opening
 };
 
 /// The stages of one contact step, in their order (as mj_fwdPosition is a list of stage calls). The triangle model
@@ -38,8 +38,9 @@ enum class ContactStage : int {
 };
 inline constexpr int kContactStages = 5;
 /// Column names of the stages (the --tick-trace columns, suffixed _us).
-inline constexpr std::array<const char*, kContactStages> kContactStageNames = {
-    "track_points", "build_patches", "solve_active_set", "friction", "distribute_forces"};
+inline constexpr std::array<const char*, kContactStages> kContactStageNames = {"track_points", "build_patches",
+                                                                               "solve_active_set", "friction",
+                                                                               "distribute_forces"};
 /// The time each stage took in the last step (ns; 0: the stage did not run).
 struct ContactStageTimes {
   std::array<std::uint32_t, kContactStages> ns{};

@@ -40,8 +40,7 @@ int total_capacity(const std::vector<ToolSpec>& tools) {
 }  // namespace
 
 ToolContacts::ToolContacts(const TetMesh& mesh, const SurfaceMesh& surface, const Tensors& tensors,
-                             const std::vector<ToolSpec>& tools, const NonlinearLaw* law,
-                             LiverDeformation deformation)
+                           const std::vector<ToolSpec>& tools, const NonlinearLaw* law, LiverDeformation deformation)
     : mesh_(mesh),
       tensors_(tensors),
       haptic_(haptic_block(tensors)),
@@ -65,8 +64,9 @@ ToolContacts::ToolContacts(const TetMesh& mesh, const SurfaceMesh& surface, cons
     }
   }
   if (deformation_ == LiverDeformation::kMultirate && law_ != nullptr)
-    throw_error("ToolContacts: liver.deformation multirate takes no quasi non-linear law (the tracker is the "
-                "non-linear model)");
+    throw_error(
+        "ToolContacts: liver.deformation multirate takes no quasi non-linear law (the tracker is the "
+        "non-linear model)");
   if (model_ != ContactModel::kPatch) return;
   const ToolSpec& tool_ = tools_.front();  // the tip radius of the patch surface: the first instrument's
   std::vector<std::uint8_t> free(static_cast<std::size_t>(mesh.nodes.rows()), 0);
@@ -99,7 +99,8 @@ void ToolContacts::rotate_union(const PatchConstraints& k) noexcept {
 }
 
 void ToolContacts::publish_solution() noexcept {
-  for (int i = 0; i < indexed_count_; ++i) solution_index_[static_cast<std::size_t>(indexed_nodes_[static_cast<std::size_t>(i)])] = -1;
+  for (int i = 0; i < indexed_count_; ++i)
+    solution_index_[static_cast<std::size_t>(indexed_nodes_[static_cast<std::size_t>(i)])] = -1;
   indexed_count_ = solution_.count;
   RotationInput& in = to_worker_.back();
   in.count = solution_.count;
@@ -847,7 +848,8 @@ void ToolContacts::apply_friction() noexcept {
       if (!(fn > 0) || ft <= mu_eff * fn * (1 + 1e-9)) continue;
       const double beta = mu_eff * fn / ft;
       for (int r = 0; r < k.row_count; ++r)
-        if (k.row_patch[static_cast<std::size_t>(r)] == pi && r > 0 && k.row_patch[static_cast<std::size_t>(r - 1)] == pi)
+        if (k.row_patch[static_cast<std::size_t>(r)] == pi && r > 0 &&
+            k.row_patch[static_cast<std::size_t>(r - 1)] == pi)
           b_[static_cast<std::size_t>(r)] *= beta;  // the tangential rows (the normal row comes first)
       c.slipping = true;
       changed = true;
@@ -917,10 +919,11 @@ void ToolContacts::distribute_forces(double dt, ContactTick* out) noexcept {
         const Eigen::Vector3d& n = patches_[si].normal;
         Eigen::Vector3d t_off = Eigen::Vector3d::Zero();
         for (int r = 0; r < k.row_count; ++r)
-          if (k.row_patch[static_cast<std::size_t>(r)] == pi && r > 0 && k.row_patch[static_cast<std::size_t>(r - 1)] == pi)
+          if (k.row_patch[static_cast<std::size_t>(r)] == pi && r > 0 &&
+              k.row_patch[static_cast<std::size_t>(r - 1)] == pi)
             t_off += b_[static_cast<std::size_t>(r)] * k.row_direction[static_cast<std::size_t>(r)];
-        const Eigen::Vector3d target = geometry.points[static_cast<std::size_t>(g - t * kMaxShaftPoints)] - t_off +
-                                       c.depth * n;
+        const Eigen::Vector3d target =
+            geometry.points[static_cast<std::size_t>(g - t * kMaxShaftPoints)] - t_off + c.depth * n;
         const RestPoint rp = surface_->closest_local(target, c.stick_triangle);
         if (rp.found) {
           c.stick_anchor = rp.point;
@@ -938,7 +941,8 @@ void ToolContacts::distribute_forces(double dt, ContactTick* out) noexcept {
     multirate_->apply(s);
     for (auto& f : force) f.setZero();
     for (int l = 0; l < s.count; ++l)
-      force[static_cast<std::size_t>(node_instrument_[static_cast<std::size_t>(l)])] -= s.lambda[static_cast<std::size_t>(l)];
+      force[static_cast<std::size_t>(node_instrument_[static_cast<std::size_t>(l)])] -=
+          s.lambda[static_cast<std::size_t>(l)];
   }
   for (int t = 0; t < count_; ++t) {
     if (geometry_[static_cast<std::size_t>(t)] == nullptr) continue;

@@ -36,12 +36,12 @@
 // (LiverOrgan's 200 Hz thread) hands over lock-free. The onset gap and deformed() stay linear.
 //
 // Multirate (liver.deformation: multirate, both contact models): after the tick's linear solve, the
-// solution's nodes and displacements are handed to a MultirateContacts (attach_multirate(); nonlinear/multirate_contacts.h) as
-// its tracker's targets, and the forces applied come from its newest snapshot's local model f_c + S du (nodes the
-// snapshot does not hold keep the linear lambda); each instrument's force is the sum over its own nodes, through the
-// device clamp (no quasi non-linear law: refused in this mode). Without an attached MultirateContacts the tick is linear.
-// The solution keeps the applied lambdas, so the ContactFrame carries them and deformed() (the onset gap, the triangle
-// model's detection) sees their linear response G lambda.
+// solution's nodes and displacements are handed to a MultirateContacts (attach_multirate();
+// nonlinear/multirate_contacts.h) as its tracker's targets, and the forces applied come from its newest snapshot's
+// local model f_c + S du (nodes the snapshot does not hold keep the linear lambda); each instrument's force is the sum
+// over its own nodes, through the device clamp (no quasi non-linear law: refused in this mode). Without an attached
+// MultirateContacts the tick is linear. The solution keeps the applied lambdas, so the ContactFrame carries them and
+// deformed() (the onset gap, the triangle model's detection) sees their linear response G lambda.
 //
 // step() runs the stages of ContactStage in order (each timed: stage_times()), allocates nothing and never returns a
 // non-finite force.
@@ -70,33 +70,33 @@ namespace surgsim::contact {
 
 /// One tool point's contact (fixed capacity, plain data).
 struct PointContact {
-  bool active = false;   // pushing (or holding) this tick
+  bool active = false;  // pushing (or holding) this tick
   bool grasp = false;
   int triangle = -1;
   std::array<int, 3> nodes{{-1, -1, -1}};
   Eigen::Vector3d bary = Eigen::Vector3d::Zero();
-  Eigen::Vector3d anchor = Eigen::Vector3d::Zero();  // m, point of the REST surface the tool point drags (patch:
-                                                     // the closest rest point of the tool point)
-  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // outward unit normal there (patch: interpolated vertex normal)
+  Eigen::Vector3d anchor = Eigen::Vector3d::Zero();   // m, point of the REST surface the tool point drags (patch:
+                                                      // the closest rest point of the tool point)
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // outward unit normal there (patch: interpolated vertex normal)
   // --- patch model ---
-  bool tracked = false;      // the point is below the rest surface (depth > 0)
-  bool resumed = false;      // tracked again after a reset with the tool inside: no onset ramp
-  double depth = 0;          // m below the rest surface along the patch normal
+  bool tracked = false;                               // the point is below the rest surface (depth > 0)
+  bool resumed = false;                               // tracked again after a reset with the tool inside: no onset ramp
+  double depth = 0;                                   // m below the rest surface along the patch normal
   Eigen::Vector3d facing = Eigen::Vector3d::UnitZ();  // normal where the point entered: the walk keeps to faces
                                                       // within 60 degrees of it
-  bool sticking = false;     // friction or a released grasp's fading hold: 3-D constraint at stick_anchor
+  bool sticking = false;  // friction or a released grasp's fading hold: 3-D constraint at stick_anchor
   int stick_triangle = -1;
   Eigen::Vector3d stick_anchor = Eigen::Vector3d::Zero();
   int grasp_triangle = -1;
   Eigen::Vector3d grasp_anchor = Eigen::Vector3d::Zero();
-  double onset_gap = 0;      // m, penetration of the deformed patch when the contact began (blended in)
-  double age = 0;            // s since the contact began
-  double release_age = -1;   // s since a grasp let go (>= 0 while its hold fades)
+  double onset_gap = 0;     // m, penetration of the deformed patch when the contact began (blended in)
+  double age = 0;           // s since the contact began
+  double release_age = -1;  // s since a grasp let go (>= 0 while its hold fades)
   Eigen::Vector3d release_offset = Eigen::Vector3d::Zero();  // m, the grasp's imposed patch displacement then
-  double cone_boost = 0;     // extra friction coefficient of a grasp released inside, fading to 0
+  double cone_boost = 0;  // extra friction coefficient of a grasp released inside, fading to 0
   Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // m, imposed patch displacement this tick
   Eigen::Vector3d force = Eigen::Vector3d::Zero();   // N, on the tool from this point (before the law and clamp)
-  bool slipping = false;     // a sticking contact slid this tick (|F_t| = mu F_n)
+  bool slipping = false;                             // a sticking contact slid this tick (|F_t| = mu F_n)
 };
 
 /// The patch of one tool point this tick (patch model).
@@ -106,10 +106,9 @@ struct PointPatch {
   std::array<double, compliance::kMaxContacts> weights{};
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  int dropped = 0;   // nodes inside the radius left out (patch capacity or the tick's contact capacity)
-  int fixed = 0;     // nodes inside the radius without a constraint (fixed)
+  int dropped = 0;  // nodes inside the radius left out (patch capacity or the tick's contact capacity)
+  int fixed = 0;    // nodes inside the radius without a constraint (fixed)
 };
-
 
 class ToolContacts {
  public:
@@ -128,11 +127,11 @@ class ToolContacts {
   /// (compliance/corotation.h): the contact nodes' rotations are recomputed every tick from the previous solution and a
   /// field of every surface node refreshed by refresh_rotations(), which the owner calls off the loop thread.
   ToolContacts(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, const compliance::Tensors& tensors,
-                const std::vector<tool::ToolSpec>& tools, const nonlinear::NonlinearLaw* law = nullptr,
-                compliance::LiverDeformation deformation = compliance::LiverDeformation::kLinear);
+               const std::vector<tool::ToolSpec>& tools, const nonlinear::NonlinearLaw* law = nullptr,
+               compliance::LiverDeformation deformation = compliance::LiverDeformation::kLinear);
   /// One instrument.
-  ToolContacts(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, const compliance::Tensors& tensors, const tool::ToolSpec& tool,
-                const nonlinear::NonlinearLaw* law = nullptr)
+  ToolContacts(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, const compliance::Tensors& tensors,
+               const tool::ToolSpec& tool, const nonlinear::NonlinearLaw* law = nullptr)
       : ToolContacts(mesh, surface, tensors, std::vector<tool::ToolSpec>{tool}, law) {}
 
   /// One haptic tick of `dt` s for `count` instruments (at most instruments()): inputs[t].tool is instrument t's
@@ -233,16 +232,16 @@ class ToolContacts {
   std::array<bool, tool::kMaxInstruments> have_previous_{};
   std::array<compliance::Contact, 3 * kMaxPoints> requests_{};
   std::array<int, 3 * kMaxPoints> request_instrument_{};
-  std::array<int, compliance::kMaxContacts> node_instrument_{};      // per solution node
-  std::array<int, tool::kMaxInstruments> instrument_nodes_{};  // solution nodes per instrument
+  std::array<int, compliance::kMaxContacts> node_instrument_{};  // per solution node
+  std::array<int, tool::kMaxInstruments> instrument_nodes_{};    // solution nodes per instrument
   // --- patch model ---
   double radius_ = 0;
   std::unique_ptr<ContactSurface> surface_;
   std::unique_ptr<compliance::PatchSolver> patch_solver_;
   std::unique_ptr<compliance::PatchConstraints> constraints_;
   std::array<PointPatch, kMaxPoints> patches_{};
-  std::array<int, kMaxPoints> patch_of_point_{};  // index in constraints_ (-1: none)
-  std::array<int, kMaxPoints> kind_{};            // 0 none, 1 slide, 2 stick, 3 grasp, 4 fading grasp
+  std::array<int, kMaxPoints> patch_of_point_{};                  // index in constraints_ (-1: none)
+  std::array<int, kMaxPoints> kind_{};                            // 0 none, 1 slide, 2 stick, 3 grasp, 4 fading grasp
   std::array<int, compliance::kMaxContacts> union_instrument_{};  // instrument that added union node u
   std::array<double, compliance::kMaxPatchRows> b_{}, mu_{};
   std::array<unsigned char, compliance::kMaxPatchRows> enabled_{};
@@ -257,23 +256,23 @@ class ToolContacts {
   };
   struct RotationField {  // refresh_rotations() -> loop: every node's rest-frame displacement and rotation
     bool valid = false;
-    Eigen::MatrixX3d u;                    // #V x 3, m: G R^T lambda (rest frame)
-    std::vector<Eigen::Quaterniond> q;     // #V
+    Eigen::MatrixX3d u;                 // #V x 3, m: G R^T lambda (rest frame)
+    std::vector<Eigen::Quaterniond> q;  // #V
   };
   /// The union nodes' rotations for this tick (from the previous solution and the background field).
   void rotate_union(const compliance::PatchConstraints& k) noexcept;
   /// solution_index_ and the worker's input from the new solution.
   void publish_solution() noexcept;
   compliance::LiverDeformation deformation_ = compliance::LiverDeformation::kLinear;
-  std::unique_ptr<compliance::NodeRotations> rotations_;          // loop thread
+  std::unique_ptr<compliance::NodeRotations> rotations_;  // loop thread
   std::array<Eigen::Matrix3d, compliance::kMaxContacts> union_rotation_{};
-  std::vector<int> solution_index_;                   // #V: index in solution_ of the last step, or -1
+  std::vector<int> solution_index_;  // #V: index in solution_ of the last step, or -1
   std::array<int, compliance::kMaxContacts> indexed_nodes_{};
   std::array<Eigen::Vector3d, compliance::kMaxContacts> rest_displacement_{};  // R_n^T u_n of the last solution's nodes
   int indexed_count_ = 0;
   concurrency::TripleBuffer<RotationInput> to_worker_;
   concurrency::TripleBuffer<RotationField> from_worker_;
-  std::unique_ptr<compliance::NodeRotations> worker_rotations_;   // refresh_rotations()' thread
+  std::unique_ptr<compliance::NodeRotations> worker_rotations_;  // refresh_rotations()' thread
   Eigen::MatrixX3d worker_u_;
   std::array<Eigen::Vector3d, compliance::kMaxContacts> worker_rest_lambda_{};
   // --- multirate ---

@@ -106,7 +106,8 @@ void CholmodSolver::refactorize(const Eigen::SparseMatrix<double>& a) {
   Impl& s = *impl_;
   if (!s.l || !s.a) throw_error("CholmodSolver: refactorize() before analyze()");
   const int n = static_cast<int>(s.a->nrow);
-  if (a.rows() != n || a.cols() != n) throw_error("CholmodSolver: refactorize() with a ", a.rows(), " x ", a.cols(), " matrix, analysed ", n);
+  if (a.rows() != n || a.cols() != n)
+    throw_error("CholmodSolver: refactorize() with a ", a.rows(), " x ", a.cols(), " matrix, analysed ", n);
   const auto* p = static_cast<const int*>(s.a->p);
   const auto* i = static_cast<const int*>(s.a->i);
   auto* v = static_cast<double*>(s.a->x);
@@ -114,7 +115,8 @@ void CholmodSolver::refactorize(const Eigen::SparseMatrix<double>& a) {
     int k = p[j];
     for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it)
       if (it.row() <= j) {
-        if (k >= p[j + 1] || i[k] != it.row()) throw_error("CholmodSolver: refactorize() with another pattern (column ", j, ")");
+        if (k >= p[j + 1] || i[k] != it.row())
+          throw_error("CholmodSolver: refactorize() with another pattern (column ", j, ")");
         v[k++] = it.value();
       }
     if (k != p[j + 1]) throw_error("CholmodSolver: refactorize() with another pattern (column ", j, ")");
@@ -136,10 +138,11 @@ void CholmodSolver::factorize() {
   if (!s.l) throw_error("CholmodSolver: factorize() before analyze()");
   const int ok = cholmod_factorize(s.a, s.l, &s.common);
   if (s.common.status == CHOLMOD_NOT_POSDEF)
-    throw_error("CHOLMOD: the matrix is not positive definite (failure at column ", s.l->minor, " of ", s.l->n,
-                "); for a stiffness matrix this means a rigid mode is free (a part of the mesh not held by 3 non-collinear "
-                "fixed nodes of its own, e.g. one joined to the rest only at a vertex or an edge) or an element is "
-                "inverted");
+    throw_error(
+        "CHOLMOD: the matrix is not positive definite (failure at column ", s.l->minor, " of ", s.l->n,
+        "); for a stiffness matrix this means a rigid mode is free (a part of the mesh not held by 3 non-collinear "
+        "fixed nodes of its own, e.g. one joined to the rest only at a vertex or an edge) or an element is "
+        "inverted");
   if (!ok || s.common.status < CHOLMOD_OK) s.fail("factorize");
   s.factorized = true;
   const int n = static_cast<int>(s.l->n);
@@ -159,7 +162,8 @@ void CholmodSolver::factorize() {
     s.parent.assign(static_cast<std::size_t>(nsuper), -1);
     for (int k = 0; k < nsuper; ++k) {
       const int nscol = super[k + 1] - super[k];
-      if (pi[k + 1] - pi[k] > nscol) s.parent[static_cast<std::size_t>(k)] = s.super_of_row[static_cast<std::size_t>(ls[pi[k] + nscol])];
+      if (pi[k + 1] - pi[k] > nscol)
+        s.parent[static_cast<std::size_t>(k)] = s.super_of_row[static_cast<std::size_t>(ls[pi[k] + nscol])];
     }
   }
 }
@@ -172,8 +176,8 @@ std::vector<char> CholmodSolver::supernodes_for_rows(const std::vector<int>& row
   const std::size_t nsuper = s.parent.size();
   std::vector<char> mark(nsuper, rows.empty() ? 1 : 0);
   for (int r : rows)
-    for (int k = s.super_of_row.at(static_cast<std::size_t>(s.pinv.at(static_cast<std::size_t>(r)))); k >= 0 && !mark[static_cast<std::size_t>(k)];
-         k = s.parent[static_cast<std::size_t>(k)])
+    for (int k = s.super_of_row.at(static_cast<std::size_t>(s.pinv.at(static_cast<std::size_t>(r))));
+         k >= 0 && !mark[static_cast<std::size_t>(k)]; k = s.parent[static_cast<std::size_t>(k)])
       mark[static_cast<std::size_t>(k)] = 1;
   return mark;
 }

@@ -54,10 +54,10 @@ class CholmodSolver {
 
   /// Scratch of solve_unit_columns(): one per thread, reused between calls (grows to the largest block).
   struct UnitSolveWork {
-    std::vector<double> x;       // rows() x count, column-major, in the factor's permuted row order
-    std::vector<double> w;       // off-diagonal rows of a supernode x count
-    std::vector<int> path;       // supernodes the unit right-hand sides reach in the forward solve
-    std::vector<int> lo, hi;     // per supernode: first and last column whose forward solve reaches it
+    std::vector<double> x;    // rows() x count, column-major, in the factor's permuted row order
+    std::vector<double> w;    // off-diagonal rows of a supernode x count
+    std::vector<int> path;    // supernodes the unit right-hand sides reach in the forward solve
+    std::vector<int> lo, hi;  // per supernode: first and last column whose forward solve reaches it
   };
   /// Position of row `row` of A in the factor's permuted order (x of solve_unit_columns is in that order).
   int permuted_row(int row) const;

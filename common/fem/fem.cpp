@@ -97,7 +97,8 @@ Eigen::SparseMatrix<double> assemble_stiffness(const TetMesh& mesh, const Materi
   for (int j = 0; j < n; ++j)
     for (int c = 0; c < 3; ++c)
       col_start[static_cast<std::size_t>(3 * j + c + 1)] =
-          col_start[static_cast<std::size_t>(3 * j + c)] + 3 * static_cast<int>(adj[static_cast<std::size_t>(j)].size());
+          col_start[static_cast<std::size_t>(3 * j + c)] +
+          3 * static_cast<int>(adj[static_cast<std::size_t>(j)].size());
   const int nnz = col_start.back();
   k.resizeNonZeros(nnz);
   std::copy(col_start.begin(), col_start.end(), k.outerIndexPtr());
@@ -121,9 +122,10 @@ Eigen::SparseMatrix<double> assemble_stiffness(const TetMesh& mesh, const Materi
         const int node = mesh.tets(t, a);
         return mesh.ids.empty() ? static_cast<std::int64_t>(node) : mesh.ids[static_cast<std::size_t>(node)];
       };
-      const std::int64_t tet_id = mesh.tet_ids.empty() ? static_cast<std::int64_t>(t) : mesh.tet_ids[static_cast<std::size_t>(t)];
-      throw_error(mesh.source.empty() ? std::string("mesh") : mesh.source, ": tetrahedron ", tet_id, " (nodes ", id(0), " ",
-                  id(1), " ", id(2), " ", id(3),
+      const std::int64_t tet_id =
+          mesh.tet_ids.empty() ? static_cast<std::int64_t>(t) : mesh.tet_ids[static_cast<std::size_t>(t)];
+      throw_error(mesh.source.empty() ? std::string("mesh") : mesh.source, ": tetrahedron ", tet_id, " (nodes ", id(0),
+                  " ", id(1), " ", id(2), " ", id(3),
                   ") is inverted or has zero volume (validate the mesh with validate_mesh, which repairs orientation)");
     }
     for (int b = 0; b < 4; ++b) {

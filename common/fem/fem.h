@@ -22,8 +22,8 @@ Eigen::Matrix<double, 6, 6> elasticity_matrix(const Material& material);
 Eigen::Matrix<double, 12, 12> tet_stiffness(const Eigen::Matrix<double, 4, 3>& x, const Material& material);
 
 /// Global stiffness K (3N x 3N, N/m, dof 3 n + c), symmetric, both triangles stored, column-major. Singular (6 rigid
-/// modes) until fixed dofs are removed. Throws surgsim::core::Error on a bad material or an inverted/degenerate tet (run
-/// validate_mesh first).
+/// modes) until fixed dofs are removed. Throws surgsim::core::Error on a bad material or an inverted/degenerate tet
+/// (run validate_mesh first).
 Eigen::SparseMatrix<double> assemble_stiffness(const mesh::TetMesh& mesh, const Material& material);
 
 /// Rows and columns of the free dofs of `fixed` (K_ff in fixed.free_index() numbering). Both triangles.
@@ -33,9 +33,9 @@ Eigen::SparseMatrix<double> free_stiffness(const Eigen::SparseMatrix<double>& k,
 /// against its rest volume. Linear elasticity keeps going where the real tissue could not: a displacement larger
 /// than an element (a deep poke) inverts the tets next to it, and this says so.
 struct TetInversion {
-  int inverted = 0;               // tets whose deformed volume is <= 0 (or not finite)
-  int worst_tet = -1;             // tet with the smallest deformed / rest volume ratio (-1 for an empty mesh)
-  double min_volume_ratio = 1;    // that ratio (negative: inverted)
+  int inverted = 0;             // tets whose deformed volume is <= 0 (or not finite)
+  int worst_tet = -1;           // tet with the smallest deformed / rest volume ratio (-1 for an empty mesh)
+  double min_volume_ratio = 1;  // that ratio (negative: inverted)
 };
 /// `displacement` #V x 3 (m). Throws surgsim::core::Error on a size mismatch. Cheap: one determinant per tet.
 TetInversion count_inverted_tets(const mesh::TetMesh& mesh, const Eigen::MatrixX3d& displacement);

@@ -62,8 +62,8 @@ std::vector<int> nodes_in_region(const TetMesh& mesh, const FixedRegion& region)
   std::vector<char> hit(static_cast<std::size_t>(n), 0);
   for (int i : region.nodes) {
     if (i < 0 || i >= n)
-      throw_error("fixed node ", i, " is out of range: the mesh", (mesh.source.empty() ? "" : " " + mesh.source), " has ",
-                  n, " nodes (0..", n - 1, ")");
+      throw_error("fixed node ", i, " is out of range: the mesh", (mesh.source.empty() ? "" : " " + mesh.source),
+                  " has ", n, " nodes (0..", n - 1, ")");
     hit[static_cast<std::size_t>(i)] = 1;
   }
   if (n > 0) {
@@ -115,9 +115,9 @@ namespace {
 // Mechanically independent parts: tetrahedra sharing a face (3 nodes) move as one body; a shared vertex or edge is
 // a hinge. Union-find over tets through their sorted faces, O(T log T).
 struct MeshParts {
-  std::vector<int> tet_part;                    // #T, part index 0..count-1 (numbered by first tet)
-  std::vector<std::vector<int>> nodes;          // per part, its nodes ascending
-  std::vector<std::vector<int>> node_parts;     // per node, the parts using it ascending (empty: in no tet)
+  std::vector<int> tet_part;                 // #T, part index 0..count-1 (numbered by first tet)
+  std::vector<std::vector<int>> nodes;       // per part, its nodes ascending
+  std::vector<std::vector<int>> node_parts;  // per node, the parts using it ascending (empty: in no tet)
   int count() const { return static_cast<int>(nodes.size()); }
 };
 
@@ -167,7 +167,7 @@ MeshParts face_connected_parts(const TetMesh& mesh) {
     parts.tet_part[static_cast<std::size_t>(t)] = p;
     for (int a = 0; a < 4; ++a) {
       const int v = mesh.tets(t, a);
-      if (v < 0 || v >= n) continue;  // validate_mesh reports it
+      if (v < 0 || v >= n) continue;                               // validate_mesh reports it
       auto& list = parts.node_parts[static_cast<std::size_t>(v)];  // a node is in few parts: a linear scan
       if (std::find(list.begin(), list.end(), p) == list.end()) list.push_back(p);
     }
@@ -263,18 +263,18 @@ void check_rigid_modes_removed(const TetMesh& mesh, const FixedSet& fixed, const
     for (int i : nodes) size = std::max(size, (mesh.nodes.row(i).transpose() - centroid).norm());
     if (size <= 0) size = 1;
     const bool one_part = parts.count() == 1;
-    const std::string part =
-        one_part ? std::string("the organ")
-                 : "part " + std::to_string(p + 1) + " of " + std::to_string(parts.count()) + " of the mesh (" +
-                       std::to_string(nodes.size()) + " of " + std::to_string(n) + " nodes: " + list_nodes(nodes, 6) +
-                       ")";
+    const std::string part = one_part ? std::string("the organ")
+                                      : "part " + std::to_string(p + 1) + " of " + std::to_string(parts.count()) +
+                                            " of the mesh (" + std::to_string(nodes.size()) + " of " +
+                                            std::to_string(n) + " nodes: " + list_nodes(nodes, 6) + ")";
     // "; " + the fix for one body; ". Part 2 touches ...: " + the fix for a part among several.
     const std::string fix =
-        one_part ? "; " + fix_hint
-                 : ". Part " + std::to_string(p + 1) + " " + describe_attachment(mesh, parts, p) +
-                       ". Either fix at least 3 non-collinear nodes of that part (scene key 'fixed': nodes, box, boxes or "
-                       "plane; programs: --fixed i,j,k, --fixed-box or --fixed-plane), merge the bodies so that they "
-                       "share faces, or remove the part";
+        one_part
+            ? "; " + fix_hint
+            : ". Part " + std::to_string(p + 1) + " " + describe_attachment(mesh, parts, p) +
+                  ". Either fix at least 3 non-collinear nodes of that part (scene key 'fixed': nodes, box, boxes or "
+                  "plane; programs: --fixed i,j,k, --fixed-box or --fixed-plane), merge the bodies so that they "
+                  "share faces, or remove the part";
     if (part_fixed.empty())
       throw_error(prefix, part, " has no fixed node and can move freely (", fixed_nodes.size(),
                   " node(s) are fixed elsewhere: ", list_nodes(fixed_nodes), ")", fix);
@@ -307,7 +307,8 @@ void check_rigid_modes_removed(const TetMesh& mesh, const FixedSet& fixed, const
       what << "a rotation about the axis along (" << canonical_direction(w).transpose() << ")";
     }
     std::string shape;
-    const bool whole_nodes = std::all_of(part_fixed.begin(), part_fixed.end(), [&](int i) { return fixed.mask(i) == 7; });
+    const bool whole_nodes =
+        std::all_of(part_fixed.begin(), part_fixed.end(), [&](int i) { return fixed.mask(i) == 7; });
     if (whole_nodes && part_fixed.size() == 1)
       shape = "a single fixed node";
     else if (whole_nodes)

@@ -55,10 +55,10 @@ std::vector<int> nodes_in_region(const mesh::TetMesh& mesh, const FixedRegion& r
 /// FixedSet fixing the nodes of nodes_in_region(mesh, region) completely.
 FixedSet fixed_set_from_region(const mesh::TetMesh& mesh, const FixedRegion& region);
 
-/// Throws surgsim::core::Error when the fixed dofs leave a rigid-body mode free in some mechanically independent part of
-/// the mesh (the stiffness would then be singular). Parts are tetrahedra joined through shared faces (union-find over
-/// sorted faces, O(T log T)); a vertex or an edge shared between parts is a hinge, so each part must be held by its
-/// own fixed dofs. Refused: nothing fixed, a single fixed point, all fixed nodes on one line, a part with no fixed
+/// Throws surgsim::core::Error when the fixed dofs leave a rigid-body mode free in some mechanically independent part
+/// of the mesh (the stiffness would then be singular). Parts are tetrahedra joined through shared faces (union-find
+/// over sorted faces, O(T log T)); a vertex or an edge shared between parts is a hinge, so each part must be held by
+/// its own fixed dofs. Refused: nothing fixed, a single fixed point, all fixed nodes on one line, a part with no fixed
 /// node. The message says how many and which nodes are fixed, which motion is left free, which part (node count and
 /// a few node indices), how it touches the other parts ("only at node 17 (a vertex hinge)", "along the edge 17-18 (an
 /// edge hinge)", "not attached to anything") and how to fix the scene; `where` (e.g. the scene file) prefixes it.

@@ -41,7 +41,8 @@ Eigen::Matrix<double, 9, 9> neo_hookean_tangent(const Eigen::Matrix3d& f, const 
     for (int i = 0; i < 3; ++i)
       for (int l = 0; l < 3; ++l)
         for (int k = 0; k < 3; ++k)
-          a(i + 3 * j, k + 3 * l) = (i == k && j == l ? lame.mu : 0.0) + c * h(l, i) * h(j, k) + lame.lambda * h(j, i) * h(l, k);
+          a(i + 3 * j, k + 3 * l) =
+              (i == k && j == l ? lame.mu : 0.0) + c * h(l, i) * h(j, k) + lame.lambda * h(j, i) * h(l, k);
   return a;
 }
 
@@ -79,7 +80,8 @@ HyperelasticSolver::HyperelasticSolver(const ElasticModel& model, const Hyperela
     : model_(model), options_(options), lame_(lame_parameters(model.material)) {
   if (options_.load_steps < 1) throw_error("hyperelastic: load_steps must be >= 1, got ", options_.load_steps);
   if (options_.max_iterations < 2)
-    throw_error("hyperelastic: max_iterations must be >= 2 (a predictor and a correction), got ", options_.max_iterations);
+    throw_error("hyperelastic: max_iterations must be >= 2 (a predictor and a correction), got ",
+                options_.max_iterations);
   if (!(options_.residual_tolerance > 0)) throw_error("hyperelastic: residual_tolerance must be positive");
   if (!model_.k.isCompressed()) throw_error("hyperelastic: the model's stiffness must be in compressed storage");
   const TetMesh& mesh = *model_.mesh;
@@ -92,7 +94,8 @@ HyperelasticSolver::HyperelasticSolver(const ElasticModel& model, const Hyperela
   for (int t = 0; t < tets; ++t) {
     // Reference shape-function gradients: rows of edges^-1 for corners 1..3, minus their sum for corner 0.
     Eigen::Matrix3d edges;
-    for (int a = 0; a < 3; ++a) edges.col(a) = (mesh.nodes.row(mesh.tets(t, a + 1)) - mesh.nodes.row(mesh.tets(t, 0))).transpose();
+    for (int a = 0; a < 3; ++a)
+      edges.col(a) = (mesh.nodes.row(mesh.tets(t, a + 1)) - mesh.nodes.row(mesh.tets(t, 0))).transpose();
     const double det = edges.determinant();
     const double scale = edges.colwise().norm().maxCoeff();
     if (!(det > 1e-14 * scale * scale * scale))
@@ -111,8 +114,8 @@ HyperelasticSolver::HyperelasticSolver(const ElasticModel& model, const Hyperela
           const int* last = inner + outer[col + 1];
           const int* it = std::lower_bound(first, last, row);
           if (last - it < 3 || it[0] != row || it[1] != row + 1 || it[2] != row + 2)
-            throw_error("hyperelastic: the model's stiffness pattern lacks the block of nodes ", mesh.tets(t, a), " and ",
-                        mesh.tets(t, b));
+            throw_error("hyperelastic: the model's stiffness pattern lacks the block of nodes ", mesh.tets(t, a),
+                        " and ", mesh.tets(t, b));
           block_pos_[static_cast<std::size_t>(t) * 48 + static_cast<std::size_t>((a * 4 + b) * 3 + k)] =
               static_cast<int>(it - inner);
         }
@@ -192,7 +195,8 @@ ReducedSystem ReducedSystem::make(const ElasticModel& model, const std::vector<i
   sys.imposed_dofs = imposed_dofs;
   sys.target = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(imposed_dofs.size()));
   for (int d = 0; d < ndof; ++d)
-    if (!model.fixed.dof_fixed(d) && !is_imposed[static_cast<std::size_t>(d)]) sys.unknown[static_cast<std::size_t>(d)] = sys.count++;
+    if (!model.fixed.dof_fixed(d) && !is_imposed[static_cast<std::size_t>(d)])
+      sys.unknown[static_cast<std::size_t>(d)] = sys.count++;
   sys.build(model.k);
   return sys;
 }
@@ -303,14 +307,16 @@ HyperelasticSolution HyperelasticSolver::solve(const std::vector<ImposedDisplace
 
   HyperelasticSolution out;
   for (const auto& dv : dof_values)
-    if (out.imposed_nodes.empty() || out.imposed_nodes.back() != dv.first / 3) out.imposed_nodes.push_back(dv.first / 3);
+    if (out.imposed_nodes.empty() || out.imposed_nodes.back() != dv.first / 3)
+      out.imposed_nodes.push_back(dv.first / 3);
   Eigen::VectorXd u = Eigen::VectorXd::Zero(ndof);  // last converged state
   Eigen::VectorXd f(ndof);
   // Reactions on the imposed nodes from the internal force of a state.
   const auto reactions = [&](const Eigen::VectorXd& force, Eigen::MatrixX3d& r, Eigen::Vector3d& total) {
     r.setZero(static_cast<Eigen::Index>(out.imposed_nodes.size()), 3);
     for (int d : sys.imposed_dofs) {
-      const auto row = std::lower_bound(out.imposed_nodes.begin(), out.imposed_nodes.end(), d / 3) - out.imposed_nodes.begin();
+      const auto row =
+          std::lower_bound(out.imposed_nodes.begin(), out.imposed_nodes.end(), d / 3) - out.imposed_nodes.begin();
       r(row, d % 3) = force[d];
     }
     total = r.colwise().sum().transpose();
@@ -415,8 +421,8 @@ HyperelasticSolution HyperelasticSolver::solve(const std::vector<ImposedDisplace
     if (++cuts > options_.max_step_cuts) {
       std::ostringstream msg;
       out.status = failure == Failure::kInverted ? HyperelasticStatus::kInverted : HyperelasticStatus::kNotConverged;
-      msg << "neo-Hookean solve stopped at load factor " << done << " of 1: the increment to " << target
-          << " failed (" << why << ") after " << options_.max_step_cuts << " cuts";
+      msg << "neo-Hookean solve stopped at load factor " << done << " of 1: the increment to " << target << " failed ("
+          << why << ") after " << options_.max_step_cuts << " cuts";
       if (out.status == HyperelasticStatus::kInverted && bad_tet >= 0) {
         out.inverted_tet = bad_tet;
         msg << "; tet " << bad_tet << " (nodes " << model_.mesh->tets.row(bad_tet) << ") inverts (det F <= 0)";

@@ -42,13 +42,13 @@ Eigen::Matrix3d neo_hookean_stress(const Eigen::Matrix3d& f, const LameParameter
 Eigen::Matrix<double, 9, 9> neo_hookean_tangent(const Eigen::Matrix3d& f, const LameParameters& lame);
 
 struct HyperelasticOptions {
-  int load_steps = 10;               // equal increments of the imposed displacements before any cut, >= 1
-  int max_step_cuts = 12;            // halvings of failed increments allowed over the whole solve
-  int max_iterations = 25;           // Newton iterations per increment (predictor included)
-  double residual_tolerance = 1e-9;  // converged when |r_i| <= tol * max(|f_c|, force_floor): r_i the out-of-balance
-                                     // force on the unknown dofs, f_c the reactions on the imposed dofs (N)
-  double force_floor = 1e-12;        // N, the scale when the reactions are (nearly) zero
-  int max_line_search_halvings = 10; // step length down to 2^-halvings before the increment is declared failed
+  int load_steps = 10;                // equal increments of the imposed displacements before any cut, >= 1
+  int max_step_cuts = 12;             // halvings of failed increments allowed over the whole solve
+  int max_iterations = 25;            // Newton iterations per increment (predictor included)
+  double residual_tolerance = 1e-9;   // converged when |r_i| <= tol * max(|f_c|, force_floor): r_i the out-of-balance
+                                      // force on the unknown dofs, f_c the reactions on the imposed dofs (N)
+  double force_floor = 1e-12;         // N, the scale when the reactions are (nearly) zero
+  int max_line_search_halvings = 10;  // step length down to 2^-halvings before the increment is declared failed
 };
 
 enum class HyperelasticStatus : std::uint8_t {
@@ -60,31 +60,31 @@ const char* to_string(HyperelasticStatus status);
 
 /// One load increment as attempted (accepted or not).
 struct HyperelasticStep {
-  double load_factor = 0;           // target fraction s of the imposed displacements, 0 < s <= 1
-  int iterations = 0;               // Newton iterations done (predictor included)
-  std::vector<double> residuals;    // N, |r_i| after each iteration (residuals[k] after iteration k + 1)
-  double force_scale = 0;           // N, max(|f_c|, force_floor) at the last state: the tolerance's scale
-  bool converged = false;           // accepted; otherwise the increment was cut (see `failure`)
-  std::string failure;              // why it was cut ("" when converged)
-  int line_search_halvings = 0;     // total step halvings over the increment's corrections
-  bool ldlt_fallback = false;       // the tangent was not positive definite at some iteration (LDL^T used)
-  double min_jacobian = 1;          // smallest det F over the tets at the last state
-  Eigen::MatrixX3d reaction;        // #I x 3, N: force on the organ at each imposed node (converged steps)
+  double load_factor = 0;         // target fraction s of the imposed displacements, 0 < s <= 1
+  int iterations = 0;             // Newton iterations done (predictor included)
+  std::vector<double> residuals;  // N, |r_i| after each iteration (residuals[k] after iteration k + 1)
+  double force_scale = 0;         // N, max(|f_c|, force_floor) at the last state: the tolerance's scale
+  bool converged = false;         // accepted; otherwise the increment was cut (see `failure`)
+  std::string failure;            // why it was cut ("" when converged)
+  int line_search_halvings = 0;   // total step halvings over the increment's corrections
+  bool ldlt_fallback = false;     // the tangent was not positive definite at some iteration (LDL^T used)
+  double min_jacobian = 1;        // smallest det F over the tets at the last state
+  Eigen::MatrixX3d reaction;      // #I x 3, N: force on the organ at each imposed node (converged steps)
   Eigen::Vector3d total_reaction = Eigen::Vector3d::Zero();  // N, sum of reaction rows
 };
 
 struct HyperelasticSolution {
   HyperelasticStatus status = HyperelasticStatus::kConverged;
-  std::string message;              // what went wrong and where (tet, J, load factor); "" when converged
-  double load_factor = 0;           // load reached (1 when converged; the last converged increment otherwise)
-  Eigen::MatrixX3d displacement;    // #V x 3, m, at load_factor: always finite (fixed dofs 0)
-  std::vector<int> imposed_nodes;   // #I nodes with an imposed component, ascending
-  Eigen::MatrixX3d reaction;        // #I x 3, N, at load_factor (0 on components left free)
+  std::string message;             // what went wrong and where (tet, J, load factor); "" when converged
+  double load_factor = 0;          // load reached (1 when converged; the last converged increment otherwise)
+  Eigen::MatrixX3d displacement;   // #V x 3, m, at load_factor: always finite (fixed dofs 0)
+  std::vector<int> imposed_nodes;  // #I nodes with an imposed component, ascending
+  Eigen::MatrixX3d reaction;       // #I x 3, N, at load_factor (0 on components left free)
   Eigen::Vector3d total_reaction = Eigen::Vector3d::Zero();  // N (the tool feels minus this)
-  std::vector<HyperelasticStep> steps;  // every increment attempted, in order
-  int total_iterations = 0;         // Newton iterations over all steps
-  int inverted_tet = -1;            // the tet that inverted (kInverted), else -1
-  double min_jacobian = 1;          // smallest det F over the tets in the returned state
+  std::vector<HyperelasticStep> steps;                       // every increment attempted, in order
+  int total_iterations = 0;                                  // Newton iterations over all steps
+  int inverted_tet = -1;                                     // the tet that inverted (kInverted), else -1
+  double min_jacobian = 1;                                   // smallest det F over the tets in the returned state
 
   bool converged() const { return status == HyperelasticStatus::kConverged; }
 };
@@ -93,12 +93,12 @@ struct HyperelasticSolution {
 /// Newton iteration factors, in the model's pattern: shared by HyperelasticSolver::solve and the multirate tracker
 /// (nonlinear/multirate.h). Allocates in make() and build() only.
 struct ReducedSystem {
-  std::vector<int> unknown;          // #dofs: index among the unknowns, or -1 (fixed or imposed)
-  std::vector<int> imposed_dofs;     // global dofs with an imposed value, ascending
-  Eigen::VectorXd target;            // #imposed: u* on those dofs, m
-  Eigen::SparseMatrix<double> kii;   // unknowns x unknowns, values refreshed from the full K_T
-  std::vector<int> kii_source;       // #kii nonzeros: value index in the full pattern
-  int count = 0;                     // number of unknowns
+  std::vector<int> unknown;         // #dofs: index among the unknowns, or -1 (fixed or imposed)
+  std::vector<int> imposed_dofs;    // global dofs with an imposed value, ascending
+  Eigen::VectorXd target;           // #imposed: u* on those dofs, m
+  Eigen::SparseMatrix<double> kii;  // unknowns x unknowns, values refreshed from the full K_T
+  std::vector<int> kii_source;      // #kii nonzeros: value index in the full pattern
+  int count = 0;                    // number of unknowns
 
   /// The unknowns of `model` when `imposed_dofs` (ascending) are imposed, and the pattern of K_ii (target sized, 0).
   static ReducedSystem make(const ElasticModel& model, const std::vector<int>& imposed_dofs);
@@ -123,11 +123,11 @@ bool solve_reduced_tangent(const Eigen::SparseMatrix<double>& kii, const Eigen::
 
 /// What one backtracking line search of a Newton correction did (HyperelasticSolver::line_search).
 struct LineSearchOutcome {
-  bool accepted = false;   // a step with sufficient decrease of |r_i| was taken
-  bool any_valid = false;  // some trial step inverted no tet
-  int halvings = 0;        // trials refused for too little decrease (not for inversion)
-  double min_jacobian = 1; // smallest det F at the accepted state
-  int bad_tet = -1;        // the worst tet of the last inverted trial, else -1
+  bool accepted = false;    // a step with sufficient decrease of |r_i| was taken
+  bool any_valid = false;   // some trial step inverted no tet
+  int halvings = 0;         // trials refused for too little decrease (not for inversion)
+  double min_jacobian = 1;  // smallest det F at the accepted state
+  int bad_tet = -1;         // the worst tet of the last inverted trial, else -1
 };
 
 /// The neo-Hookean organ: reads the mesh, material and fixed set of an ElasticModel (which must outlive it) and the
@@ -137,8 +137,8 @@ class HyperelasticSolver {
   explicit HyperelasticSolver(const ElasticModel& model, const HyperelasticOptions& options = HyperelasticOptions());
 
   /// Static equilibrium with u = u* on the imposed components, 0 on the fixed dofs, no other load. Input errors
-  /// (see imposed_dof_values) and bad options throw surgsim::core::Error; a load that cannot be reached is a status, with
-  /// the last converged state returned (never NaN).
+  /// (see imposed_dof_values) and bad options throw surgsim::core::Error; a load that cannot be reached is a status,
+  /// with the last converged state returned (never NaN).
   HyperelasticSolution solve(const std::vector<ImposedDisplacement>& imposed) const;
 
   /// Internal force f_int = dE/du (3N, N) and total strain energy (J) at displacement u (3N, m; dof 3 n + c).

@@ -16,11 +16,11 @@ struct Material {
 /// YAML: `fixed: {nodes: [..], box: {min, max}, boxes: [{min, max}, ..], plane: {point, normal}}`, all optional.
 /// The single `box` key is one more entry of `boxes` (after it, before the list's boxes): one representation.
 struct FixedRegion {
-  std::vector<int> nodes;                           // 0-based node indices in file order
+  std::vector<int> nodes;                                          // 0-based node indices in file order
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes;  // (min, max) per box, m; min < max
   bool has_plane = false;
-  Eigen::Vector3d plane_point = Eigen::Vector3d::Zero();   // m
-  Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitZ(); // unit; nodes with (x - point) . normal >= 0 are fixed
+  Eigen::Vector3d plane_point = Eigen::Vector3d::Zero();    // m
+  Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitZ();  // unit; nodes with (x - point) . normal >= 0 are fixed
 
   /// True if node `index` at rest position `x` (m) is fixed: listed, inside a box (bounds inclusive) or on
   /// the fixed side of the plane.

@@ -49,7 +49,7 @@ namespace {
 
 // The imposed components in free-dof numbering, sorted by free index, with their values.
 struct Constraints {
-  std::vector<int> dofs;  // free-dof indices, ascending
+  std::vector<int> dofs;   // free-dof indices, ascending
   Eigen::VectorXd values;  // m
   std::vector<int> nodes;  // nodes with an imposed component, ascending
 };
@@ -72,7 +72,8 @@ void fill_solution(const ElasticModel& model, const Constraints& c, const Eigen:
   const int n = model.node_count();
   out.displacement.setZero(n, 3);
   const auto& dofs = model.fixed.free_dofs();
-  for (std::size_t f = 0; f < dofs.size(); ++f) out.displacement(dofs[f] / 3, dofs[f] % 3) = u_free[static_cast<Eigen::Index>(f)];
+  for (std::size_t f = 0; f < dofs.size(); ++f)
+    out.displacement(dofs[f] / 3, dofs[f] % 3) = u_free[static_cast<Eigen::Index>(f)];
   out.imposed_nodes = c.nodes;
   out.reaction.setZero(static_cast<Eigen::Index>(c.nodes.size()), 3);
   for (std::size_t k = 0; k < c.dofs.size(); ++k) {

@@ -25,7 +25,7 @@ SolveMethod parse_solve_method(const std::string& text);
 
 /// A displacement imposed on some components of one node.
 struct ImposedDisplacement {
-  int node = -1;                                   // 0-based node index
+  int node = -1;                                    // 0-based node index
   Eigen::Vector3d value = Eigen::Vector3d::Zero();  // m; only the imposed components are read
   std::uint8_t components = 7;                      // bit c set: component c (x, y, z) imposed; others stay free
 };
@@ -43,14 +43,14 @@ struct StaticSolverOptions {
 };
 
 struct StaticSolution {
-  Eigen::MatrixX3d displacement;    // #V x 3, m (fixed dofs are 0, imposed ones equal their value)
-  std::vector<int> imposed_nodes;   // #I nodes with an imposed component, ascending
-  Eigen::MatrixX3d reaction;        // #I x 3, N: force the constraint applies on the organ at imposed_nodes[i]
-                                    // (the Lagrange multiplier; 0 on components left free)
+  Eigen::MatrixX3d displacement;   // #V x 3, m (fixed dofs are 0, imposed ones equal their value)
+  std::vector<int> imposed_nodes;  // #I nodes with an imposed component, ascending
+  Eigen::MatrixX3d reaction;       // #I x 3, N: force the constraint applies on the organ at imposed_nodes[i]
+                                   // (the Lagrange multiplier; 0 on components left free)
   Eigen::Vector3d total_reaction = Eigen::Vector3d::Zero();  // N, sum of reaction rows (the tool feels minus this)
-  int iterations = 0;               // CG iterations (0 for direct)
-  double residual = 0;              // relative residual of the solve in K (CG: of the reduced system)
-  bool converged = true;            // false when CG stopped at its iteration limit
+  int iterations = 0;                                        // CG iterations (0 for direct)
+  double residual = 0;    // relative residual of the solve in K (CG: of the reduced system)
+  bool converged = true;  // false when CG stopped at its iteration limit
 };
 
 /// Solves K u = f with u = u* on imposed dofs, u = 0 on fixed dofs and no other load. Direct: K_ff is factored once
@@ -65,8 +65,8 @@ class StaticSolver {
   StaticSolver(const StaticSolver&) = delete;
   StaticSolver& operator=(const StaticSolver&) = delete;
 
-  /// Throws surgsim::core::Error for a node out of range, a non-finite value, no component selected, a component that is
-  /// fixed, or the same component imposed twice with different values (repeats with equal values are merged).
+  /// Throws surgsim::core::Error for a node out of range, a non-finite value, no component selected, a component that
+  /// is fixed, or the same component imposed twice with different values (repeats with equal values are merged).
   StaticSolution solve(const std::vector<ImposedDisplacement>& imposed);
 
   const StaticSolverOptions& options() const { return options_; }

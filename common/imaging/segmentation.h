@@ -61,7 +61,7 @@ struct SegmentReport {
   DecimationReport surface;              // error-driven reduction: the smooth, light surface
   DecimationReport boundary;             // further reduction to the node budget's surface vertex count
   int boundary_target = 0;               // that vertex count (closed_surface_nodes)
-  mesher::OrganMeshReport mesh;                  // tetrahedralization
+  mesher::OrganMeshReport mesh;          // tetrahedralization
   double voxel_volume = 0.0;             // m^3, organ voxels x voxel volume
   double mc_volume = 0.0;                // m^3, enclosed by each surface / the tets
   double surface_volume = 0.0;
@@ -74,7 +74,7 @@ struct SegmentReport {
 struct Segmentation {
   mesh::TriSurface marching_cubes;  // plain marching cubes of the cleaned mask
   mesh::TriSurface surface;         // smoothed and reduced (error-driven): the smooth, light surface
-  mesh::TetMesh mesh;            // the tetrahedral mesh (its boundary: `surface` reduced to the node budget)
+  mesh::TetMesh mesh;               // the tetrahedral mesh (its boundary: `surface` reduced to the node budget)
   SegmentReport report;
   std::string source;      // the volume's file or folder
 };

@@ -24,7 +24,8 @@ struct SmoothingReport {
 
 /// Smooths the surface in place (grid frame, m; topology unchanged). Uniform umbrella weights, which also evens
 /// out marching cubes' triangle shapes. Throws surgsim::core::Error for bad options.
-SmoothingReport smooth_surface(mesh::TriSurface& mesh, const VoxelBoundaryDistance& boundary, const SmoothingOptions& options);
+SmoothingReport smooth_surface(mesh::TriSurface& mesh, const VoxelBoundaryDistance& boundary,
+                               const SmoothingOptions& options);
 
 /// Vertex neighbours (sorted, unique) of each vertex.
 std::vector<std::vector<int>> vertex_neighbours(const mesh::TriSurface& mesh);

@@ -50,8 +50,8 @@ struct VoxelMask {
 std::vector<std::pair<std::int32_t, std::int64_t>> label_counts(const LabelVolume& volume);
 
 /// Selects one organ. With `label`, its voxels; without, the only non-zero label (any non-zero voxel of a binary
-/// image). Throws surgsim::core::Error naming volume.source when: the volume is empty or inconsistent (sizes vs labels);
-/// it holds no foreground (every voxel 0); every voxel is foreground (nothing to separate the organ from);
+/// image). Throws surgsim::core::Error naming volume.source when: the volume is empty or inconsistent (sizes vs
+/// labels); it holds no foreground (every voxel 0); every voxel is foreground (nothing to separate the organ from);
 /// `label` is not present (the message lists the labels present with their counts); no label was given and
 /// several foreground labels are present (listed).
 VoxelMask select_label(const LabelVolume& volume, std::optional<std::int32_t> label = std::nullopt);

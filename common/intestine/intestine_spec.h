@@ -22,7 +22,7 @@ namespace surgsim::intestine {
 ///   collisions: self_collisions, random_pairs (the paper's n), random_mesentery_pairs, seed, response_iterations,
 ///     contact_capacity.
 struct IntestineSpec {
-  IntestineParams params;  // ready for IntestineModel: probe_force_limit = tools[0].force_limit
+  IntestineParams params;             // ready for IntestineModel: probe_force_limit = tools[0].force_limit
   double probe_radius = 0.01;         // m
 };
 

@@ -77,10 +77,10 @@ const char* to_string(IntegrateStatus status);
 /// envelope of the implicit matrix follows from it and the springs.
 class MassSpring {
  public:
-  /// Init phase (allocates, throws surgsim::core::Error on bad input): `rest` 3 x N (m), `mass` N (kg, > 0 for free nodes),
-  /// `fixed` N flags, `springs` (rest lengths taken from the Spring entries), `gravity` (m/s^2), `drag` (1/s, force
-  /// -drag m v). `order`: N entries, a permutation of the free nodes into 0..F-1 (fixed nodes: any value, ignored);
-  /// empty = natural order of the free nodes.
+  /// Init phase (allocates, throws surgsim::core::Error on bad input): `rest` 3 x N (m), `mass` N (kg, > 0 for free
+  /// nodes), `fixed` N flags, `springs` (rest lengths taken from the Spring entries), `gravity` (m/s^2), `drag` (1/s,
+  /// force -drag m v). `order`: N entries, a permutation of the free nodes into 0..F-1 (fixed nodes: any value,
+  /// ignored); empty = natural order of the free nodes.
   MassSpring(Eigen::Matrix3Xd rest, std::vector<double> mass, std::vector<std::uint8_t> fixed,
              std::vector<Spring> springs, const Eigen::Vector3d& gravity, double drag, std::vector<int> order = {});
 

@@ -163,7 +163,8 @@ void rotation_minimizing_frames(const Eigen::Vector3d* centers, const Eigen::Vec
 
 class TubeBuilder {
  public:
-  /// Init phase (allocates): work arrays for up to `max_points` input points. Throws surgsim::core::Error on bad params.
+  /// Init phase (allocates): work arrays for up to `max_points` input points. Throws surgsim::core::Error on bad
+  /// params.
   TubeBuilder(const TubeParams& params, int max_points);
 
   const TubeParams& params() const { return params_; }

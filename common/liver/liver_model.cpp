@@ -19,9 +19,9 @@ std::shared_ptr<const LiverModel> build_liver_model(mesh::TetMesh mesh, const Li
   m->fixed = setup.fixed;
   m->tensors = load_liver_tensors(setup, m->mesh, source.material, {"haptic"}, progress, nullptr, source.where);
   m->tensor_hash = setup.key.combined();
-  m->law = source.organ_curves ? nonlinear::load_organ_law(m->mesh, source.material, setup.fixed, m->tensor_hash,
-                                                           cache_dir, progress)
-                               : nonlinear::load_nonlinear_law(source.nonlinear, source.material);
+  m->law = source.organ_curves
+               ? nonlinear::load_organ_law(m->mesh, source.material, setup.fixed, m->tensor_hash, cache_dir, progress)
+               : nonlinear::load_nonlinear_law(source.nonlinear, source.material);
   m->generation = generation;
   return m;
 }

@@ -25,14 +25,14 @@ namespace surgsim::liver {
 /// The immutable, shareable part of a liver.
 struct LiverModel {
   mesh::TetMesh mesh;
-  mesh::SurfaceMesh surface;         // boundary of mesh
+  mesh::SurfaceMesh surface;  // boundary of mesh
   fem::Material material;
-  fem::FixedSet fixed;               // resolved on mesh
-  compliance::Tensors tensors;       // the "haptic" block (surface x surface)
-  nonlinear::NonlinearLaw law;       // identity without curves
+  fem::FixedSet fixed;          // resolved on mesh
+  compliance::Tensors tensors;  // the "haptic" block (surface x surface)
+  nonlinear::NonlinearLaw law;  // identity without curves
   std::uint64_t mesh_hash = 0;
-  std::uint64_t tensor_hash = 0;     // the tensor cache key (mesh, material, fixed set, rows)
-  std::uint64_t generation = 0;      // topology generation: 0 for the scene's mesh, +1 per change of topology
+  std::uint64_t tensor_hash = 0;  // the tensor cache key (mesh, material, fixed set, rows)
+  std::uint64_t generation = 0;   // topology generation: 0 for the scene's mesh, +1 per change of topology
 };
 
 /// What a model is built from (the liver part of a scene; scene/ sits above this folder).

@@ -24,22 +24,23 @@ compliance::PrecomputeOptions scene_precompute_options(int contact_count, const 
 struct LiverTensorSetup {
   fem::FixedSet fixed;
   std::vector<int> contacts;     // contactable (free surface) nodes
-  std::vector<compliance::RowSet> rows;      // "haptic" (surface x surface) and "visual" (boundary x surface)
-  compliance::PrecomputeOptions options;     // direct, symmetric haptic block, double (float above kFloatAboveMiB)
+  std::vector<compliance::RowSet> rows;   // "haptic" (surface x surface) and "visual" (boundary x surface)
+  compliance::PrecomputeOptions options;  // direct, symmetric haptic block, double (float above kFloatAboveMiB)
   compliance::TensorCacheKey key;
   std::string cache_path;        // <cache_dir>/tensors-<combined key, hex>.bin
 };
 
 /// Resolves the fixed region on the mesh and derives everything the tensors depend on (the material enters the key).
 /// Throws surgsim::core::Error (e.g. a fixed set leaving a rigid mode free) naming `where` (the scene file).
-LiverTensorSetup liver_tensor_setup(const fem::Material& material, const fem::FixedRegion& fixed, const mesh::TetMesh& mesh,
-                                    const std::string& cache_dir, const std::string& where);
+LiverTensorSetup liver_tensor_setup(const fem::Material& material, const fem::FixedRegion& fixed,
+                                    const mesh::TetMesh& mesh, const std::string& cache_dir, const std::string& where);
 
 /// Loads the cached tensors keeping only `blocks` ("haptic", "visual"; empty = all), or, when the cache is missing,
 /// stale or corrupt, precomputes them (progress with ETA on `log`), saves the cache and keeps `blocks`. Concurrent
 /// callers on the same cache serialize on a lock file, so the work is done once. Throws surgsim::core::Error.
-compliance::Tensors load_liver_tensors(const LiverTensorSetup& setup, const mesh::TetMesh& mesh, const fem::Material& material,
-                           const std::vector<std::string>& blocks, std::ostream* log, compliance::CacheOutcome* outcome = nullptr,
-                           const std::string& where = "");
+compliance::Tensors load_liver_tensors(const LiverTensorSetup& setup, const mesh::TetMesh& mesh,
+                                       const fem::Material& material, const std::vector<std::string>& blocks,
+                                       std::ostream* log, compliance::CacheOutcome* outcome = nullptr,
+                                       const std::string& where = "");
 
 }  // namespace surgsim::liver

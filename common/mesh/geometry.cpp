@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 
-
 namespace surgsim::mesh {
 
 bool segment_triangle(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& a,

@@ -52,7 +52,8 @@ void check_organ_spec(const OrganSpec& spec);
 /// The result has been through validate_mesh (positively oriented, no degenerate tets, manifold boundary).
 /// `progress`, if given, receives one line per meshing attempt and Gmsh's own log; otherwise Gmsh is silent.
 /// Throws surgsim::core::Error on a bad spec or when Gmsh fails. Takes a process-wide lock (see the file comment).
-mesh::TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress = nullptr, OrganMeshReport* report = nullptr);
+mesh::TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress = nullptr,
+                             OrganMeshReport* report = nullptr);
 
 /// Tetrahedralizes the solid a closed triangle surface bounds, keeping the surface's triangles as the mesh boundary
 /// (Gmsh 3D Delaunay inside a discrete surface; no remeshing of the surface), with about `target_nodes` nodes: the
@@ -60,10 +61,10 @@ mesh::TetMesh generate_organ(const OrganSpec& spec, std::ostream* progress = nul
 /// like generate_organ's. The surface's triangles face outward (counter-clockwise seen from outside); it must be
 /// closed, 2-manifold and free of self-intersections, and have fewer vertices than target_nodes
 /// (closed_surface_nodes gives a good vertex count to reduce it to). The result has been through validate_mesh and
-/// its boundary is exactly `surface.tris` (nodes renumbered). Deterministic. Throws surgsim::core::Error when Gmsh fails or
-/// the input is unusable. Takes the process-wide Gmsh lock (see the file comment).
+/// its boundary is exactly `surface.tris` (nodes renumbered). Deterministic. Throws surgsim::core::Error when Gmsh
+/// fails or the input is unusable. Takes the process-wide Gmsh lock (see the file comment).
 mesh::TetMesh mesh_closed_surface(const mesh::TriSurface& surface, int target_nodes, std::ostream* progress = nullptr,
-                            OrganMeshReport* report = nullptr);
+                                  OrganMeshReport* report = nullptr);
 
 /// Surface vertices of a quasi-uniform tetrahedral mesh with `target_nodes` nodes of a solid with this volume (m^3)
 /// and area (m^2), by generate_organ's node-count model: the size to reduce a surface to before

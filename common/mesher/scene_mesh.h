@@ -14,6 +14,7 @@ std::string default_cache_dir();
 
 /// Loads (file) or generates-and-caches (generate) the scene's tetrahedral mesh and validates it.
 /// Throws surgsim::core::Error naming the scene file and the mesh at fault.
-mesh::TetMesh load_scene_mesh(const scene::Scene& scene, const std::string& cache_dir, std::ostream* progress = nullptr);
+mesh::TetMesh load_scene_mesh(const scene::Scene& scene, const std::string& cache_dir,
+                              std::ostream* progress = nullptr);
 
 }  // namespace surgsim::mesher

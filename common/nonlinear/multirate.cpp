@@ -64,7 +64,8 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
     const int node = targets.nodes[static_cast<std::size_t>(k)];
     if (node < 0 || node >= n) throw_error("multirate: contact node ", node, " out of range [0, ", n, ")");
     for (int j = 0; j < k; ++j)
-      if (targets.nodes[static_cast<std::size_t>(j)] == node) throw_error("multirate: contact node ", node, " repeated");
+      if (targets.nodes[static_cast<std::size_t>(j)] == node)
+        throw_error("multirate: contact node ", node, " repeated");
     if (!targets.u[static_cast<std::size_t>(k)].allFinite())
       throw_error("multirate: contact node ", node, " has a non-finite target displacement");
     for (int c = 0; c < 3; ++c)
@@ -175,9 +176,12 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
     // The contact stiffness of this tangent: S = K_cc - K_ci K_ii^-1 K_ic.
     s_.resize(m, m);
     for (int j = 0; j < m; ++j)
-      for (int l = 0; l < m; ++l) s_(j, l) = kt_.coeff(imposed[static_cast<std::size_t>(j)], imposed[static_cast<std::size_t>(l)]);
-    if (columns == 0) s_.setZero();
-    else s_.noalias() -= b_.rightCols(m).transpose() * x_.rightCols(m);
+      for (int l = 0; l < m; ++l)
+        s_(j, l) = kt_.coeff(imposed[static_cast<std::size_t>(j)], imposed[static_cast<std::size_t>(l)]);
+    if (columns == 0)
+      s_.setZero();
+    else
+      s_.noalias() -= b_.rightCols(m).transpose() * x_.rightCols(m);
     s_ = 0.5 * (s_ + s_.transpose()).eval();
     out.solve_ms += ms_since(t0);
     t0 = Clock::now();
@@ -222,7 +226,8 @@ TrackerCycle NonlinearTracker::cycle(const ContactTargets& targets) {
     double r1 = relative_residual();
     // Modified Newton corrections with this factorization (no new tangent): cheap, and they keep the state near
     // equilibrium while the targets move every cycle.
-    for (int k = 0; stepped && factored && k < options_.corrections_per_cycle && r1 > options_.residual_tolerance; ++k) {
+    for (int k = 0; stepped && factored && k < options_.corrections_per_cycle && r1 > options_.residual_tolerance;
+         ++k) {
       rhs_ = -ri_;
       dx_.resize(rhs_.size());
       chol_.solve(rhs_, dx_);
@@ -281,7 +286,8 @@ void NonlinearTracker::publish(const ContactTargets& targets, const Eigen::Matri
         x.cols() == 1 + m ? Eigen::VectorXd(x.rightCols(m).transpose() * ri_) : Eigen::VectorXd::Zero(m);
     for (int j = 0; j < m; ++j) {
       const int cj = dof_contact_[static_cast<std::size_t>(j)];
-      s.reaction[static_cast<std::size_t>(cj / 3)][cj % 3] = f_[sys_.imposed_dofs[static_cast<std::size_t>(j)]] - correction[j];
+      s.reaction[static_cast<std::size_t>(cj / 3)][cj % 3] =
+          f_[sys_.imposed_dofs[static_cast<std::size_t>(j)]] - correction[j];
       for (int l = 0; l < m; ++l) s.stiffness(cj, dof_contact_[static_cast<std::size_t>(l)]) = s_(j, l);
     }
   }
@@ -289,7 +295,8 @@ void NonlinearTracker::publish(const ContactTargets& targets, const Eigen::Matri
     s.surface.segment<3>(3 * static_cast<Eigen::Index>(i)) = u_.segment<3>(3 * surface_nodes_[i]);
   bool finite = s.surface.allFinite() && s.stiffness.topLeftCorner(3 * targets.count, 3 * targets.count).allFinite();
   for (int k = 0; k < targets.count; ++k)
-    finite = finite && s.u[static_cast<std::size_t>(k)].allFinite() && s.reaction[static_cast<std::size_t>(k)].allFinite();
+    finite =
+        finite && s.u[static_cast<std::size_t>(k)].allFinite() && s.reaction[static_cast<std::size_t>(k)].allFinite();
   s.valid = finite;
   snapshots_.publish();
 }
@@ -327,7 +334,8 @@ int snapshot_forces(const TrackerSnapshot& snapshot, const int* nodes, const Eig
     Eigen::Vector3d f = snapshot.reaction[static_cast<std::size_t>(j)];
     for (int r = 0; r < 3; ++r) {
       double acc = 0;
-      for (int col = 0; col < 3 * n; ++col) acc += snapshot.stiffness(3 * j + r, col) * du[static_cast<std::size_t>(col)];
+      for (int col = 0; col < 3 * n; ++col)
+        acc += snapshot.stiffness(3 * j + r, col) * du[static_cast<std::size_t>(col)];
       f[r] += acc;
     }
     if (!f.allFinite()) {
@@ -377,7 +385,8 @@ bool local_contact_forces(const TrackerSnapshot& snapshot, const Contact* contac
 
 MultirateSource MultirateForce::evaluate(const Contact* contacts, int m, ContactSolution& out) noexcept {
   snapshots_.take();
-  if (local_contact_forces(snapshots_.front(), contacts, m, max_extrapolation_, out)) return MultirateSource::kNonlinear;
+  if (local_contact_forces(snapshots_.front(), contacts, m, max_extrapolation_, out))
+    return MultirateSource::kNonlinear;
   ++fallbacks_;
   linear_.solve(contacts, m, out);
   return MultirateSource::kLinearFallback;

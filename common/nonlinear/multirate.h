@@ -40,21 +40,21 @@
 namespace surgsim::nonlinear {
 
 struct MultirateOptions {
-  int iterations_per_cycle = 2;       // factorizations per slow cycle at most (>= 1)
-  double residual_tolerance = 1e-9;   // converged when |r_i| <= tol * max(|f_c|, force_floor), as HyperelasticOptions
-  double force_floor = 1e-12;         // N
-  int max_predictor_halvings = 6;     // a predictor that inverts a tet is halved up to this many times
-  int corrections_per_cycle = 10;     // modified Newton corrections after each step, on the same factor (>= 0)
-  double move_tolerance = 1e-2;       // the contact dofs move towards new targets only from a state whose relative
-                                      // residual is within this (else the iteration is a correction)
-  double max_step = 0.005;            // m: the largest move of a contact node per predictor
-  double publish_tolerance = 2e-2;    // a predictor whose state (after the corrections) has a larger relative
-                                      // residual is taken back and the step limit halved (doubled back on success);
-                                      // any state above it is not published (the fast side keeps the previous
-                                      // snapshot): the linearly corrected f_c and S of a state far from equilibrium
-                                      // can be wrong in sign (lift_90 in 0.5 s: 140-309 % force error)
-  double max_extrapolation = 0.01;    // m: the fast side clamps |u_c(now) - u_c(snapshot)| of each node to this
-  bool contact_stiffness = true;      // false: S left 0 and f_c uncorrected (a reference run that needs forces only)
+  int iterations_per_cycle = 2;      // factorizations per slow cycle at most (>= 1)
+  double residual_tolerance = 1e-9;  // converged when |r_i| <= tol * max(|f_c|, force_floor), as HyperelasticOptions
+  double force_floor = 1e-12;        // N
+  int max_predictor_halvings = 6;    // a predictor that inverts a tet is halved up to this many times
+  int corrections_per_cycle = 10;    // modified Newton corrections after each step, on the same factor (>= 0)
+  double move_tolerance = 1e-2;      // the contact dofs move towards new targets only from a state whose relative
+                                     // residual is within this (else the iteration is a correction)
+  double max_step = 0.005;           // m: the largest move of a contact node per predictor
+  double publish_tolerance = 2e-2;   // a predictor whose state (after the corrections) has a larger relative
+                                     // residual is taken back and the step limit halved (doubled back on success);
+                                     // any state above it is not published (the fast side keeps the previous
+                                     // snapshot): the linearly corrected f_c and S of a state far from equilibrium
+                                     // can be wrong in sign (lift_90 in 0.5 s: 140-309 % force error)
+  double max_extrapolation = 0.01;   // m: the fast side clamps |u_c(now) - u_c(snapshot)| of each node to this
+  bool contact_stiffness = true;     // false: S left 0 and f_c uncorrected (a reference run that needs forces only)
 };
 
 /// The imposed displacements the fast side asks for (all three components of each node), fixed capacity.
@@ -66,16 +66,16 @@ struct ContactTargets {
 
 /// One published state of the slow side. Preallocated (sized by NonlinearTracker); written in place.
 struct TrackerSnapshot {
-  bool valid = false;                              // a finite state of this contact set
-  std::uint64_t cycle = 0;                         // the tracker's cycle that made it
-  int count = 0;                                   // contact nodes
-  std::array<int, compliance::kMaxContacts> nodes{};           // in the order of the targets
-  std::array<Eigen::Vector3d, compliance::kMaxContacts> u{};   // m, the contact nodes' displacement in the state
+  bool valid = false;                                                // a finite state of this contact set
+  std::uint64_t cycle = 0;                                           // the tracker's cycle that made it
+  int count = 0;                                                     // contact nodes
+  std::array<int, compliance::kMaxContacts> nodes{};                 // in the order of the targets
+  std::array<Eigen::Vector3d, compliance::kMaxContacts> u{};         // m, the contact nodes' displacement in the state
   std::array<Eigen::Vector3d, compliance::kMaxContacts> reaction{};  // N, force on the organ at each node (f_c)
-  Eigen::MatrixXd stiffness;                       // (3 kMaxContacts)^2, N/m: S in the top-left 3 count block
-  double residual = 0;                             // |r_i| / max(|f_c|, floor) of the state
-  bool converged = false;                          // at the targets, residual within the tolerance, S exact
-  Eigen::VectorXd surface;                         // 3 x #surface nodes, m: the state's displacement there
+  Eigen::MatrixXd stiffness;  // (3 kMaxContacts)^2, N/m: S in the top-left 3 count block
+  double residual = 0;        // |r_i| / max(|f_c|, floor) of the state
+  bool converged = false;     // at the targets, residual within the tolerance, S exact
+  Eigen::VectorXd surface;    // 3 x #surface nodes, m: the state's displacement there
 };
 
 /// What one slow cycle did.
@@ -89,9 +89,9 @@ struct TrackerCycle {
   bool step_rejected = false;  // the predictor's state was above publish_tolerance: taken back, step limit halved
   bool ldlt_fallback = false;  // the tangent was not positive definite
   double assemble_ms = 0, factor_ms = 0, solve_ms = 0, total_ms = 0;  // wall clock: tangent + internal force,
-                                                                     // analysis (a new set) + factor, solves
-  bool published = false;      // a snapshot was published (not when the state's residual > publish_tolerance)
-  std::string failure;         // "" or why the cycle did not step
+                                                                      // analysis (a new set) + factor, solves
+  bool published = false;  // a snapshot was published (not when the state's residual > publish_tolerance)
+  std::string failure;     // "" or why the cycle did not step
 };
 
 class NonlinearTracker {
@@ -128,10 +128,10 @@ class NonlinearTracker {
   fem::ReducedSystem sys_;
   std::vector<int> dof_contact_;  // per imposed dof: 3 * (index in the targets) + component
   Eigen::MatrixXd b_, x_, s_;
-  fem::CholmodSolver chol_;     // K_ii's factor: analysed when the contact set changes, refactored every iteration
+  fem::CholmodSolver chol_;  // K_ii's factor: analysed when the contact set changes, refactored every iteration
   bool analysed_ = false;
-  bool stuck_ = false;     // the last correction found no decrease: the next iteration moves regardless
-  double step_cut_ = 1;    // fraction of max_step the predictor may take (halved on a rejected step)
+  bool stuck_ = false;               // the last correction found no decrease: the next iteration moves regardless
+  double step_cut_ = 1;              // fraction of max_step the predictor may take (halved on a rejected step)
   Eigen::VectorXd u_keep_, f_keep_;  // the state before the predictor (restored when its step is rejected)
 };
 
@@ -145,11 +145,11 @@ int snapshot_forces(const TrackerSnapshot& snapshot, const int* nodes, const Eig
                     double max_extrapolation, Eigen::Vector3d* lambda, bool* held, double& largest) noexcept;
 
 /// The local model, no allocation: for each contact (node, u now) the snapshot's node, lambda = f_c + S du with du
-/// clamped to `max_extrapolation` per node (snapshot_forces with every contact held); out.lambda (force on the organ), out.tool_force = -sum, out.nodes and
-/// out.displacement filled as Superposition::solve does. False (out.count = 0) when the snapshot is not valid, its
-/// node set differs from the contacts', or the result is not finite.
-bool local_contact_forces(const TrackerSnapshot& snapshot, const compliance::Contact* contacts, int m, double max_extrapolation,
-                          compliance::ContactSolution& out) noexcept;
+/// clamped to `max_extrapolation` per node (snapshot_forces with every contact held); out.lambda (force on the organ),
+/// out.tool_force = -sum, out.nodes and out.displacement filled as Superposition::solve does. False (out.count = 0)
+/// when the snapshot is not valid, its node set differs from the contacts', or the result is not finite.
+bool local_contact_forces(const TrackerSnapshot& snapshot, const compliance::Contact* contacts, int m,
+                          double max_extrapolation, compliance::ContactSolution& out) noexcept;
 
 /// Where a MultirateForce::evaluate result came from.
 enum class MultirateSource : std::uint8_t { kNonlinear = 0, kLinearFallback };
@@ -157,7 +157,8 @@ enum class MultirateSource : std::uint8_t { kNonlinear = 0, kLinearFallback };
 /// The 1 kHz side: the newest snapshot of a tracker's buffer, or the linear model. One per haptic thread.
 class MultirateForce {
  public:
-  MultirateForce(concurrency::TripleBuffer<TrackerSnapshot>& snapshots, compliance::Superposition& linear, double max_extrapolation)
+  MultirateForce(concurrency::TripleBuffer<TrackerSnapshot>& snapshots, compliance::Superposition& linear,
+                 double max_extrapolation)
       : snapshots_(snapshots), linear_(linear), max_extrapolation_(max_extrapolation) {}
   /// No allocation. Never returns a non-finite force: the linear model's result when the snapshot cannot be used.
   MultirateSource evaluate(const compliance::Contact* contacts, int m, compliance::ContactSolution& out) noexcept;

@@ -27,8 +27,8 @@ MultirateOptions MultirateContacts::node_options() {
 }
 
 MultirateContacts::MultirateContacts(const TetMesh& mesh, const Material& material, const FixedSet& fixed,
-                               std::vector<int> surface_nodes, const std::string& where,
-                               const MultirateOptions& options)
+                                     std::vector<int> surface_nodes, const std::string& where,
+                                     const MultirateOptions& options)
     : model_(std::make_unique<ElasticModel>(build_elastic_model(mesh, material, fixed, where))),
       solver_(std::make_unique<HyperelasticSolver>(*model_)),
       surface_nodes_(std::move(surface_nodes)),
@@ -37,7 +37,8 @@ MultirateContacts::MultirateContacts(const TetMesh& mesh, const Material& materi
   last_u_.assign(nv, Eigen::Vector3d::Zero());
   velocity_.assign(nv, Eigen::Vector3d::Zero());
   last_tick_.assign(nv, 0);
-  for (int i = 0; i < 3; ++i) surfaces_.slot(i).u = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(surface_nodes_.size()));
+  for (int i = 0; i < 3; ++i)
+    surfaces_.slot(i).u = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(surface_nodes_.size()));
   for (auto& t : cycle_tick_) t.store(0, std::memory_order_relaxed);
 }
 
@@ -219,8 +220,10 @@ MultirateUse MultirateContacts::apply(ContactSolution& solution) noexcept {
   Eigen::Vector3d total = Eigen::Vector3d::Zero();
   for (int l = 0; l < m; ++l) {
     const auto sl = static_cast<std::size_t>(l);
-    if (held_[sl]) lambda_[sl] = w * lambda_[sl] + (1 - w) * solution.lambda[sl];
-    else lambda_[sl] = solution.lambda[sl];
+    if (held_[sl])
+      lambda_[sl] = w * lambda_[sl] + (1 - w) * solution.lambda[sl];
+    else
+      lambda_[sl] = solution.lambda[sl];
     total += lambda_[sl];
   }
   if (!total.allFinite()) return fallback();
@@ -229,7 +232,8 @@ MultirateUse MultirateContacts::apply(ContactSolution& solution) noexcept {
 
   // --- statistics: the snapshot's age (sim time since its targets) and the extrapolation ---
   // This tick's index is tick_ (hand_over() follows apply()).
-  const std::uint64_t t_snap = cycle_tick_[static_cast<std::size_t>(s.cycle % kCycleTicks)].load(std::memory_order_relaxed);
+  const std::uint64_t t_snap =
+      cycle_tick_[static_cast<std::size_t>(s.cycle % kCycleTicks)].load(std::memory_order_relaxed);
   age_ms_.add(1e3 * dt_ * static_cast<double>(tick_ >= t_snap ? tick_ - t_snap : 0));
   // Staleness: since the snapshot's targets, or since the last tick the contact nodes were where it has them (a held
   // tool's converged snapshot is exact however old; the release after a hold is stale from the release on).

@@ -1,7 +1,7 @@
 // The multirate non-linear liver in the haptic node (scene key liver.deformation: multirate): the scene's
 // liver as a neo-Hookean organ (fem/hyperelastic.h: same mesh, material and fixed set as the tensors) tracked by a
-// NonlinearTracker (nonlinear/multirate.h) on a thread of its own, and the 1 kHz side that turns the tracker's snapshots
-// into the contact forces of the tick.
+// NonlinearTracker (nonlinear/multirate.h) on a thread of its own, and the 1 kHz side that turns the tracker's
+// snapshots into the contact forces of the tick.
 //
 // Loop -> tracker: every tick hand_over() writes the tick's contact solution (its nodes and their displacements: the
 // linear solve's) as the tracker's targets into a TripleBuffer (no allocation), with the tick's sim time and each
@@ -55,19 +55,19 @@ namespace surgsim::nonlinear {
 
 /// What the loop hands the tracker each tick (fixed size).
 struct LoopTargets {
-  ContactTargets targets;                                // the tick's contact nodes and displacements (m)
+  ContactTargets targets;                                            // the tick's contact nodes and displacements (m)
   std::array<Eigen::Vector3d, compliance::kMaxContacts> velocity{};  // m/s, each node's displacement rate (filtered)
-  double sim_time = 0;                                   // s, the tick's haptic sim time
-  std::uint64_t tick = 0;                                // the tick's index (the node's record seq)
+  double sim_time = 0;                                               // s, the tick's haptic sim time
+  std::uint64_t tick = 0;                                            // the tick's index (the node's record seq)
 };
 
 /// The tracker's surface for the organ's BodyState (tracker thread -> publisher thread).
 struct TrackerSurface {
   bool valid = false;
-  std::uint64_t cycle = 0;      // the tracker cycle whose state it is
-  double sim_time = 0;          // s, sim time of the targets that cycle was computed for
-  std::uint64_t tick = 0;       // their tick
-  Eigen::VectorXd u;            // 3 x #surface nodes, m
+  std::uint64_t cycle = 0;  // the tracker cycle whose state it is
+  double sim_time = 0;      // s, sim time of the targets that cycle was computed for
+  std::uint64_t tick = 0;   // their tick
+  Eigen::VectorXd u;        // 3 x #surface nodes, m
 };
 
 /// Where a tick's forces came from (apply()).
@@ -76,11 +76,11 @@ enum class MultirateUse : std::uint8_t { kNoContact = 0, kNonlinear, kPartial, k
 class MultirateContacts {
  public:
   static constexpr std::chrono::microseconds kIdleSleep{1500};
-  static constexpr double kVelocityFilter = 0.1;  // per tick: an exponential filter of about 10 ticks
-  static constexpr double kMaxPrediction = 0.005; // m: the prediction moves a target by at most this
-  static constexpr double kMinPrediction = 1e-6;  // m: and not at all when it would move it by less
-  static constexpr double kTrustFraction = 0.5;   // of max_extrapolation: the local model's full weight up to it
-  static constexpr double kBlendRate = 0.05;      // per tick: the local model's weight changes by at most this
+  static constexpr double kVelocityFilter = 0.1;   // per tick: an exponential filter of about 10 ticks
+  static constexpr double kMaxPrediction = 0.005;  // m: the prediction moves a target by at most this
+  static constexpr double kMinPrediction = 1e-6;   // m: and not at all when it would move it by less
+  static constexpr double kTrustFraction = 0.5;    // of max_extrapolation: the local model's full weight up to it
+  static constexpr double kBlendRate = 0.05;       // per tick: the local model's weight changes by at most this
 
   /// The node's tracker options: those of large_deformation_bench's moving-tool figures (one Newton iteration and up
   /// to 10 modified-Newton corrections per cycle, at most 5 mm per predictor; the rest MultirateOptions' defaults).
@@ -89,8 +89,9 @@ class MultirateContacts {
   /// Init (allocates): the neo-Hookean model of `mesh` with `material` and `fixed` (the tensors' own), a tracker
   /// whose snapshots carry the displacement of `surface_nodes` (SurfaceMesh::nodes order). `mesh` must outlive
   /// this object. Throws surgsim::core::Error (prefixed with `where`, the scene file) on a bad model.
-  MultirateContacts(const mesh::TetMesh& mesh, const fem::Material& material, const fem::FixedSet& fixed, std::vector<int> surface_nodes,
-                 const std::string& where, const MultirateOptions& options = node_options());
+  MultirateContacts(const mesh::TetMesh& mesh, const fem::Material& material, const fem::FixedSet& fixed,
+                    std::vector<int> surface_nodes, const std::string& where,
+                    const MultirateOptions& options = node_options());
   ~MultirateContacts();
   MultirateContacts(const MultirateContacts&) = delete;
   MultirateContacts& operator=(const MultirateContacts&) = delete;
@@ -165,15 +166,15 @@ class MultirateContacts {
 
   // --- loop thread ---
   std::array<Eigen::Vector3d, compliance::kMaxContacts> lambda_{};  // this tick's local model, then the blended lambdas
-  std::array<bool, compliance::kMaxContacts> held_{};                // per solution node: the snapshot holds it
-  std::vector<Eigen::Vector3d> last_u_;         // #V: each node's displacement at the tick last_tick_
-  std::vector<Eigen::Vector3d> velocity_;       // #V: m/s, filtered
-  std::vector<std::uint64_t> last_tick_;        // #V: the tick a node was last in contact (+1; 0: never)
-  std::uint64_t tick_ = 0;                      // ticks handed over
-  double dt_ = 0;                               // s, the last tick's
-  std::array<std::uint64_t, 4> ticks_{};        // by MultirateUse
+  std::array<bool, compliance::kMaxContacts> held_{};               // per solution node: the snapshot holds it
+  std::vector<Eigen::Vector3d> last_u_;    // #V: each node's displacement at the tick last_tick_
+  std::vector<Eigen::Vector3d> velocity_;  // #V: m/s, filtered
+  std::vector<std::uint64_t> last_tick_;   // #V: the tick a node was last in contact (+1; 0: never)
+  std::uint64_t tick_ = 0;                 // ticks handed over
+  double dt_ = 0;                          // s, the last tick's
+  std::array<std::uint64_t, 4> ticks_{};   // by MultirateUse
   std::uint64_t blended_ = 0;
-  double weight_ = 0;                           // the local model's weight (trust region, rate-limited)
+  double weight_ = 0;  // the local model's weight (trust region, rate-limited)
   core::SampleRecorder age_ms_{1 << 16, core::SampleRecorder::Keep::kNewest};
   core::SampleRecorder stale_ms_{1 << 16, core::SampleRecorder::Keep::kNewest};
   std::uint64_t stale_cycle_ = 0, exact_tick_ = 0;
@@ -183,7 +184,7 @@ class MultirateContacts {
   int numeric_threads_ = 1;
   bool predict_ = true;
   double fixed_horizon_s_ = 0;
-  ContactTargets cycled_;          // the targets of the last cycle (before prediction)
+  ContactTargets cycled_;  // the targets of the last cycle (before prediction)
   bool have_cycled_ = false;
   bool last_converged_ = false;
   double last_cycle_s_ = 0;

@@ -45,8 +45,8 @@ struct ChebyshevSums {
 
 ChebyshevSums chebyshev(const std::array<double, kMaxLawDegree + 1>& c, int n, double z) noexcept {
   ChebyshevSums s;
-  double t_prev = 1, t = z;          // T_0, T_1
-  double u_prev = 1, u = 2 * z;      // U_0, U_1
+  double t_prev = 1, t = z;      // T_0, T_1
+  double u_prev = 1, u = 2 * z;  // U_0, U_1
   s.value = c[0];
   for (int k = 1; k <= n; ++k) {
     s.value += c[static_cast<std::size_t>(k)] * t;
@@ -82,7 +82,8 @@ CylinderReference parse_cylinder(const std::string& text, const std::string& whe
     const std::string kv = trim(item);
     const auto eq = kv.find('=');
     if (eq == std::string::npos)
-      throw_error(where, ": cylinder item '", kv, "' is not key=value (expected radius=R, height=H, young=E, poisson=NU)");
+      throw_error(where, ": cylinder item '", kv,
+                  "' is not key=value (expected radius=R, height=H, young=E, poisson=NU)");
     const std::string key = trim(kv.substr(0, eq)), value = trim(kv.substr(eq + 1));
     int k = 0;
     while (k < 4 && key != kKeys[k]) ++k;
@@ -92,7 +93,8 @@ CylinderReference parse_cylinder(const std::string& text, const std::string& whe
     seen[k] = true;
   }
   for (int k = 0; k < 4; ++k)
-    if (!seen[k]) throw_error(where, ": cylinder line lacks '", kKeys[k], "=' (expected radius=R, height=H, young=E, poisson=NU)");
+    if (!seen[k])
+      throw_error(where, ": cylinder line lacks '", kKeys[k], "=' (expected radius=R, height=H, young=E, poisson=NU)");
   CylinderReference c;
   c.radius = values[0];
   c.height = values[1];
@@ -120,7 +122,8 @@ const char* to_string(CurveQuantity quantity) {
 
 void check_cylinder(const CylinderReference& c, const std::string& where) {
   const auto positive = [&](double v, const char* name, const char* unit) {
-    if (!(std::isfinite(v) && v > 0)) throw_error(where, ": cylinder ", name, " = ", v, " must be a finite number > 0 (", unit, ")");
+    if (!(std::isfinite(v) && v > 0))
+      throw_error(where, ": cylinder ", name, " = ", v, " must be a finite number > 0 (", unit, ")");
   };
   positive(c.radius, "radius", "m");
   positive(c.height, "height", "m");
@@ -171,12 +174,14 @@ Curve read_curve(std::istream& in, const std::string& source) {
       } else if (compact == "x,f") {
         curve.quantity = CurveQuantity::kForce;
       } else {
-        throw_error(where, ": expected the column header 'x,d_r' (radial displacement curve) or 'x,f' (force curve), got '",
+        throw_error(where,
+                    ": expected the column header 'x,d_r' (radial displacement curve) or 'x,f' (force curve), got '",
                     text, "'");
       }
       if (!have_cylinder)
-        throw_error(where, ": column header before any '# cylinder: radius=R, height=H, young=E, poisson=NU' line "
-                           "(state the reference cylinder the curve describes)");
+        throw_error(where,
+                    ": column header before any '# cylinder: radius=R, height=H, young=E, poisson=NU' line "
+                    "(state the reference cylinder the curve describes)");
       have_header = true;
       curve.header_line = line;
       continue;
@@ -185,7 +190,8 @@ Curve read_curve(std::istream& in, const std::string& source) {
     // A data row: x,value.
     const std::vector<std::string> fields = split(text, ',');
     if (fields.size() != 2)
-      throw_error(where, ": expected 2 fields 'x,", value_name(curve.quantity), "', got ", fields.size(), " in '", text, "'");
+      throw_error(where, ": expected 2 fields 'x,", value_name(curve.quantity), "', got ", fields.size(), " in '", text,
+                  "'");
     double x = 0, v = 0;
     if (!parse_double(fields[0], x)) throw_error(where, ": x '", trim(fields[0]), "' is not a number");
     if (!parse_double(fields[1], v))
@@ -203,8 +209,9 @@ Curve read_curve(std::istream& in, const std::string& source) {
     curve.lines.push_back(line);
   }
   if (!have_cylinder)
-    throw_error(source, ": no '# cylinder: radius=R, height=H, young=E, poisson=NU' line (state the reference cylinder "
-                        "the curve describes)");
+    throw_error(source,
+                ": no '# cylinder: radius=R, height=H, young=E, poisson=NU' line (state the reference cylinder "
+                "the curve describes)");
   if (!have_header) throw_error(source, ": no column header 'x,d_r' or 'x,f'");
   if (xs.empty()) throw_error(source, ": no data rows after the column header on line ", curve.header_line);
   curve.x = Eigen::Map<const Eigen::VectorXd>(xs.data(), static_cast<Eigen::Index>(xs.size()));
@@ -285,7 +292,8 @@ PolynomialMap PolynomialMap::fit(const Eigen::VectorXd& t, const Eigen::VectorXd
       sum2 += e * e;
       if (e > worst) {
         worst = e;
-        r.worst_line = lines && lines->size() == static_cast<std::size_t>(n) ? (*lines)[static_cast<std::size_t>(i)] : 0;
+        r.worst_line =
+            lines && lines->size() == static_cast<std::size_t>(n) ? (*lines)[static_cast<std::size_t>(i)] : 0;
       }
     }
     r.rms_residual = std::sqrt(sum2 / n) / range;
@@ -334,8 +342,9 @@ CurveFit fit_curve(const Curve& curve, int degree) {
     throw_error(curve.source, ": ", curve.size(), " points, a degree-", degree, " fit needs at least ", degree + 1,
                 " (add points or lower nonlinear.degree)");
   if (curve.quantity == CurveQuantity::kRadialDisplacement && !(curve.cylinder.poisson_ratio > 0))
-    throw_error(curve.source, ": poisson = 0 makes the linear radial displacement nu r x / h identically 0, so P is "
-                              "undefined (a radial curve needs poisson > 0)");
+    throw_error(curve.source,
+                ": poisson = 0 makes the linear radial displacement nu r x / h identically 0, so P is "
+                "undefined (a radial curve needs poisson > 0)");
   CurveFit f;
   f.curve = curve;
   f.map = PolynomialMap::fit(curve.linear(), curve.value, degree, curve.source, &f.report, &curve.lines);
@@ -410,9 +419,9 @@ NonlinearLaw::NonlinearLaw(std::optional<CurveFit> displacement, std::optional<C
                   "' is a ", to_string(f->curve.quantity), " curve, but it is used as the ", name, " (needs '",
                   column_name(want), "')");
     if (!f->report.increasing)
-      throw_error(f->curve.source, ": the degree-", f->report.degree, " fit of ", want == CurveQuantity::kForce ? "Q" : "P",
-                  " is not increasing on [0, ", f->report.t_max, "] (end slope ", f->report.end_slope,
-                  "): lower nonlinear.degree or check the curve");
+      throw_error(f->curve.source, ": the degree-", f->report.degree, " fit of ",
+                  want == CurveQuantity::kForce ? "Q" : "P", " is not increasing on [0, ", f->report.t_max,
+                  "] (end slope ", f->report.end_slope, "): lower nonlinear.degree or check the curve");
   };
   check(displacement_, CurveQuantity::kRadialDisplacement, "displacement curve");
   check(force_, CurveQuantity::kForce, "force curve");
@@ -552,13 +561,11 @@ double SurfaceForceField::ratio(const int* nodes, int m, const Eigen::Vector3d& 
   return std::clamp(value, kMinRatio, kMaxRatio);
 }
 
-NonlinearLaw::NonlinearLaw(std::optional<CurveFit> displacement, std::optional<CurveFit> force,
-                           SurfaceForceField field)
+NonlinearLaw::NonlinearLaw(std::optional<CurveFit> displacement, std::optional<CurveFit> force, SurfaceForceField field)
     : NonlinearLaw(std::move(displacement), std::move(force)) {
   const std::size_t n = field.thickness.size();
   if (field.degree < 0 || field.degree > kMaxLawDegree || field.lever.size() != n || field.position.size() != n ||
-      field.normal.size() != n ||
-      field.site_residual.size() != field.site_centre.size() * field.depths.size())
+      field.normal.size() != n || field.site_residual.size() != field.site_centre.size() * field.depths.size())
     throw_error("organ surface field: degree ", field.degree, ", ", n, " thicknesses, ", field.lever.size(),
                 " levers, ", field.position.size(), " positions, ", field.site_residual.size(), " residuals for ",
                 field.site_centre.size(), " sites x ", field.depths.size(),
@@ -609,10 +616,11 @@ NonlinearLaw load_nonlinear_law(const NonlinearSpec& spec, const Material& mater
     if (rel_diff(c.young_modulus, material.young_modulus) > kMaterialTolerance ||
         rel_diff(c.poisson_ratio, material.poisson_ratio) > kMaterialTolerance)
       throw_error((*f)->curve.source, ": the curve describes young=", c.young_modulus, ", poisson=", c.poisson_ratio,
-                  " but the scene's material is young_modulus=", material.young_modulus, ", poisson_ratio=",
-                  material.poisson_ratio, ": the linear input of the law would not be the scene's (regenerate the "
-                  "curves with surgsim-curves --young ", material.young_modulus, " --poisson ", material.poisson_ratio,
-                  ")");
+                  " but the scene's material is young_modulus=", material.young_modulus,
+                  ", poisson_ratio=", material.poisson_ratio,
+                  ": the linear input of the law would not be the scene's (regenerate the "
+                  "curves with surgsim-curves --young ",
+                  material.young_modulus, " --poisson ", material.poisson_ratio, ")");
   }
   return law;
 }

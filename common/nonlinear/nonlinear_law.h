@@ -65,7 +65,6 @@ struct NonlinearSpec {
   bool enabled() const { return !displacement_curve.empty() || !force_curve.empty(); }
 };
 
-
 /// Polynomial degrees the fit accepts (inclusive).
 inline constexpr int kMinLawDegree = 4;
 inline constexpr int kMaxLawDegree = 10;
@@ -77,9 +76,9 @@ struct CylinderReference {
   double young_modulus = 3000.0;  // Pa, > 0
   double poisson_ratio = 0.45;    // [0, 0.5)
 
-  double area() const;                       // m^2, pi r^2: the top (and cross-section) area s
-  double linear_radial(double x) const;      // m, d_r^L = nu r x / h for a compression x (m)
-  double linear_force(double x) const;       // N, f^L = s E x / h
+  double area() const;                   // m^2, pi r^2: the top (and cross-section) area s
+  double linear_radial(double x) const;  // m, d_r^L = nu r x / h for a compression x (m)
+  double linear_force(double x) const;   // N, f^L = s E x / h
 };
 
 enum class CurveQuantity {
@@ -90,13 +89,13 @@ const char* to_string(CurveQuantity quantity);
 
 /// One curve file, validated.
 struct Curve {
-  std::string source;             // file path (or the name given to read_curve), for messages
+  std::string source;  // file path (or the name given to read_curve), for messages
   CurveQuantity quantity = CurveQuantity::kRadialDisplacement;
   CylinderReference cylinder;
-  int header_line = 0;            // 1-based line of the column header
-  std::vector<int> lines;         // #points: 1-based source line of each point
-  Eigen::VectorXd x;              // #points, m: imposed compression, >= 0, strictly increasing, < height
-  Eigen::VectorXd value;          // #points, m (d_r) or N (f)
+  int header_line = 0;     // 1-based line of the column header
+  std::vector<int> lines;  // #points: 1-based source line of each point
+  Eigen::VectorXd x;       // #points, m: imposed compression, >= 0, strictly increasing, < height
+  Eigen::VectorXd value;   // #points, m (d_r) or N (f)
 
   int size() const { return static_cast<int>(x.size()); }
   /// #points: the linear prediction at each x (d_r^L in m, or f^L in N).
@@ -113,15 +112,15 @@ Curve load_curve(const std::string& path);
 struct FitReport {
   int degree = 0;
   int points = 0;
-  double range = 0;          // max - min of the fitted values (m or N)
-  double rms_residual = 0;   // sqrt(mean (P(t_i) - y_i)^2) / range
-  double max_residual = 0;   // max |P(t_i) - y_i| / range
-  int worst_line = 0;        // source line of the worst point (0 when unknown)
-  double t_max = 0;          // end of the fitted range of the argument (m or N)
-  double end_value = 0;      // P(t_max)
-  double end_slope = 0;      // P'(t_max): the slope of the linear extrapolation beyond t_max
-  double start_slope = 0;    // P'(0): 1 when the curve has the linear law as its small-strain limit
-  bool increasing = false;   // P strictly increasing on [0, t_max] (checked on 2001 points) and end_slope > 0
+  double range = 0;         // max - min of the fitted values (m or N)
+  double rms_residual = 0;  // sqrt(mean (P(t_i) - y_i)^2) / range
+  double max_residual = 0;  // max |P(t_i) - y_i| / range
+  int worst_line = 0;       // source line of the worst point (0 when unknown)
+  double t_max = 0;         // end of the fitted range of the argument (m or N)
+  double end_value = 0;     // P(t_max)
+  double end_slope = 0;     // P'(t_max): the slope of the linear extrapolation beyond t_max
+  double start_slope = 0;   // P'(0): 1 when the curve has the linear law as its small-strain limit
+  bool increasing = false;  // P strictly increasing on [0, t_max] (checked on 2001 points) and end_slope > 0
 };
 
 /// y = P(t) with P(0) = 0: the shifted-Chebyshev polynomial of the fit inside [0, t_max], its tangent beyond, odd
@@ -134,9 +133,8 @@ class PolynomialMap {
   /// Least-squares fit of y_i ~ P(t_i), degree kMinLawDegree..kMaxLawDegree. t must be finite and >= 0 with
   /// max t > 0, y finite, at least degree + 1 distinct t. `lines` (optional, same size) names points in the report.
   /// Throws surgsim::core::Error prefixed by `source` (e.g. the curve file) with the reason.
-  static PolynomialMap fit(const Eigen::VectorXd& t, const Eigen::VectorXd& y, int degree,
-                           const std::string& source, FitReport* report = nullptr,
-                           const std::vector<int>* lines = nullptr);
+  static PolynomialMap fit(const Eigen::VectorXd& t, const Eigen::VectorXd& y, int degree, const std::string& source,
+                           FitReport* report = nullptr, const std::vector<int>* lines = nullptr);
 
   double operator()(double t) const noexcept;
   /// dP/dt (continuous at t_max: the end slope beyond).
@@ -153,21 +151,21 @@ class PolynomialMap {
 
   int degree_ = 1;
   double t_max_ = 1;
-  double offset_ = 0;                        // sum_k c_k T_k(-1), so that P(0) = 0
-  double end_value_ = 1, end_slope_ = 1;     // P(t_max), P'(t_max)
+  double offset_ = 0;                          // sum_k c_k T_k(-1), so that P(0) = 0
+  double end_value_ = 1, end_slope_ = 1;       // P(t_max), P'(t_max)
   std::array<double, kMaxLawDegree + 1> c_{};  // c_[0] unused (0)
 };
 
 /// A curve and the polynomial fitted from its linear prediction to its values.
 struct CurveFit {
   Curve curve;
-  PolynomialMap map;   // P (radial displacement) or Q (force)
+  PolynomialMap map;  // P (radial displacement) or Q (force)
   FitReport report;
 };
 
 /// Fits P or Q (by curve.quantity) of `degree` from the curve mapped through the cylinder's linear relation.
-/// Throws surgsim::core::Error "SOURCE: ..." for a bad degree, too few points (< degree + 1), poisson = 0 for a radial curve
-/// (d_r^L would be identically 0) or a constant curve.
+/// Throws surgsim::core::Error "SOURCE: ..." for a bad degree, too few points (< degree + 1), poisson = 0 for a radial
+/// curve (d_r^L would be identically 0) or a constant curve.
 CurveFit fit_curve(const Curve& curve, int degree);
 
 /// Homogeneous uniaxial compression of a compressible neo-Hookean cylinder with a traction-free lateral surface,
@@ -177,10 +175,10 @@ CurveFit fit_curve(const Curve& curve, int degree);
 /// nominal (first Piola-Kirchhoff) stress times the reference area: f = |P_11| s, P_11 = (mu (l^2 - 1) + lambda ln J)
 /// / l, J = l l_t^2. For small x: d_r -> nu r x / h and f -> s E x / h, the linear relations.
 struct NeoHookeanPoint {
-  double x = 0;               // m, imposed compression
+  double x = 0;                // m, imposed compression
   double lateral_stretch = 1;  // l_t
-  double radial = 0;          // m, d_r
-  double force = 0;           // N, f
+  double radial = 0;           // m, d_r
+  double force = 0;            // N, f
 };
 /// Throws surgsim::core::Error for 0 > x or x >= height, or a bad cylinder.
 NeoHookeanPoint neo_hookean_compression(const CylinderReference& cylinder, double x);
@@ -193,8 +191,8 @@ void check_cylinder(const CylinderReference& cylinder, const std::string& where)
 /// sum is (numerically) zero.
 bool constraint_direction(const Eigen::Vector3d* imposed, int m, Eigen::Vector3d& direction) noexcept;
 
-/// The organ's force ratio over its surface (fitted by nonlinear/organ_curves.h): a push of depth delta along d on a patch
-/// of surface nodes feels the linear force times
+/// The organ's force ratio over its surface (fitted by nonlinear/organ_curves.h): a push of depth delta along d on a
+/// patch of surface nodes feels the linear force times
 ///   ratio = [1 + sum_k (a_k + b_k L / h) e^k] * residual(c, delta),   e = delta / h,
 /// with h and L the means over the patch nodes of each node's thickness along its inward normal and its distance to
 /// the nearest fixed node (m), and residual the regression's own error at the fit sites (Newton / (linear x
@@ -208,7 +206,7 @@ struct SurfaceForceField {
   static constexpr double kMinRatio = 0.1;
   static constexpr double kMaxRatio = 10.0;
   static constexpr double kPower = 4;
-  static constexpr double kPushCosine = 0.5;  // cos 60 degrees
+  static constexpr double kPushCosine = 0.5;       // cos 60 degrees
   int degree = 0;                                  // K, 1..kMaxLawDegree (0: an empty field)
   std::array<double, kMaxLawDegree + 1> a{}, b{};  // a_k, b_k for k = 1..K (index 0 unused)
   double e_max = 0;                                // end of the fitted range of e
@@ -237,8 +235,8 @@ class NonlinearLaw {
  public:
   /// The identity law: linear elasticity unchanged.
   NonlinearLaw() = default;
-  /// Either may be absent (that part stays linear). Throws surgsim::core::Error when a fit is not increasing, or a fit of
-  /// the wrong quantity is given.
+  /// Either may be absent (that part stays linear). Throws surgsim::core::Error when a fit is not increasing, or a fit
+  /// of the wrong quantity is given.
   NonlinearLaw(std::optional<CurveFit> displacement, std::optional<CurveFit> force);
   /// With the organ's surface field: apply_force with the contact nodes uses it instead of Q (Q stays the fallback
   /// of the node-less apply_force). Throws surgsim::core::Error for a field whose sizes do not match.

@@ -35,7 +35,9 @@ struct Fnv {
     for (std::size_t i = 0; i < n; ++i) h = (h ^ c[i]) * 1099511628211ull;
   }
   template <class T>
-  void value(const T& v) { bytes(&v, sizeof v); }
+  void value(const T& v) {
+    bytes(&v, sizeof v);
+  }
 };
 
 const Eigen::Vector3d kPush(0, 0, -1);  // the punch pushes straight down
@@ -119,8 +121,7 @@ std::vector<SiteSamples> group_sites(const OrganCurves& curves) {
   for (const auto& s : curves.samples) {
     if (out.empty() || out.back().site->site_x != s.site_x || out.back().site->site_y != s.site_y)
       out.push_back(SiteSamples{&s, {}});
-    if (s.converged && s.linear_force > 0 && s.newton_force > 0 && s.thickness > 0)
-      out.back().converged.push_back(&s);
+    if (s.converged && s.linear_force > 0 && s.newton_force > 0 && s.thickness > 0) out.back().converged.push_back(&s);
   }
   return out;
 }
@@ -193,8 +194,7 @@ SurfaceForceField fit_field_model(const std::vector<SiteSamples>& sites, const s
 std::vector<double> sample_depths(const OrganCurves& curves) {
   std::vector<double> out;
   for (const auto& s : curves.samples) {
-    if (!out.empty() && (s.site_x != curves.samples.front().site_x || s.site_y != curves.samples.front().site_y))
-      break;
+    if (!out.empty() && (s.site_x != curves.samples.front().site_x || s.site_y != curves.samples.front().site_y)) break;
     out.push_back(s.depth);
   }
   return out;
@@ -262,8 +262,7 @@ std::vector<int> organ_punch_nodes(const ElasticModel& model, const Eigen::Vecto
 
 std::vector<Eigen::Vector2d> organ_curve_sites(const ElasticModel& model, const OrganCurveSettings& settings) {
   if (!settings.sites.empty()) return settings.sites;
-  if (!(settings.site_spacing > 0))
-    throw_error("organ curves: site_spacing ", settings.site_spacing, " m must be > 0");
+  if (!(settings.site_spacing > 0)) throw_error("organ curves: site_spacing ", settings.site_spacing, " m must be > 0");
   const TetMesh& mesh = *model.mesh;
   const SurfaceMesh surface = boundary_surface(mesh);
   const std::vector<int> top = top_nodes(model, surface, surface_normals(mesh, surface));
@@ -330,8 +329,8 @@ OrganCurves compute_organ_curves(const ElasticModel& model, const OrganCurveSett
     opts.load_steps = std::max(2, static_cast<int>(std::ceil(deepest / settings.newton_increment)));
     if (log)
       *log << "organ curves: site " << si + 1 << "/" << sites.size() << " (" << site.x() << ", " << site.y() << "), "
-           << punch.size() << " nodes: Newton to " << deepest * 1000 << " mm in " << opts.load_steps
-           << " increments" << std::endl;
+           << punch.size() << " nodes: Newton to " << deepest * 1000 << " mm in " << opts.load_steps << " increments"
+           << std::endl;
     const HyperelasticSolution ref = HyperelasticSolver(model, opts).solve(imposed);
     std::vector<std::pair<double, double>> path{{0.0, 0.0}};  // (depth m, force N) of the converged increments
     for (const HyperelasticStep& step : ref.steps)
@@ -398,8 +397,8 @@ OrganLawValidation validate_organ_law(const OrganCurves& curves, const OrganCurv
   const std::vector<SiteSamples> sites = group_sites(curves);
   const std::vector<double> depths = sample_depths(curves);
   OrganLawValidation v;
-  const SurfaceForceField all = fit_field_model(sites, std::vector<bool>(sites.size(), true), depths,
-                                                settings.ratio_degree);
+  const SurfaceForceField all =
+      fit_field_model(sites, std::vector<bool>(sites.size(), true), depths, settings.ratio_degree);
   std::vector<const OrganCurveSample*> ok;
   for (const auto& s : curves.samples)
     if (s.converged) ok.push_back(&s);

@@ -42,27 +42,27 @@ namespace surgsim::nonlinear {
 struct OrganCurveSettings {
   // Punch sites: x-y (m) of the punch centres on the organ's top surface. Empty: chosen automatically (above).
   std::vector<Eigen::Vector2d> sites;
-  double site_spacing = 0.04;                                       // m, automatic sites
-  int min_punch_nodes = 6;                                          // automatic sites
-  double punch_radius = 0.02;                                       // m
+  double site_spacing = 0.04;                                         // m, automatic sites
+  int min_punch_nodes = 6;                                            // automatic sites
+  double punch_radius = 0.02;                                         // m
   std::vector<double> depths = {0.05, 0.10, 0.15, 0.20, 0.25, 0.30};  // fraction of the organ's z extent, ascending
-  int degree = 4;                                                   // of Q, kMinLawDegree..kMaxLawDegree
-  int ratio_degree = 3;                                             // K of the surface field, 1..kMaxLawDegree
-  double newton_increment = 0.002;                                  // m of depth per Newton load step
+  int degree = 4;                                                     // of Q, kMinLawDegree..kMaxLawDegree
+  int ratio_degree = 3;                                               // K of the surface field, 1..kMaxLawDegree
+  double newton_increment = 0.002;                                    // m of depth per Newton load step
   std::uint64_t hash() const;
 };
 
 /// One indentation: the organ's response, linear and Newton.
 struct OrganCurveSample {
-  double site_x = 0, site_y = 0;  // m, the punch centre
+  double site_x = 0, site_y = 0;                     // m, the punch centre
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // m, rest centroid of the punch nodes
-  double thickness = 0;           // m, mean thickness of the punch nodes (organ_surface_geometry)
-  double lever = 0;               // m, mean distance of the punch nodes to the fixed set
-  double depth = 0;               // m
-  int nodes = 0;                  // punch nodes
-  double linear_force = 0;        // N, |F . d| of the linear solve (d = -z, the push)
-  double newton_force = 0;        // N, the same of the Newton solve
-  bool converged = true;          // Newton reached this depth
+  double thickness = 0;                              // m, mean thickness of the punch nodes (organ_surface_geometry)
+  double lever = 0;                                  // m, mean distance of the punch nodes to the fixed set
+  double depth = 0;                                  // m
+  int nodes = 0;                                     // punch nodes
+  double linear_force = 0;                           // N, |F . d| of the linear solve (d = -z, the push)
+  double newton_force = 0;                           // N, the same of the Newton solve
+  bool converged = true;                             // Newton reached this depth
 };
 
 struct OrganCurves {
@@ -74,9 +74,9 @@ struct OrganCurves {
 /// crossing (m; the organ's z extent when the ray finds none; 0 off the surface) and distance to the nearest node
 /// with a fixed component (m; 0 without a fixed set).
 struct OrganSurfaceGeometry {
-  std::vector<double> thickness;         // #V
-  std::vector<double> lever;             // #V
-  std::vector<Eigen::Vector3d> normal;   // #V, unit outward (0 off the surface)
+  std::vector<double> thickness;        // #V
+  std::vector<double> lever;            // #V
+  std::vector<Eigen::Vector3d> normal;  // #V, unit outward (0 off the surface)
 };
 OrganSurfaceGeometry organ_surface_geometry(const mesh::TetMesh& mesh, const fem::FixedSet& fixed);
 
@@ -93,8 +93,8 @@ std::vector<Eigen::Vector2d> organ_curve_sites(const fem::ElasticModel& model, c
 OrganCurves compute_organ_curves(const fem::ElasticModel& model, const OrganCurveSettings& settings, std::ostream* log);
 
 /// The law: Q (degree settings.degree, the node-less fallback; `q_report` receives its fit) and the surface field
-/// (settings.ratio_degree) of `mesh` and `fixed` from the converged samples. Throws surgsim::core::Error when Q cannot be
-/// fitted or there are too few samples for the field.
+/// (settings.ratio_degree) of `mesh` and `fixed` from the converged samples. Throws surgsim::core::Error when Q cannot
+/// be fitted or there are too few samples for the field.
 NonlinearLaw fit_organ_law(const OrganCurves& curves, const mesh::TetMesh& mesh, const fem::FixedSet& fixed,
                            const OrganCurveSettings& settings, FitReport* q_report = nullptr);
 
@@ -104,9 +104,9 @@ struct OrganLawValidation {
   struct Site {
     double site_x = 0, site_y = 0;
     int nodes = 0;
-    double worst = 0;   // largest |F_pred - F_newton| / F_newton over its depths, held out
-    double fitted = 0;  // the same with every site in the fit
-    double q_worst = 0; // the same with the one-Q law (fitted on every site)
+    double worst = 0;    // largest |F_pred - F_newton| / F_newton over its depths, held out
+    double fitted = 0;   // the same with every site in the fit
+    double q_worst = 0;  // the same with the one-Q law (fitted on every site)
   };
   std::vector<Site> sites;
   double worst = 0, mean = 0;  // held out, over every site and depth

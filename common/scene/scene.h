@@ -49,8 +49,9 @@ struct VisualSpec {
 /// The liver's run-time model, YAML
 /// `liver: {deformation: linear | corotational | multirate, curves: cylinder | organ}`.
 struct LiverOptions {
-  compliance::LiverDeformation deformation = compliance::LiverDeformation::kLinear;  // corotational: warped compliance (compliance/corotation.h);
-                                                             // multirate: neo-Hookean tracker (nonlinear/multirate.h)
+  compliance::LiverDeformation deformation =
+      compliance::LiverDeformation::kLinear;  // corotational: warped compliance (compliance/corotation.h);
+                                              // multirate: neo-Hookean tracker (nonlinear/multirate.h)
   bool organ_curves = false;  // curves: organ: P and Q fitted on the organ's own Newton indentations (cached)
   bool defaults() const { return deformation == compliance::LiverDeformation::kLinear && !organ_curves; }
 };

@@ -134,11 +134,11 @@ int read_magic(const std::string& path, std::string_view line, bool complete, bo
                 "re-record the trajectory or convert it)");
   }
   if (multi) {
-    throw_error(path, ":1: not a surgsim trajectory: first line is ", core::text::quote(line), " (the first line must be ",
-                "exactly '", kMagic, "' or '", kMagicV2, "', then the column header)");
+    throw_error(path, ":1: not a surgsim trajectory: first line is ", core::text::quote(line),
+                " (the first line must be ", "exactly '", kMagic, "' or '", kMagicV2, "', then the column header)");
   }
-  throw_error(path, ":1: not a surgsim trajectory: first line is ", core::text::quote(line), " (the first line must be ",
-              "exactly '", kMagic, "', then the header '", kHeader, "')");
+  throw_error(path, ":1: not a surgsim trajectory: first line is ", core::text::quote(line),
+              " (the first line must be ", "exactly '", kMagic, "', then the header '", kHeader, "')");
 }
 
 // A v2 column header: "t", then for each instrument NAME.pitch,NAME.yaw,NAME.insertion,NAME.roll,NAME.jaw.
@@ -148,7 +148,8 @@ std::vector<std::string> read_header_v2(const std::string& path, int line_no, st
                           std::string(kHeaderV2.substr(2)) + "', e.g. 't,grasper.pitch,grasper.yaw," +
                           "grasper.insertion,grasper.roll,grasper.jaw')";
   if (fields[0] != "t") {
-    throw_error(path, ":", line_no, ": column header is ", core::text::quote(body), ": the first column must be 't'", fix);
+    throw_error(path, ":", line_no, ": column header is ", core::text::quote(body), ": the first column must be 't'",
+                fix);
   }
   if (count == 1 || (count - 1) % kDof != 0) {
     throw_error(path, ":", line_no, ": column header has ", count - 1, " columns after 't', not a whole group of ",
@@ -244,8 +245,8 @@ Table read_table(const std::string& path, bool multi) {
         const std::vector<std::string> want = column_names(1, {std::string(kSingleName)});
         for (int c = 0; ok && c < count; ++c) ok = fields[c] == want[static_cast<std::size_t>(c)];
         if (!ok) {
-          throw_error(path, ":", line_no, ": column header is ", core::text::quote(body), " (expected exactly '", kHeader,
-                      "' after the first line)");
+          throw_error(path, ":", line_no, ": column header is ", core::text::quote(body), " (expected exactly '",
+                      kHeader, "' after the first line)");
         }
         table.names = {std::string(kSingleName)};
       } else {

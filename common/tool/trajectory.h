@@ -65,9 +65,9 @@ class Trajectory {
 /// Poses of one or more instruments over time (v1 or v2 file).
 class MultiTrajectory {
  public:
-  /// Reads and validates a v1 or v2 file. Throws surgsim::core::Error "FILE:LINE: ..." as Trajectory::load does, and for a
-  /// v2 header whose groups are not NAME.pitch,NAME.yaw,NAME.insertion,NAME.roll,NAME.jaw, a repeated name, more than
-  /// kMaxInstruments groups, or a group partly empty.
+  /// Reads and validates a v1 or v2 file. Throws surgsim::core::Error "FILE:LINE: ..." as Trajectory::load does, and
+  /// for a v2 header whose groups are not NAME.pitch,NAME.yaw,NAME.insertion,NAME.roll,NAME.jaw, a repeated name, more
+  /// than kMaxInstruments groups, or a group partly empty.
   static MultiTrajectory load(const std::string& path);
   /// One instrument named "tool" from a single-instrument trajectory (every sample valid).
   static MultiTrajectory from_single(const Trajectory& trajectory, const std::string& name = "tool");

@@ -46,8 +46,8 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
   if (multirate) {
     // The neo-Hookean organ on the tensors' own mesh, material and fixed set; its tracker thread is started from
     // this (the main) thread, so with --cpu N it inherits the CPUs the haptic app left to everything but the loop.
-    multirate_ = std::make_unique<MultirateContacts>(model.mesh, scene.material, model.fixed, model.surface.nodes,
-                                                     scene.file);
+    multirate_ =
+        std::make_unique<MultirateContacts>(model.mesh, scene.material, model.fixed, model.surface.nodes, scene.file);
     contacts_->attach_multirate(multirate_.get());
     instruments_at_.resize(kInstrumentTicks);
     min_period_ns_ = scene.visual.rate_hz > 0 ? static_cast<std::uint64_t>(1e9 / scene.visual.rate_hz) : 0;

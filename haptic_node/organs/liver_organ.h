@@ -32,8 +32,8 @@ class LiverOrgan final : public HapticOrgan {
   /// also for a surface of more than msg::kMaxBodyPoints nodes). `tracker_thread` false (tests): a multirate scene's
   /// tracker is not started; the test cycles it with multirate()->cycle_once(). `tracker_threads`: the tracker's
   /// numeric threads (MultirateContacts::set_numeric_threads).
-  LiverOrgan(const scene::Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread = true,
-             int tracker_threads = 1);
+  LiverOrgan(const scene::Scene& scene, const std::string& cache_dir, std::ostream* progress,
+             bool tracker_thread = true, int tracker_threads = 1);
   /// Stops the rotation thread (corotational) and the tracker thread (multirate).
   ~LiverOrgan() override;
   LiverOrgan(const LiverOrgan&) = delete;
@@ -87,7 +87,8 @@ class LiverOrgan final : public HapticOrgan {
  private:
   std::vector<tool::ToolSpec> tools_;
   compliance::LiverDeformation deformation_ = compliance::LiverDeformation::kLinear;
-  std::unique_ptr<nonlinear::MultirateContacts> multirate_;  // multirate only (before contacts_: it outlives the pointer there)
+  std::unique_ptr<nonlinear::MultirateContacts>
+      multirate_;                                   // multirate only (before contacts_: it outlives the pointer there)
   std::unique_ptr<liver::LiverInstance> instance_;  // the model and the contact state the loop steps
   contact::ToolContacts* contacts_ = nullptr;       // &instance_->contacts()
   // Model swaps: a new instance from post_model() to the loop, the replaced one back to be freed off the loop.

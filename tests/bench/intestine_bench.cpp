@@ -328,8 +328,10 @@ void controller_table() {
       }
     }
   }
-  std::printf("controller_settle_worst_s %.3f (log2 law, every target and step; budget: the frame-rate controller "
-              "settles within 1 s)\n", worst_s);
+  std::printf(
+      "controller_settle_worst_s %.3f (log2 law, every target and step; budget: the frame-rate controller "
+      "settles within 1 s)\n",
+      worst_s);
 }
 
 }  // namespace

@@ -17,8 +17,9 @@ namespace surgsim::intestine::bench {
 struct RunResult {
   std::vector<double> total, dynamics, detection, response;  // wall clock per step, us
   std::vector<double> cpu;                                   // thread CPU time per step, us
-  intestine::RecallStats recall;    // summed over the compared steps
-  intestine::RecallStats recall_kind[2];  // the same, intestine-intestine [0] and intestine-mesentery [1] contacts apart
+  intestine::RecallStats recall;                             // summed over the compared steps
+  intestine::RecallStats
+      recall_kind[2];    // the same, intestine-intestine [0] and intestine-mesentery [1] contacts apart
   int compared = 0;      // steps compared with the reference
   double residual = 0;   // m, largest brute-force penetration after the response (compared steps)
   double contacts_mean = 0;
@@ -96,7 +97,8 @@ class DetectLatency {
 /// (recall, time to detect) and measures the penetration left by the response. after_step(s, state, report) is
 /// called after each step, outside the timed parts.
 template <class AfterStep>
-RunResult scripted_run(const intestine::IntestineParams& params, int steps, int every, double dt, AfterStep&& after_step) {
+RunResult scripted_run(const intestine::IntestineParams& params, int steps, int every, double dt,
+                       AfterStep&& after_step) {
   using surgsim::bench::thread_cpu_us;
   using surgsim::bench::us_since;
   using surgsim::bench::WallClock;
@@ -126,7 +128,8 @@ RunResult scripted_run(const intestine::IntestineParams& params, int steps, int 
       intestine::detect_brute_force(model.topology(), state.x, truth);
       r.recall += intestine::compare_with_reference(model.topology(), state.contacts(), truth);
       for (int k = 0; k < 2; ++k) {
-        const intestine::ContactKind kind = k == 0 ? intestine::ContactKind::kSegmentSegment : intestine::ContactKind::kSegmentTriangle;
+        const intestine::ContactKind kind =
+            k == 0 ? intestine::ContactKind::kSegmentSegment : intestine::ContactKind::kSegmentTriangle;
         kind_found.clear();
         kind_truth.clear();
         for (const auto& c : state.contacts()) {
@@ -157,7 +160,8 @@ RunResult scripted_run(const intestine::IntestineParams& params, int steps, int 
     r.total.push_back(d0 + d1 + d2);
     contacts += report.contacts;
     r.contacts_max = std::max(r.contacts_max, report.contacts);
-    after_step(s, static_cast<const intestine::IntestineState&>(state), static_cast<const intestine::StepReport&>(report));
+    after_step(s, static_cast<const intestine::IntestineState&>(state),
+               static_cast<const intestine::StepReport&>(report));
   }
   latency.finish(r);
   r.contacts_mean = steps > 0 ? static_cast<double>(contacts) / steps : 0.0;
@@ -166,7 +170,8 @@ RunResult scripted_run(const intestine::IntestineParams& params, int steps, int 
 
 /// The scripted run at dt = 1 ms with nothing observed after the steps.
 inline RunResult scripted_run(const intestine::IntestineParams& params, int steps, int every) {
-  return scripted_run(params, steps, every, 1e-3, [](int, const intestine::IntestineState&, const intestine::StepReport&) {});
+  return scripted_run(params, steps, every, 1e-3,
+                      [](int, const intestine::IntestineState&, const intestine::StepReport&) {});
 }
 
 }  // namespace surgsim::intestine::bench

@@ -493,7 +493,8 @@ int main(int argc, char** argv) {
                                  [&](const Case& c) { return std::find(only.begin(), only.end(), c.name) == only.end(); }),
                   cases.end());
     if (punch.empty() || grasp.empty()) throw surgsim::core::Error("no punch or grasp nodes on this mesh");
-    if (static_cast<int>(std::max(punch.size(), grasp.size())) > kMaxContacts) throw surgsim::core::Error("more than kMaxContacts constrained nodes");
+    if (static_cast<int>(std::max(punch.size(), grasp.size())) > kMaxContacts)
+      throw surgsim::core::Error("more than kMaxContacts constrained nodes");
 
     // The multirate slow side on this liver: a Newton iteration's cost decides the snapshot rate.
     const HyperelasticSolver newton(*o.model);
@@ -506,7 +507,8 @@ int main(int argc, char** argv) {
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
     if (!trace_path.empty()) {
       trace.reset(std::fopen(trace_path.c_str(), "w"));
-      if (!trace) throw surgsim::core::Error("--trace " + trace_path + ": cannot write the file (does its folder exist?)");
+      if (!trace)
+        throw surgsim::core::Error("--trace " + trace_path + ": cannot write the file (does its folder exist?)");
     }
     Superposition linear_fallback(tensors, "haptic");
     const auto print_slow_cycle = [&](const char* what, const MotionResult& mr) {
@@ -612,7 +614,8 @@ int main(int argc, char** argv) {
             law->apply_force(f, dir, sol.nodes.data(), sol.displacement.data(), sol.count, f);
           out.tick_us.push_back(us_since(t0));
         }
-        if (haptic.solve(contacts.data(), m, sol) != ContactStatus::kOk) throw surgsim::core::Error(c.name + ": G_CC solve failed");
+        if (haptic.solve(contacts.data(), m, sol) != ContactStatus::kOk)
+          throw surgsim::core::Error(c.name + ": G_CC solve failed");
         out.force = sol.tool_force;
         out.u.resize(3 * vis.row_count());
         visual.displacements(sol.nodes.data(), sol.lambda.data(), sol.count, out.u);
@@ -725,8 +728,10 @@ int main(int argc, char** argv) {
                   bench::percentile(all_cycle, 0.99), 1000 / bench::percentile(all_cycle, 0.5));
 
     // ---- the haptic tick and the visual frame, linear against corotational ----
-    std::printf("\nHaptic tick (ToolContacts, patch model, one instrument pressing 8 mm at (0.03, 0); us, %d ticks "
-                "after 50 warm)\n", 10 * repeats);
+    std::printf(
+        "\nHaptic tick (ToolContacts, patch model, one instrument pressing 8 mm at (0.03, 0); us, %d ticks "
+        "after 50 warm)\n",
+        10 * repeats);
     std::printf("%-14s | %8s %8s %8s | %6s\n", "deformation", "p50", "p99", "max", "nodes");
     for (LiverDeformation d : {LiverDeformation::kLinear, LiverDeformation::kCorotational}) {
       const SurfaceMesh surface = boundary_surface(o.mesh);

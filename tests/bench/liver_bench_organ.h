@@ -30,14 +30,15 @@ struct Organ {
   fem::FixedSet fixed;
   std::unique_ptr<fem::ElasticModel> model;
   std::vector<int> contacts;      // contactable (free boundary) nodes
-  std::vector<compliance::RowSet> rows;       // "haptic", "visual"
+  std::vector<compliance::RowSet> rows;  // "haptic", "visual"
   std::vector<int> visible;       // boundary nodes = the visual rows, in row order
   Eigen::MatrixX3d normals;       // #V x 3, unit outward normals on boundary nodes (0 inside)
   double height = 0;              // m, z extent
 };
 
 /// The scene's liver at `target_nodes` (meshes cached in `cache`), or with `box` a liver-sized structured box.
-inline std::unique_ptr<Organ> make_organ(const scene::Scene& scene, int target_nodes, const std::string& cache, bool box) {
+inline std::unique_ptr<Organ> make_organ(const scene::Scene& scene, int target_nodes, const std::string& cache,
+                                         bool box) {
   auto o = std::make_unique<Organ>();
   if (!box) {
     scene::Scene sized = scene;
@@ -52,7 +53,8 @@ inline std::unique_ptr<Organ> make_organ(const scene::Scene& scene, int target_n
     o->mesh.nodes.rowwise() -= Eigen::RowVector3d(0.13, 0.08, 0.04);
   }
   o->fixed = fem::fixed_set_from_region(o->mesh, scene.fixed);
-  o->model = std::make_unique<fem::ElasticModel>(fem::build_elastic_model(o->mesh, scene.material, o->fixed, scene.file));
+  o->model =
+      std::make_unique<fem::ElasticModel>(fem::build_elastic_model(o->mesh, scene.material, o->fixed, scene.file));
   o->contacts = compliance::contactable_nodes(o->mesh, o->fixed);
   o->rows = compliance::standard_row_sets(o->mesh, o->contacts);
   for (const auto& r : o->rows)
@@ -93,8 +95,8 @@ inline double rel(double err, double scale) { return err / std::max(scale, 1e-30
 
 /// The quasi non-linear law as the nodes apply it: the haptic node's Q (the organ law: its surface field at the
 /// contact nodes) on the tool force `force` along the mean imposed displacement (`imposed`, `m` of them;
-/// common/contact/tool_contacts.cpp), the visual node's P on every visible row of `u` (3R, the "visual" block's rows) along the direction of the summed rows of the contact nodes
-/// (visual_node/views/surface_deformer.cpp).
+/// common/contact/tool_contacts.cpp), the visual node's P on every visible row of `u` (3R, the "visual" block's rows)
+/// along the direction of the summed rows of the contact nodes (visual_node/views/surface_deformer.cpp).
 inline void apply_quasi(const nonlinear::NonlinearLaw& law, const Eigen::Vector3d* imposed, int m, const int* nodes,
                         const compliance::TensorBlock& visual, Eigen::Vector3d& force, Eigen::VectorXd& u) {
   Eigen::Vector3d dir;

@@ -147,8 +147,9 @@ int main(int argc, char** argv) {
     print_row(name, linear, render);
     print_row("BodyState shape (multirate)", shape_path, render);
     std::printf("contact frames not applied: %llu (must be 0)\n", static_cast<unsigned long long>(view.deform_errors()));
-    std::printf("budget (docs/DESIGN.md, section 'Budgets'): deformation of the visible mesh <= 1000 us; "
-                "frames >= 50 Hz (20 ms) at 640x480\n");
+    std::printf(
+        "budget (docs/DESIGN.md, section 'Budgets'): deformation of the visible mesh <= 1000 us; "
+        "frames >= 50 Hz (20 ms) at 640x480\n");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "multirate_view_bench: %s\n", e.what());
     return 1;

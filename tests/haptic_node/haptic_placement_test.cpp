@@ -124,7 +124,7 @@ TEST(HapticPlacement, TickTraceHasEveryTick) {
   HapticOptions o = paced_intestine("trace");
   const nlohmann::json j = run(o);
   const auto stages = expect_trace(o.tick_trace, 50, 60e6);  // the whole run, start-up included, is far below a minute
-  for (const double us : stages) EXPECT_EQ(us, 0.0);  // the intestine has no contact stages
+  for (const double us : stages) EXPECT_EQ(us, 0.0);         // the intestine has no contact stages
   EXPECT_EQ(j.at("tick_cpu_us").at("count").get<int>(), 50);
   EXPECT_TRUE(j.contains("loop_involuntary_switches"));
   EXPECT_TRUE(j.contains("loop_page_faults"));

@@ -296,8 +296,8 @@ TEST(Publisher, NoHoldAfterTheLastTick) {
   EXPECT_EQ(order, "F0 C0 F1 ");
 }
 
-// Several instruments: each instrument's force goes out as its own ForceFeedback (its key), in instrument order before the frame;
-// an overrun holds and fades every instrument's force, and the final zero releases every device.
+// Several instruments: each instrument's force goes out as its own ForceFeedback (its key), in instrument order before
+// the frame; an overrun holds and fades every instrument's force, and the final zero releases every device.
 TEST(Publisher, EveryInstrumentGetsItsOwnForceHoldAndFinalZero) {
   RecordingSink sink;
   PublisherOptions o;

@@ -21,7 +21,6 @@
 #include "node_test.h"
 #include "process.h"
 
-
 namespace surgsim {
 namespace {
 

@@ -19,7 +19,6 @@
 #include "node_test.h"
 #include "process.h"
 
-
 namespace surgsim {
 namespace {
 

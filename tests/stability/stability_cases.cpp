@@ -598,7 +598,7 @@ std::vector<CaseResult> liver_tool_speed_cases() {
   for (const Run& run : runs) {
     out.push_back(guarded(make("liver", "tool_speed", "v=" + g(run.speed) + " m/s" + run.what), [&](CaseResult& r) {
       ToolContacts contacts(box.mesh, box.surface, (run.stiff ? stiff_setup : setup).tensors, spec,
-                             run.stiff ? &linear : &law);
+                            run.stiff ? &linear : &law);
       const double start = 0.0237;  // m above the top face
       const double step = run.speed * kHapticDt;
       int crossing_tick = -1, contact_tick = -1, saturated = 0, faults = 0;

@@ -23,7 +23,8 @@ struct ConstraintRow {
 
 /// The rows ToolContacts (patch model) imposed for point i of instrument t in its last step: the patch's normal row
 /// (a sliding contact), or three Cartesian rows (a grasp or sticking contact: a 3-D constraint, basis-independent).
-inline void add_patch_rows(const contact::ToolContacts& c, int i, int t, bool three_d, std::vector<ConstraintRow>& rows) {
+inline void add_patch_rows(const contact::ToolContacts& c, int i, int t, bool three_d,
+                           std::vector<ConstraintRow>& rows) {
   const contact::PointPatch& p = c.patch(i, t);
   const contact::PointContact& pc = c.point(i, t);
   const Eigen::Vector3d dirs[3] = {Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};

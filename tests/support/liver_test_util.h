@@ -24,7 +24,10 @@ struct Organ {
   fem::ElasticModel model;
 
   Organ(mesh::TetMesh m, const fem::Material& mat, fem::FixedSet f)
-      : mesh(std::move(m)), material(mat), fixed(std::move(f)), model(fem::build_elastic_model(mesh, material, fixed)) {}
+      : mesh(std::move(m)),
+        material(mat),
+        fixed(std::move(f)),
+        model(fem::build_elastic_model(mesh, material, fixed)) {}
   Organ(const Organ&) = delete;
   Organ& operator=(const Organ&) = delete;
 };
@@ -37,8 +40,10 @@ inline fem::Material liver_material() {
 }
 
 /// A liver-sized box (0.16 x 0.12 x 0.08 m) of nx x ny x nz cells, clamped on its bottom face (z = 0).
-inline std::unique_ptr<Organ> box_organ(int nx = 8, int ny = 6, int nz = 4, mesh::BoxSplit split = mesh::BoxSplit::kSix) {
-  mesh::TetMesh mesh = mesh::make_box_mesh(nx, ny, nz, Eigen::Vector3d(0.16, 0.12, 0.08), Eigen::Vector3d::Zero(), split);
+inline std::unique_ptr<Organ> box_organ(int nx = 8, int ny = 6, int nz = 4,
+                                        mesh::BoxSplit split = mesh::BoxSplit::kSix) {
+  mesh::TetMesh mesh =
+      mesh::make_box_mesh(nx, ny, nz, Eigen::Vector3d(0.16, 0.12, 0.08), Eigen::Vector3d::Zero(), split);
   fem::FixedRegion region;
   region.has_plane = true;
   region.plane_point = Eigen::Vector3d::Zero();

@@ -66,8 +66,8 @@ constexpr int kMesenteryColSteps = 2;
 
 class IntestineView {
  public:
-  /// Init (allocates; throws surgsim::core::Error on bad parameters): the tube builder for scene.intestine's columns, the
-  /// meshes at the finest LOD, the mesentery's refined surface, the frame-rate controller. BodyStates whose scene
+  /// Init (allocates; throws surgsim::core::Error on bad parameters): the tube builder for scene.intestine's columns,
+  /// the meshes at the finest LOD, the mesentery's refined surface, the frame-rate controller. BodyStates whose scene
   /// hash differs from `scene_hash` are refused.
   IntestineView(const scene::Scene& scene, std::uint64_t scene_hash,
                 intestine::TubeSkinning skinning = intestine::TubeSkinning::kGpu);

@@ -114,7 +114,8 @@ class LiverView : public OrganView {
   std::unique_ptr<BodyStateListener> listener_;
   std::vector<double> body_xyz_;  // 3 x kMaxBodyPoints, the listener's newest copied out
   std::vector<double> snapshot_xyz_;  // 3 x surface nodes: the last state taken (carried to each frame's contacts)
-  std::array<compliance::Contact, compliance::kMaxContacts> carry_contacts_{};  // the last fresh frame's nodes and imposed displacements
+  std::array<compliance::Contact, compliance::kMaxContacts>
+      carry_contacts_{};  // the last fresh frame's nodes and imposed displacements
   std::uint64_t carry_failures_ = 0;
   InstrumentPoses body_instruments_;
   int body_state_instruments_ = 0;  // instruments the last state drawn carried (the wire protocol: all of them)
@@ -128,7 +129,7 @@ class LiverView : public OrganView {
   std::uint64_t frames_linear_ = 0;  // frames drawn by the linear deformer before the first BodyState
   std::uint64_t frames_body_ = 0;    // frames drawn with the tracker's shape
   std::uint64_t age_unknown_ = 0;    // frames whose shape's stamp is after the draw (another host's clock)
-  core::SampleRecorder body_age_ms_{1 << 18};  // the drawn shape's age at draw: draw time - BodyState stamp_ns
+  core::SampleRecorder body_age_ms_{1 << 18};        // the drawn shape's age at draw: draw time - BodyState stamp_ns
   core::SampleRecorder body_first_age_ms_{1 << 18};  // the same at the first frame that draws each state (its delivery)
   bool body_new_ = false;  // a state was taken since the last frame
   core::SampleRecorder body_apply_us_{1 << 18};

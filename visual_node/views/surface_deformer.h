@@ -28,21 +28,22 @@ class SurfaceDeformer {
   /// and the drawn u_n = R_n u~_n with the last rotations;
   /// warm-started from the previous frame's rotations; the law's P comes after, on the warped u.
   SurfaceDeformer(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, const compliance::Tensors* tensors,
-                  const nonlinear::NonlinearLaw* law = nullptr, compliance::LiverDeformation deformation = compliance::LiverDeformation::kLinear);
+                  const nonlinear::NonlinearLaw* law = nullptr,
+                  compliance::LiverDeformation deformation = compliance::LiverDeformation::kLinear);
   static constexpr int kCorotationalPasses = 2;
 
   /// Deforms for forces lambda (N) on m contact nodes (mesh indices). m = 0 restores the rest shape. On a bad
   /// input (unknown node, non-finite lambda) the previous shape is kept and the status says why. `direction`
   /// (unit; the ContactFrame's mean imposed displacement) is the axis of the non-linear law; zero skips it.
   compliance::ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, int m,
-                      const Eigen::Vector3d& direction = Eigen::Vector3d::Zero()) noexcept;
+                                  const Eigen::Vector3d& direction = Eigen::Vector3d::Zero()) noexcept;
   /// Several instruments: contact l belongs to instrument instrument[l], whose mean imposed displacement
   /// direction is directions[instrument[l]] (`instruments` of them). The displacements are the same linear sum
   /// u = sum_l G(., k_l) lambda_l; the non-linear law bends each instrument's share u_i (its own contacts) about its
   /// own direction before the shares are added. Contacts naming an instrument outside 0..instruments-1 or one with
   /// a zero direction are superposed linearly. One instrument: the same as apply(nodes, lambda, m, direction).
   compliance::ContactStatus apply(const int* nodes, const Eigen::Vector3d* lambda, const int* instrument, int m,
-                      const Eigen::Vector3d* directions, int instruments) noexcept;
+                                  const Eigen::Vector3d* directions, int instruments) noexcept;
 
   /// The shape itself (liver.deformation multirate: the haptic node's tracker publishes it as BodyState):
   /// `xyz` holds x, y, z (m) of every visible vertex in SurfaceMesh node order (the order of visible_nodes()),
@@ -54,13 +55,15 @@ class SurfaceDeformer {
   /// node from its place in `xyz` to rest + its displacement, lambda = G_CC^-1 (u* - u_xyz), added to the whole
   /// shape, so the contact nodes land exactly where the tool holds them and the rest follows linearly between two
   /// tracker states. m = 0 is set_positions. kOk, or why not (then the previous shape is kept). No allocation.
-  compliance::ContactStatus carry_positions(const double* xyz, int count, const compliance::Contact* contacts, int m) noexcept;
+  compliance::ContactStatus carry_positions(const double* xyz, int count, const compliance::Contact* contacts,
+                                            int m) noexcept;
 
   /// Embeds a finer visual surface: each of its vertices is tied to the closest point of the mechanical boundary
   /// (triangle, barycentric coordinates, offset along the triangle's normal) and follows it. Only boundary rows are
   /// used, so the visual node still holds no interior rows. Throws surgsim::core::Error naming the file and the first
   /// vertex further than `max_distance` (m) from the boundary.
-  void embed(const mesh::TriSurface& fine, const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, double max_distance);
+  void embed(const mesh::TriSurface& fine, const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface,
+             double max_distance);
   bool embedded() const { return fine_tris_.rows() > 0; }
   /// What the renderer draws: the embedded surface when there is one, else the boundary.
   const Eigen::MatrixX3f& drawn_positions() const { return embedded() ? fine_positions_ : positions_; }
@@ -111,7 +114,7 @@ class SurfaceDeformer {
   // --- corotational ---
   /// u (3 per visual row) for forces lambda on m contact nodes: linear, or warped by the current rotations.
   compliance::ContactStatus displace(const int* nodes, const Eigen::Vector3d* lambda, int m, Eigen::VectorXd& u,
-                         bool rotate_rows = true) noexcept;
+                                     bool rotate_rows = true) noexcept;
   /// The rotations of every visible node from the contacts (kCorotationalPasses passes); u_ holds the last pass's u.
   compliance::ContactStatus update_rotations(const int* nodes, const Eigen::Vector3d* lambda, int m) noexcept;
   std::unique_ptr<compliance::NodeRotations> rotations_;

@@ -34,7 +34,7 @@ struct Telemetry {
   std::uint32_t contacts = 0;            // contact entries of the newest frame (every instrument)
   std::uint32_t instrument_contacts = 0; // the driven instrument's contact points
   double sim_time = 0;                   // s
-  tool::Pose5 pose;                            // the driven instrument's pose as the haptic node used it
+  tool::Pose5 pose;                      // the driven instrument's pose as the haptic node used it
   // VisualStatus echoes: the haptic -> visual one-way latency of the newest echo (same host clocks), us.
   double haptic_visual_latency_us = -1;
   double visual_fps = 0;

@@ -42,7 +42,7 @@ const char* content_type(std::string_view name);
 /// A message from a page (JSON text over the WebSocket).
 struct ClientMessage {
   enum class Type { kTake, kRelease, kPose, kShown } type = Type::kTake;
-  tool::Pose5 pose;                    // kPose: the pose the page asks for (pitch, yaw, insertion, roll, jaw)
+  tool::Pose5 pose;              // kPose: the pose the page asks for (pitch, yaw, insertion, roll, jaw)
   std::uint64_t frame = 0;       // kShown: the frame number the page just displayed
 };
 

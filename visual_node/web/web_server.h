@@ -34,7 +34,7 @@ struct ServerOptions {
   double command_rate_hz = 200;         // ToolCommand rate while a page drives
   double driver_silence_s = 0.5;        // a driving page silent this long stops the commands (the tab is hidden)
   DeviceLimits limits;
-  tool::Pose5 start_pose;                     // the virtual device's pose before any page moved it
+  tool::Pose5 start_pose;  // the virtual device's pose before any page moved it
   std::uint32_t instrument = 0;
   std::string instrument_name = "tool";
   double force_limit = 8;               // N, the instrument's device limit (the page's force bar)

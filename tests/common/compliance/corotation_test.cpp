@@ -58,7 +58,8 @@ struct Fixture {
     }
     for (int e = 0; e < c.node_count; ++e) {
       c.entry_weight[static_cast<std::size_t>(e)] /= sum;
-      centre += c.entry_weight[static_cast<std::size_t>(e)] * organ->mesh.nodes.row(c.nodes[static_cast<std::size_t>(e)]).transpose();
+      centre += c.entry_weight[static_cast<std::size_t>(e)] *
+                organ->mesh.nodes.row(c.nodes[static_cast<std::size_t>(e)]).transpose();
     }
     c.patch_count = 1;
     c.patch_start[1] = c.node_count;
@@ -83,7 +84,8 @@ Result hold(const Fixture& f, const Eigen::Vector3d& target, const RigidFrame* b
   }
   std::array<Eigen::Matrix3d, kMaxContacts> r;
   for (int u = 0; u < c.node_count; ++u)
-    r[static_cast<std::size_t>(u)] = rot ? rot->rotation(c.nodes[static_cast<std::size_t>(u)]) : Eigen::Matrix3d::Identity();
+    r[static_cast<std::size_t>(u)] =
+        rot ? rot->rotation(c.nodes[static_cast<std::size_t>(u)]) : Eigen::Matrix3d::Identity();
   // The free configuration: the rest shape carried by the base frame (corotational) or the rest shape (linear).
   const Eigen::Vector3d free_centre = base ? base->apply(f.centre) : f.centre;
   const Eigen::Vector3d offset = target - free_centre;
@@ -158,8 +160,8 @@ TEST(Corotation, RingRotationsOfARigidMotionAreThatRotation) {
     for (int n : f.surface.nodes) worst = std::max(worst, (rot.rotation(n) - q).norm());
     EXPECT_LT(worst, 1e-9) << deg << " degrees";
     const Eigen::MatrixX3d& x0 = f.organ->mesh.nodes;
-    const RigidFrame base = fit_rigid_frame(x0, f.fixed_nodes, ((x0 * q.transpose()).rowwise() +
-                                                                 Eigen::RowVector3d(0.3, -0.1, 0.2)) - x0);
+    const RigidFrame base =
+        fit_rigid_frame(x0, f.fixed_nodes, ((x0 * q.transpose()).rowwise() + Eigen::RowVector3d(0.3, -0.1, 0.2)) - x0);
     EXPECT_LT((base.r - q).norm(), 1e-9);
     EXPECT_LT((base.t - Eigen::Vector3d(0.3, -0.1, 0.2)).norm(), 1e-9);
   }
@@ -254,7 +256,8 @@ TEST(Corotation, AgreesWithTheLinearPathAtSmallRotations) {
     Eigen::VectorXd uv(3 * sup.block().row_count());
     ASSERT_EQ(sup.displacements(nodes.data(), lambda.data(), c.node_count, uv), ContactStatus::kOk);
     Eigen::MatrixX3d u = Eigen::MatrixX3d::Zero(f.organ->mesh.nodes.rows(), 3);
-    for (int r = 0; r < sup.block().row_count(); ++r) u.row(sup.block().row_nodes[static_cast<std::size_t>(r)]) = uv.segment<3>(3 * r).transpose();
+    for (int r = 0; r < sup.block().row_count(); ++r)
+      u.row(sup.block().row_nodes[static_cast<std::size_t>(r)]) = uv.segment<3>(3 * r).transpose();
     NodeRotations rot(f.organ->mesh, f.surface);
     rot.update_all(u);
     double angle = 0;

@@ -99,8 +99,8 @@ CylinderResult compress_generated_cylinder(int target_nodes) {
       if (a < 0 || mesh.nodes.row(i).head<2>().norm() < mesh.nodes.row(a).head<2>().norm()) a = i;
     }
   for (int i = 0; i < n; ++i)
-    if (masks[static_cast<std::size_t>(i)] && (c < 0 || (mesh.nodes.row(i) - mesh.nodes.row(a)).norm() >
-                                                             (mesh.nodes.row(c) - mesh.nodes.row(a)).norm()))
+    if (masks[static_cast<std::size_t>(i)] &&
+        (c < 0 || (mesh.nodes.row(i) - mesh.nodes.row(a)).norm() > (mesh.nodes.row(c) - mesh.nodes.row(a)).norm()))
       c = i;
   masks[static_cast<std::size_t>(a)] |= 3;
   const Eigen::Vector3d ac = (mesh.nodes.row(c) - mesh.nodes.row(a)).transpose();

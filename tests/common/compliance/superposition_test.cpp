@@ -83,7 +83,8 @@ TEST_F(SuperpositionTest, EqualsTheReferenceSolveForRandomMultiContactLoads) {
       Eigen::MatrixX3d ref_lambda(m, 3);
       for (int l = 0; l < m; ++l) {
         lambda.row(l) = sol.lambda[static_cast<std::size_t>(l)].transpose();
-        const auto it = std::lower_bound(ref.imposed_nodes.begin(), ref.imposed_nodes.end(), sol.nodes[static_cast<std::size_t>(l)]);
+        const auto it = std::lower_bound(ref.imposed_nodes.begin(), ref.imposed_nodes.end(),
+                                         sol.nodes[static_cast<std::size_t>(l)]);
         ref_lambda.row(l) = ref.reaction.row(it - ref.imposed_nodes.begin());
       }
       EXPECT_LT(test::rel_error(lambda, ref_lambda), 1e-9) << m;
@@ -91,7 +92,8 @@ TEST_F(SuperpositionTest, EqualsTheReferenceSolveForRandomMultiContactLoads) {
       // Displacements of every node.
       ASSERT_EQ(all.displacements(sol.nodes.data(), sol.lambda.data(), sol.count, u), ContactStatus::kOk);
       Eigen::VectorXd ref_u(u.size());
-      for (Eigen::Index i = 0; i < ref.displacement.rows(); ++i) ref_u.segment<3>(3 * i) = ref.displacement.row(i).transpose();
+      for (Eigen::Index i = 0; i < ref.displacement.rows(); ++i)
+        ref_u.segment<3>(3 * i) = ref.displacement.row(i).transpose();
       EXPECT_LT(test::rel_error(u, ref_u), 1e-9) << m;
       // The imposed displacements hold at the contact nodes.
       for (const auto& c : contacts) {
@@ -123,7 +125,8 @@ TEST_F(SuperpositionTest, PaperFormAgrees) {
                 1e-9 * p.corrected[static_cast<std::size_t>(l)].norm());
       // u~_l = G_kk lambda_l, and lambda_from_corrected inverts it.
       Eigen::Vector3d back;
-      ASSERT_EQ(all.lambda_from_corrected(&p.nodes[static_cast<std::size_t>(l)], &p.corrected[static_cast<std::size_t>(l)], 1, &back),
+      ASSERT_EQ(all.lambda_from_corrected(&p.nodes[static_cast<std::size_t>(l)],
+                                          &p.corrected[static_cast<std::size_t>(l)], 1, &back),
                 ContactStatus::kOk);
       EXPECT_LT((back - sol.lambda[static_cast<std::size_t>(l)]).norm(), 1e-9 * sol.tool_force.norm() + 1e-15);
     }
@@ -152,8 +155,8 @@ TEST_F(SuperpositionTest, VisualBlockAgreesWithPerNodeEvaluation) {
   ASSERT_EQ(visual.displacements(sol.nodes.data(), sol.lambda.data(), sol.count, u), ContactStatus::kOk);
   for (int r = 0; r < visual.block().row_count(); r += 11) {
     Eigen::Vector3d ur;
-    ASSERT_EQ(visual.displacement(visual.block().row_nodes[static_cast<std::size_t>(r)], sol.nodes.data(), sol.lambda.data(),
-                                  sol.count, ur),
+    ASSERT_EQ(visual.displacement(visual.block().row_nodes[static_cast<std::size_t>(r)], sol.nodes.data(),
+                                  sol.lambda.data(), sol.count, ur),
               ContactStatus::kOk);
     EXPECT_LT((ur - u.segment<3>(3 * r)).norm(), 1e-15 + 1e-12 * u.norm());
   }
@@ -162,7 +165,8 @@ TEST_F(SuperpositionTest, VisualBlockAgreesWithPerNodeEvaluation) {
   EXPECT_TRUE(haptic.displacement(organ_->fixed.fixed_nodes().front(), sol, uf));
   EXPECT_EQ(uf, Eigen::Vector3d::Zero());
   for (int i = 0; i < tensors_->node_count; ++i)
-    if (tensors_->column_of_node[static_cast<std::size_t>(i)] < 0 && tensors_->fixed_mask[static_cast<std::size_t>(i)] == 0) {
+    if (tensors_->column_of_node[static_cast<std::size_t>(i)] < 0 &&
+        tensors_->fixed_mask[static_cast<std::size_t>(i)] == 0) {
       EXPECT_FALSE(haptic.displacement(i, sol, uf));
       break;
     }
@@ -189,8 +193,10 @@ TEST_F(SuperpositionTest, DuplicatesAreMerged) {
   EXPECT_EQ(sol.lambda[0], ref.lambda[0]);
   EXPECT_EQ(sol.tool_force, ref.tool_force);
   // Five entries over four distinct nodes fit a capacity of 4 once merged.
-  std::vector<Contact> five = {{(*contacts_)[1], {0, 0, -1e-3}}, {(*contacts_)[2], {0, 0, -1e-3}},
-                               {(*contacts_)[1], {0, 0, -1e-3}}, {(*contacts_)[4], {0, 0, -1e-3}},
+  std::vector<Contact> five = {{(*contacts_)[1], {0, 0, -1e-3}},
+                               {(*contacts_)[2], {0, 0, -1e-3}},
+                               {(*contacts_)[1], {0, 0, -1e-3}},
+                               {(*contacts_)[4], {0, 0, -1e-3}},
                                {(*contacts_)[5], {0, 0, -1e-3}}};
   EXPECT_EQ(s.solve(five.data(), 5, sol), ContactStatus::kOk);
   five.push_back({(*contacts_)[6], {0, 0, -1e-3}});
@@ -205,7 +211,9 @@ TEST_F(SuperpositionTest, BadContactsAreRefusedWithAStatus) {
   const int fixed_node = organ_->fixed.fixed_nodes().front();
   int interior = -1;
   for (int i = 0; i < tensors_->node_count && interior < 0; ++i)
-    if (tensors_->column_of_node[static_cast<std::size_t>(i)] < 0 && tensors_->fixed_mask[static_cast<std::size_t>(i)] == 0) interior = i;
+    if (tensors_->column_of_node[static_cast<std::size_t>(i)] < 0 &&
+        tensors_->fixed_mask[static_cast<std::size_t>(i)] == 0)
+      interior = i;
   ASSERT_GE(interior, 0);
   auto status = [&](int node, const Eigen::Vector3d& d) {
     const Contact c[2] = {{good, Eigen::Vector3d(0, 0, -1e-3)}, {node, d}};
@@ -246,10 +254,12 @@ TEST_F(SuperpositionTest, NearSingularIsReportedNotThrown) {
 
   // A genuinely singular G_CC: a copy of the tensors in which two contact nodes share one column.
   Tensors twin = *tensors_;
-  const int ca = twin.column_of_node[static_cast<std::size_t>(a)], cb = twin.column_of_node[static_cast<std::size_t>(b)];
+  const int ca = twin.column_of_node[static_cast<std::size_t>(a)],
+            cb = twin.column_of_node[static_cast<std::size_t>(b)];
   TensorBlock& h = twin.blocks[0];
   h.g.middleCols<3>(3 * cb) = h.g.middleCols<3>(3 * ca);
-  h.g.middleRows<3>(3 * h.row_of_node[static_cast<std::size_t>(b)]) = h.g.middleRows<3>(3 * h.row_of_node[static_cast<std::size_t>(a)]);
+  h.g.middleRows<3>(3 * h.row_of_node[static_cast<std::size_t>(b)]) =
+      h.g.middleRows<3>(3 * h.row_of_node[static_cast<std::size_t>(a)]);
   Superposition singular(twin, "haptic", 4);
   EXPECT_EQ(singular.solve(c, 2, sol), ContactStatus::kNearSingular);
 }

@@ -186,7 +186,8 @@ TEST_F(TensorCacheTest, SymmetricFloatRoundTrip) {
   const TensorCacheKey key = tensor_cache_key(organ_->mesh, organ_->material, organ_->fixed, contacts_, rows, opts);
   PrecomputeOptions dense = opts;
   dense.symmetric_blocks.clear();
-  EXPECT_NE(key.settings, tensor_cache_key(organ_->mesh, organ_->material, organ_->fixed, contacts_, rows, dense).settings);
+  EXPECT_NE(key.settings,
+            tensor_cache_key(organ_->mesh, organ_->material, organ_->fixed, contacts_, rows, dense).settings);
   save_tensor_cache(path_, t, key);
   Tensors back;
   ASSERT_EQ(load_tensor_cache(path_, key, back, {"haptic"}).status, CacheStatus::kOk);

@@ -34,7 +34,7 @@ class LiverCorotationTest : public ::testing::Test {
   }
   std::unique_ptr<ToolContacts> make(LiverDeformation d) const {
     return std::make_unique<ToolContacts>(slab_->mesh, slab_->surface, slab_->tensors, std::vector<ToolSpec>{spec_},
-                                           nullptr, d);
+                                          nullptr, d);
   }
   static ContactTick step(ToolContacts& c, const Eigen::Vector3d& tip, double jaw = 0.5) {
     ContactTick t;

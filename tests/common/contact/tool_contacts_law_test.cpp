@@ -1,6 +1,5 @@
-// The haptic tick applies the organ law's surface field (nonlinear/nonlinear_law.h, fitted by nonlinear/organ_curves.h) at
-// each instrument's own contact nodes (common/contact/tool_contacts.cpp, ToolContacts::finish), without
-// allocating.
+// The haptic tick applies the organ law's surface field (nonlinear/nonlinear_law.h, fitted by nonlinear/organ_curves.h)
+// at each instrument's own contact nodes (common/contact/tool_contacts.cpp, ToolContacts::finish), without allocating.
 #include <gtest/gtest.h>
 
 #include "fem/fixed_set.h"
@@ -35,7 +34,8 @@ TEST(ToolContactsOrganLaw, TheTickScalesThePushByTheFieldAtItsContactNodes) {
   field.thickness = g.thickness;
   field.lever = g.lever;
   field.normal = g.normal;
-  for (Eigen::Index n = 0; n < slab.mesh.nodes.rows(); ++n) field.position.push_back(slab.mesh.nodes.row(n).transpose());
+  for (Eigen::Index n = 0; n < slab.mesh.nodes.rows(); ++n)
+    field.position.push_back(slab.mesh.nodes.row(n).transpose());
   const NonlinearLaw law(std::nullopt, std::nullopt, field);
 
   ToolSpec spec;
@@ -44,7 +44,8 @@ TEST(ToolContactsOrganLaw, TheTickScalesThePushByTheFieldAtItsContactNodes) {
   spec.shaft_points = 1;
   spec.force_limit = 100.0;
   spec.contact_capacity = 20;
-  ToolContacts linear(slab.mesh, slab.surface, slab.tensors, spec), organ(slab.mesh, slab.surface, slab.tensors, spec, &law);
+  ToolContacts linear(slab.mesh, slab.surface, slab.tensors, spec),
+      organ(slab.mesh, slab.surface, slab.tensors, spec, &law);
   long allocations = 0;
   int checked = 0;
   for (int k = 0; k <= 40; ++k) {

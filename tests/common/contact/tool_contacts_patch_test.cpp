@@ -51,9 +51,9 @@ class LiverPatchTest : public ::testing::Test {
   }
 
   struct Slide {
-    double ripple = 0;          // peak-to-peak of the detrended normal force / mean
-    double tangential = 0;      // largest |F_t| / F_n
-    double mean = 0;            // N
+    double ripple = 0;      // peak-to-peak of the detrended normal force / mean
+    double tangential = 0;  // largest |F_t| / F_n
+    double mean = 0;        // N
   };
   // Press to `depth` at `start`, settle, then slide `length` along the unit `dir` in 0.2 mm ticks at constant depth.
   Slide slide(ContactModel model, const Eigen::Vector3d& start, const Eigen::Vector3d& dir, double depth,
@@ -103,14 +103,14 @@ TEST_F(LiverPatchTest, SlidingAtConstantDepthIsSmoothAndFrictionless) {
     const char* name;
     Eigen::Vector3d start, dir;
   };
-  for (const Path& path : {Path{"grid-aligned", {0.0731, 0.0977, 0}, along_x},
-                           Path{"irrational angle", {0.0731, 0.0777, 0}, oblique}}) {
+  for (const Path& path :
+       {Path{"grid-aligned", {0.0731, 0.0977, 0}, along_x}, Path{"irrational angle", {0.0731, 0.0777, 0}, oblique}}) {
     for (double depth : {0.001, 0.003}) {
       const Slide patch = slide(ContactModel::kPatch, path.start, path.dir, depth, 0.05);
       const Slide triangle = slide(ContactModel::kTriangle, path.start, path.dir, depth, 0.05);
-      std::cout << "[ripple] " << path.name << ", depth " << depth * 1e3 << " mm: patch ripple "
-                << 100 * patch.ripple << " %, tangential max " << 100 * patch.tangential << " % (mean "
-                << patch.mean << " N); triangle model ripple " << 100 * triangle.ripple << " %, tangential max "
+      std::cout << "[ripple] " << path.name << ", depth " << depth * 1e3 << " mm: patch ripple " << 100 * patch.ripple
+                << " %, tangential max " << 100 * patch.tangential << " % (mean " << patch.mean
+                << " N); triangle model ripple " << 100 * triangle.ripple << " %, tangential max "
                 << 100 * triangle.tangential << " % (mean " << triangle.mean << " N)\n";
       RecordProperty(std::string("ripple_patch_") + (path.dir.y() == 0 ? "grid_" : "oblique_") +
                          std::to_string(static_cast<int>(depth * 1e3)) + "mm_pct",
@@ -149,8 +149,8 @@ TEST_F(LiverPatchTest, CoulombFrictionSticksThenSlips) {
   }
   ft = t.force.head<2>().norm();
   fn = t.force.z();
-  std::cout << "[friction] mu 0.3, sliding: |F_t| / F_n = " << ft / fn << " (largest deviation from mu "
-            << worst << ")\n";
+  std::cout << "[friction] mu 0.3, sliding: |F_t| / F_n = " << ft / fn << " (largest deviation from mu " << worst
+            << ")\n";
   EXPECT_TRUE(c.point(0).slipping);
   EXPECT_LT(t.force.x(), 0.0);
   EXPECT_LT(worst, 0.02 * 0.3);

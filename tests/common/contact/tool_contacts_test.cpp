@@ -79,7 +79,8 @@ TEST_F(ToolContactsTest, PokePushesBackAndReleases) {
   ASSERT_GT(pp.count, 3);
   EXPECT_NEAR(pp.normal.z(), 1.0, 1e-12);
   double z = 0;
-  for (int e = 0; e < pp.count; ++e) z += pp.weights[static_cast<std::size_t>(e)] * c.deformed(pp.nodes[static_cast<std::size_t>(e)]).z();
+  for (int e = 0; e < pp.count; ++e)
+    z += pp.weights[static_cast<std::size_t>(e)] * c.deformed(pp.nodes[static_cast<std::size_t>(e)]).z();
   EXPECT_NEAR(z, 0.04 - 0.008, 1e-9);
   // Back out: released, no force.
   const ContactTick out = step(c, pose_at_depth(-0.002));

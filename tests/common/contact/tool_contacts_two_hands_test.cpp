@@ -141,7 +141,8 @@ TEST_F(LiverTwoHandsTest, TriangleModelMatchesTheDirectSolveWithEveryNodeImposed
   ASSERT_EQ(out[1].points_in_contact, 1);
   const ContactSolution& s = c.solution();
   std::vector<ImposedDisplacement> imposed;
-  for (int l = 0; l < s.count; ++l) imposed.push_back({s.nodes[static_cast<std::size_t>(l)], s.displacement[static_cast<std::size_t>(l)], 7});
+  for (int l = 0; l < s.count; ++l)
+    imposed.push_back({s.nodes[static_cast<std::size_t>(l)], s.displacement[static_cast<std::size_t>(l)], 7});
   StaticSolver solver(*model_);
   const StaticSolution direct = solver.solve(imposed);
   Eigen::Vector3d f[2] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
@@ -199,7 +200,7 @@ TEST_F(LiverTwoHandsTest, AGraspHeldByOneWhileTheOtherPresses) {
   for (int k = 0; k <= 40; ++k) step(c, {at(xg, y, 0.002 * std::min(1.0, k / 20.0)), away}, out);  // press 2 mm
   for (int k = 0; k <= 10; ++k) step(c, {at(xg, y, 0.002), away}, out, {0.0, 0.5});                // close the jaw
   ASSERT_TRUE(out[0].grasp);
-  for (int k = 0; k <= 60; ++k)                                                                   // lift to 4 mm up
+  for (int k = 0; k <= 60; ++k)  // lift to 4 mm up
     step(c, {at(xg, y, 0.002 - 0.006 * std::min(1.0, k / 40.0)), away}, out, {0.0, 0.5});
   ASSERT_TRUE(out[0].grasp);
   const Eigen::Vector3d holding = out[0].force;

@@ -117,7 +117,8 @@ TEST(CholmodSolver, UnitColumnsMatchTheFullSolveAtTheNeededRows) {
   Eigen::MatrixXd x(n, static_cast<Eigen::Index>(rhs.size()));
   for (int f = 0; f < n; ++f)
     for (std::size_t j = 0; j < rhs.size(); ++j)
-      x(f, static_cast<Eigen::Index>(j)) = all.x[static_cast<std::size_t>(solver.permuted_row(f)) + static_cast<std::size_t>(n) * j];
+      x(f, static_cast<Eigen::Index>(j)) =
+          all.x[static_cast<std::size_t>(solver.permuted_row(f)) + static_cast<std::size_t>(n) * j];
   EXPECT_LT(test::rel_error(x, ref), 1e-12);
   // Only some rows needed: the backward solve skips the other supernodes, the needed rows keep their bits.
   const std::vector<int> needed = {3, 40, n - 2};

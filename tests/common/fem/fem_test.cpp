@@ -109,7 +109,8 @@ TEST(Fem, FreeStiffnessDropsFixedDofs) {
   const auto& dofs = model.fixed.free_dofs();
   for (int j = 0; j < model.k_ff.cols(); j += 7)
     for (int i = 0; i < model.k_ff.rows(); i += 5)
-      EXPECT_EQ(model.k_ff.coeff(i, j), model.k.coeff(dofs[static_cast<std::size_t>(i)], dofs[static_cast<std::size_t>(j)]));
+      EXPECT_EQ(model.k_ff.coeff(i, j),
+                model.k.coeff(dofs[static_cast<std::size_t>(i)], dofs[static_cast<std::size_t>(j)]));
 }
 
 TEST(Fem, CountInvertedTetsFindsTetsTurnedInsideOut) {

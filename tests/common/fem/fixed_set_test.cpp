@@ -124,8 +124,10 @@ TetMesh two_boxes(const Eigen::Vector3d& b_origin, const std::vector<std::pair<i
   out.nodes.resize(next, 3);
   out.nodes.topRows(8) = a.nodes;
   for (int i = 0; i < 8; ++i) {
-    if (map[static_cast<std::size_t>(i)] >= 8) out.nodes.row(map[static_cast<std::size_t>(i)]) = b.nodes.row(i);
-    else EXPECT_TRUE(out.nodes.row(map[static_cast<std::size_t>(i)]).isApprox(b.nodes.row(i)));
+    if (map[static_cast<std::size_t>(i)] >= 8)
+      out.nodes.row(map[static_cast<std::size_t>(i)]) = b.nodes.row(i);
+    else
+      EXPECT_TRUE(out.nodes.row(map[static_cast<std::size_t>(i)]).isApprox(b.nodes.row(i)));
   }
   out.tets.resize(a.tets.rows() + b.tets.rows(), 4);
   out.tets.topRows(a.tets.rows()) = a.tets;

@@ -56,13 +56,14 @@ TEST(Hyperelastic, StressIsTheEnergyGradientAndTangentItsDerivative) {
       for (int r = 0; r < 9; ++r) EXPECT_NEAR(dp(r % 3, r / 3), a(r, c), 1e-6 * a.norm()) << r << "," << c;
     }
   }
-  // At F = I: stress free, and the tangent is the linear elasticity tensor (lambda d_ij d_kl + mu (d_ik d_jl + d_il d_jk)).
+  // At F = I: stress free, and the tangent is the linear elasticity tensor (lambda d_ij d_kl + mu (d_ik d_jl + d_il
+  // d_jk)).
   EXPECT_LT(neo_hookean_stress(Eigen::Matrix3d::Identity(), lame).norm(), 1e-12);
   const Eigen::Matrix<double, 9, 9> a0 = neo_hookean_tangent(Eigen::Matrix3d::Identity(), lame);
   EXPECT_NEAR(a0(0, 0), lame.lambda + 2 * lame.mu, 1e-9);
-  EXPECT_NEAR(a0(0, 4), lame.lambda, 1e-9);        // dP_xx / dF_yy
-  EXPECT_NEAR(a0(3, 3), lame.mu, 1e-9);            // dP_xy / dF_xy
-  EXPECT_NEAR(a0(3, 1), lame.mu, 1e-9);            // dP_xy / dF_yx
+  EXPECT_NEAR(a0(0, 4), lame.lambda, 1e-9);  // dP_xx / dF_yy
+  EXPECT_NEAR(a0(3, 3), lame.mu, 1e-9);      // dP_xy / dF_xy
+  EXPECT_NEAR(a0(3, 1), lame.mu, 1e-9);      // dP_xy / dF_yx
 }
 
 TEST(Hyperelastic, ConsistentTangentMatchesFiniteDifferencesOfTheInternalForce) {
@@ -127,7 +128,8 @@ void uniaxial_patch(double stretch) {
     for (int c = 0; c < 3; ++c)
       if (std::abs(mesh.nodes(i, c)) < 1e-12) masks[static_cast<std::size_t>(i)] |= static_cast<std::uint8_t>(1u << c);
   for (int i = 0; i < n; ++i)
-    if (std::abs(mesh.nodes(i, 0) - size.x()) < 1e-12) imposed.push_back({i, Eigen::Vector3d((stretch - 1) * size.x(), 0, 0), 1});
+    if (std::abs(mesh.nodes(i, 0) - size.x()) < 1e-12)
+      imposed.push_back({i, Eigen::Vector3d((stretch - 1) * size.x(), 0, 0), 1});
   test::Organ organ(std::move(mesh), test::liver_material(), FixedSet(masks));
   const HyperelasticSolution s = HyperelasticSolver(organ.model).solve(imposed);
   ASSERT_TRUE(s.converged()) << s.message;

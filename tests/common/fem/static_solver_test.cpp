@@ -57,8 +57,8 @@ void patch_test(const TetMesh& mesh, int n0, int n1, int n2) {
 }
 
 TEST(StaticSolver, PatchTestSixTetBox) {
-  patch_test(make_box_mesh(4, 4, 4, Eigen::Vector3d(0.1, 0.08, 0.06)), box_node(4, 4, 0, 0, 0),
-             box_node(4, 4, 4, 0, 0), box_node(4, 4, 0, 4, 0));
+  patch_test(make_box_mesh(4, 4, 4, Eigen::Vector3d(0.1, 0.08, 0.06)), box_node(4, 4, 0, 0, 0), box_node(4, 4, 4, 0, 0),
+             box_node(4, 4, 0, 4, 0));
 }
 
 TEST(StaticSolver, PatchTestFiveTetBox) {
@@ -75,9 +75,9 @@ TEST(StaticSolver, PatchTestCylinder) {
 // Cylinder (radius r, height h) compressed by x on its top face, lateral surface free, base held only axially:
 // linear elasticity gives d_r = nu r x / h and f = s E x / h (s = cross-section area).
 struct CompressionResult {
-  double radial_error;    // max |d_r - nu r x / h| / (nu r x / h) over the lateral nodes
-  double force_error;     // |f - pi r^2 E x / h| / (pi r^2 E x / h)
-  double polygon_error;   // |f - s_h E x / h| / (...) with s_h the meshed (polygonal) cross-section
+  double radial_error;   // max |d_r - nu r x / h| / (nu r x / h) over the lateral nodes
+  double force_error;    // |f - pi r^2 E x / h| / (pi r^2 E x / h)
+  double polygon_error;  // |f - s_h E x / h| / (...) with s_h the meshed (polygonal) cross-section
 };
 
 CompressionResult compress_cylinder(int rings, int layers) {
@@ -87,8 +87,8 @@ CompressionResult compress_cylinder(int rings, int layers) {
   const int n = static_cast<int>(mesh.nodes.rows());
   std::vector<std::uint8_t> masks(static_cast<std::size_t>(n), 0);
   for (int p = 0; p < per; ++p) masks[static_cast<std::size_t>(p)] = 4;  // base: axial only
-  masks[0] = 7;                                                           // centre: also x, y
-  masks[static_cast<std::size_t>(1 + 3 * rings * (rings - 1))] |= 2;    // on +x: y (no spin)
+  masks[0] = 7;                                                          // centre: also x, y
+  masks[static_cast<std::size_t>(1 + 3 * rings * (rings - 1))] |= 2;     // on +x: y (no spin)
   test::Organ organ(std::move(mesh), test::liver_material(), FixedSet(masks));
   std::vector<ImposedDisplacement> top;
   for (int p = 0; p < per; ++p) top.push_back({layers * per + p, Eigen::Vector3d(0, 0, -x), 4});
@@ -187,10 +187,9 @@ TEST(StaticSolver, ReactionsBalanceAtTheFixedNodes) {
 
 TEST(StaticSolver, CgAgreesWithDirectWithinItsTolerance) {
   auto organ = test::box_organ(6, 5, 4);
-  std::vector<ImposedDisplacement> imposed = {
-      {box_node(6, 5, 2, 2, 4), Eigen::Vector3d(0.001, -0.002, -0.006), 7},
-      {box_node(6, 5, 5, 3, 4), Eigen::Vector3d(0, 0, -0.004), 7},
-      {box_node(6, 5, 6, 0, 2), Eigen::Vector3d(-0.003, 0.002, 0), 3}};
+  std::vector<ImposedDisplacement> imposed = {{box_node(6, 5, 2, 2, 4), Eigen::Vector3d(0.001, -0.002, -0.006), 7},
+                                              {box_node(6, 5, 5, 3, 4), Eigen::Vector3d(0, 0, -0.004), 7},
+                                              {box_node(6, 5, 6, 0, 2), Eigen::Vector3d(-0.003, 0.002, 0), 3}};
   StaticSolver direct(organ->model);
   const StaticSolution d = direct.solve(imposed);
   for (double tol : {1e-6, 1e-10}) {

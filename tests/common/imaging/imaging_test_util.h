@@ -51,7 +51,7 @@ inline ReferenceOrgan reference_liver(int nodes) {
 /// A test volume: the reference voxelized at `spacing` (m), label `label`, optionally with seeded noise
 /// (boundary voxels flipped with probability `noise`, plus `speckles` stray voxels).
 inline imaging::LabelVolume liver_volume(const ReferenceOrgan& reference, double spacing, double noise = 0.0,
-                                int speckles = 0, std::uint32_t seed = 1, std::int32_t label = 1) {
+                                         int speckles = 0, std::uint32_t seed = 1, std::int32_t label = 1) {
   imaging::LabelVolume v = imaging::voxelize(reference.surface.vertices, reference.surface.tris, spacing, 2, label);
   if (noise > 0.0 || speckles > 0) add_label_noise(v, noise, speckles, seed);
   return v;

@@ -136,8 +136,7 @@ TEST(MultirateContactsNode, HeldDeepPressIsLinearBeforeASnapshotThenNewtons) {
   std::cout << "[press] " << depth * 1e3 << " mm held, " << p.mr.contacts() << " contact nodes: linear "
             << t_lin.force.transpose() << " N; multirate after " << cycles << " tracker cycles "
             << t_mr.force.transpose() << " N (snapshot reaction sum " << f_snap.transpose()
-            << " N, relative difference " << to_snapshot << "); multirate against linear " << 100 * to_linear
-            << " %\n";
+            << " N, relative difference " << to_snapshot << "); multirate against linear " << 100 * to_linear << " %\n";
   EXPECT_LT(to_snapshot, 1e-9) << "the held press feels the converged snapshot's reactions";
   EXPECT_GT(to_linear, 0.10) << "the non-linear force differs from the linear one by more than its known error";
   EXPECT_GT(p.m.ticks_nonlinear(), 0u);
@@ -323,7 +322,8 @@ TEST(MultirateContactsNode, SurfaceOverTheBodyStateCapacityIsRefused) {
   const auto from = text.find("  generate: liver"), to = text.find("material:");
   ASSERT_TRUE(from != std::string::npos && to != std::string::npos);
   text.replace(from, to - from, "  file: " + msh + "\n");
-  text.replace(text.find("trajectory: trajectories/"), 25, "trajectory: " + std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/");
+  text.replace(text.find("trajectory: trajectories/"), 25,
+               "trajectory: " + std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/");
   std::ofstream(yaml) << text;
   const Scene scene = load_scene(yaml);
   try {

@@ -39,12 +39,14 @@ ContactTargets targets_of(const std::vector<int>& nodes, const Eigen::Vector3d& 
 
 std::vector<Contact> contacts_of(const ContactTargets& t) {
   std::vector<Contact> c;
-  for (int k = 0; k < t.count; ++k) c.push_back({t.nodes[static_cast<std::size_t>(k)], t.u[static_cast<std::size_t>(k)]});
+  for (int k = 0; k < t.count; ++k)
+    c.push_back({t.nodes[static_cast<std::size_t>(k)], t.u[static_cast<std::size_t>(k)]});
   return c;
 }
 
 // Newton's force on the tool (N) with the nodes held at `d`.
-Eigen::Vector3d newton_force(const HyperelasticSolver& solver, const std::vector<int>& nodes, const Eigen::Vector3d& d) {
+Eigen::Vector3d newton_force(const HyperelasticSolver& solver, const std::vector<int>& nodes,
+                             const Eigen::Vector3d& d) {
   std::vector<ImposedDisplacement> imposed;
   for (int n : nodes) imposed.push_back({n, d, 7});
   const HyperelasticSolution ref = solver.solve(imposed);
@@ -94,14 +96,16 @@ TEST(Multirate, TrackerConvergesToTheNewtonReactionsForAPressAndALift) {
     ASSERT_TRUE(ref.converged()) << ref.message;
     double worst = 0;
     for (int k = 0; k < s.count; ++k) {
-      const auto row = std::lower_bound(ref.imposed_nodes.begin(), ref.imposed_nodes.end(), s.nodes[static_cast<std::size_t>(k)]) -
-                       ref.imposed_nodes.begin();
+      const auto row =
+          std::lower_bound(ref.imposed_nodes.begin(), ref.imposed_nodes.end(), s.nodes[static_cast<std::size_t>(k)]) -
+          ref.imposed_nodes.begin();
       worst = std::max(worst, (s.reaction[static_cast<std::size_t>(k)] - ref.reaction.row(row).transpose()).norm());
     }
     const double total_err = (tool_force(s) + ref.total_reaction).norm() / ref.total_reaction.norm();
     const double node_err = worst / ref.reaction.rowwise().norm().maxCoeff();
     const Eigen::VectorXd u_ref = Eigen::Map<const Eigen::VectorXd>(
-        Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>(ref.displacement).data(), 3 * ref.displacement.rows());
+        Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>(ref.displacement).data(),
+        3 * ref.displacement.rows());
     const double u_err = (tracker.state() - u_ref).norm() / u_ref.norm();
     std::cout << "imposed " << d.transpose() << ": " << cycles << " cycles; total force error " << total_err
               << ", worst node " << node_err << ", displacement " << u_err << "\n";
@@ -126,7 +130,8 @@ TEST(Multirate, LocalModelMatchesNewtonForASmallStepAndNeedsTheSchurComplement) 
   ASSERT_TRUE(f.solver.tangent_stiffness(tracker.state(), kt));
   for (int j = 0; j < 3 * s.count; ++j)
     for (int l = 0; l < 3 * s.count; ++l)
-      wrong.stiffness(j, l) = kt.coeff(3 * s.nodes[static_cast<std::size_t>(j / 3)] + j % 3, 3 * s.nodes[static_cast<std::size_t>(l / 3)] + l % 3);
+      wrong.stiffness(j, l) = kt.coeff(3 * s.nodes[static_cast<std::size_t>(j / 3)] + j % 3,
+                                       3 * s.nodes[static_cast<std::size_t>(l / 3)] + l % 3);
   const Eigen::Vector3d f0 = newton_force(f.solver, f.patch, d);
   for (const Eigen::Vector3d& step : {Eigen::Vector3d(0, 0, 2e-4), Eigen::Vector3d(2e-4, -1e-4, 0)}) {
     const Eigen::Vector3d f1 = newton_force(f.solver, f.patch, d + step);
@@ -181,7 +186,8 @@ TEST(Multirate, APredictorFarFromEquilibriumIsTakenBackAndNotPublished) {
 TEST(Multirate, FastSideAllocatesNothingNeverReturnsNanAndFallsBack) {
   Fixture f;
   const std::vector<int> contactable = contactable_nodes(f.organ->mesh, f.organ->fixed);
-  const Tensors tensors = precompute_tensors(f.organ->model, contactable, standard_row_sets(f.organ->mesh, contactable), {});
+  const Tensors tensors =
+      precompute_tensors(f.organ->model, contactable, standard_row_sets(f.organ->mesh, contactable), {});
   Superposition linear(tensors, "haptic");
   NonlinearTracker tracker(f.solver, {});
   MultirateForce fast(tracker.snapshots(), linear, tracker.options().max_extrapolation);
@@ -281,8 +287,7 @@ TEST(Multirate, SnapshotForcesOfAPartlyHeldContactSet) {
   EXPECT_FALSE(held[1]);
   EXPECT_NEAR(largest, 0.001, 1e-15);
   // Row of node 20 (snapshot index 1: rows 3..5) times du = (0, 0, -0.001) at its own column 5 only.
-  for (int r = 0; r < 3; ++r)
-    EXPECT_NEAR(lambda[0][r], s.reaction[1][r] + s.stiffness(3 + r, 5) * -0.001, 1e-15) << r;
+  for (int r = 0; r < 3; ++r) EXPECT_NEAR(lambda[0][r], s.reaction[1][r] + s.stiffness(3 + r, 5) * -0.001, 1e-15) << r;
   EXPECT_EQ(lambda[1], Eigen::Vector3d::Constant(7)) << "a contact the snapshot lacks is left to the caller";
   // Far from the snapshot: du clamped to the limit (largest reports the distance itself).
   const Eigen::Vector3d far[2] = {Eigen::Vector3d(0, 0, -0.052), u[1]};

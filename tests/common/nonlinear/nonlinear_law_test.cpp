@@ -164,7 +164,7 @@ const std::string kCylinder = "# cylinder: radius=0.025, height=0.1, young=3000,
 struct CurveErrorCase {
   const char* name;
   std::string text;
-  int line;         // 0: the message has no line ("mem.csv: ...")
+  int line;  // 0: the message has no line ("mem.csv: ...")
   const char* what;
 };
 
@@ -243,7 +243,8 @@ TEST(CurveFile, MissingFileAndFileErrorsNameThePath) {
 }
 
 TEST(CurveFile, ParsesHeaderAndRows) {
-  std::istringstream in("# comment\n" + kCylinder + "\n # another\r\n x , f \r\n0,0\n0.001, 0.05\n# mid\n0.002 ,0.11\n");
+  std::istringstream in("# comment\n" + kCylinder +
+                        "\n # another\r\n x , f \r\n0,0\n0.001, 0.05\n# mid\n0.002 ,0.11\n");
   const Curve c = read_curve(in, "mem.csv");
   EXPECT_EQ(c.quantity, CurveQuantity::kForce);
   EXPECT_EQ(c.header_line, 5);
@@ -393,15 +394,15 @@ TEST(NonlinearLaw, KeepsDirectionsAndReplacesAmplitudes) {
     Eigen::Vector3d out;
     ASSERT_TRUE(law.apply_displacement(u, raw_d, out));  // any non-zero direction vector: normalized inside
     const Eigen::Vector3d ur = u - u.dot(d) * d, out_r = out - out.dot(d) * d;
-    EXPECT_NEAR(out.dot(d), u.dot(d), 1e-15);                      // collinear part kept
-    EXPECT_NEAR(out_r.norm(), law.p(ur.norm()), 1e-15);           // |u_r| -> P(|u_r|)
+    EXPECT_NEAR(out.dot(d), u.dot(d), 1e-15);                          // collinear part kept
+    EXPECT_NEAR(out_r.norm(), law.p(ur.norm()), 1e-15);                // |u_r| -> P(|u_r|)
     EXPECT_NEAR(out_r.normalized().dot(ur.normalized()), 1.0, 1e-12);  // same orthogonal direction
 
     const Eigen::Vector3d f = 2.0 * Eigen::Vector3d(g(rng), g(rng), g(rng));
     ASSERT_TRUE(law.apply_force(f, raw_d, out));
     EXPECT_NEAR((out - out.dot(d) * d - (f - f.dot(d) * d)).norm(), 0.0, 1e-14);  // orthogonal part kept
-    EXPECT_NEAR(std::abs(out.dot(d)), law.q(std::abs(f.dot(d))), 1e-14);         // |f_t| -> Q(|f_t|)
-    EXPECT_EQ(std::signbit(out.dot(d)), std::signbit(f.dot(d)));                 // sign kept
+    EXPECT_NEAR(std::abs(out.dot(d)), law.q(std::abs(f.dot(d))), 1e-14);          // |f_t| -> Q(|f_t|)
+    EXPECT_EQ(std::signbit(out.dot(d)), std::signbit(f.dot(d)));                  // sign kept
     // Aliasing.
     Eigen::Vector3d v = f;
     ASSERT_TRUE(law.apply_force(v, raw_d, v));
@@ -465,14 +466,13 @@ TEST(NonlinearLaw, NodeHooksAllocateNothing) {
   const NonlinearLaw law = shipped_law();
   auto organ = test::box_organ(4, 3, 2);
   const std::vector<int> contact_nodes = contactable_nodes(organ->mesh, organ->fixed);
-  const Tensors tensors = precompute_tensors(organ->model, contact_nodes,
-                                             standard_row_sets(organ->mesh, contact_nodes), PrecomputeOptions());
+  const Tensors tensors = precompute_tensors(organ->model, contact_nodes, standard_row_sets(organ->mesh, contact_nodes),
+                                             PrecomputeOptions());
   Superposition haptic(tensors, "haptic", 8), visual(tensors, "visual", 8);
   const TensorBlock& block = visual.block();
   // Three top nodes pushed down and slightly sideways.
   std::vector<Contact> contacts;
-  for (int i : {1, 2, 3})
-    contacts.push_back({box_node(4, 3, i, 1, 2), Eigen::Vector3d(0.4e-3 * i, 0, -3e-3)});
+  for (int i : {1, 2, 3}) contacts.push_back({box_node(4, 3, i, 1, 2), Eigen::Vector3d(0.4e-3 * i, 0, -3e-3)});
   ContactSolution sol;
   Eigen::VectorXd u(3 * block.row_count());
   Eigen::Vector3d haptic_d = Eigen::Vector3d::Zero(), visual_d = Eigen::Vector3d::Zero();
@@ -632,8 +632,9 @@ TEST(NonlinearLaw, QuasiNonlinearCylinderReproducesItsCurves) {
   const double kRadialTol = 1e-6, kForceTol = 5e-3, kForceSectionCorrectedTol = 2e-6;
   const double polygon = 0.5 * 6 * rings * ref.radius * ref.radius * std::sin(2 * M_PI / (6 * rings));
   const double area_ratio = ref.area() / polygon;
-  std::printf("fig. 13: x (m)   d_r curve     d_r linear    d_r law       err/range   f curve     f linear    f law"
-              "       rel err   corrected/range\n");
+  std::printf(
+      "fig. 13: x (m)   d_r curve     d_r linear    d_r law       err/range   f curve     f linear    f law"
+      "       rel err   corrected/range\n");
   double worst_dr = 0, worst_f = 0;
   for (int k = 1; k <= 12; ++k) {
     const double x = 0.0025 * k;  // every other one between the curve's samples

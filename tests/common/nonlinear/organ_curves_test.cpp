@@ -121,10 +121,12 @@ TEST(OrganCurves, TheLawReproducesTheFitAndHoldsAtASiteItWasNotFittedOn) {
   ASSERT_EQ(v.sites.size(), 12u);
   double worst_q_held = 0;
   for (const auto& s : v.sites) {
-    std::cout << "site (" << s.site_x << ", " << s.site_y << "): held out " << s.worst << ", one Q " << s.q_worst << "\n";
+    std::cout << "site (" << s.site_x << ", " << s.site_y << "): held out " << s.worst << ", one Q " << s.q_worst
+              << "\n";
     worst_q_held = std::max(worst_q_held, s.q_worst);
   }
-  std::cout << "leave one site out: worst " << v.worst << ", mean " << v.mean << "; in sample " << v.fitted_worst << "\n";
+  std::cout << "leave one site out: worst " << v.worst << ", mean " << v.mean << "; in sample " << v.fitted_worst
+            << "\n";
   EXPECT_LT(v.fitted_worst, 1e-9);
   EXPECT_LT(v.worst, 0.03);
   EXPECT_GT(worst_q_held, 2 * v.worst);  // one Q for the wedge errs more than the field held out
@@ -158,9 +160,11 @@ TEST(OrganCurves, CacheIsKeyedByTheMaterialAndRewrittenWhenDamaged) {
     return k.combined();
   };
   OrganCurvesOutcome outcome;
-  const OrganCurves first = load_or_compute_organ_curves(organ->model, settings, key_of(organ->material), dir, nullptr, &outcome);
+  const OrganCurves first =
+      load_or_compute_organ_curves(organ->model, settings, key_of(organ->material), dir, nullptr, &outcome);
   EXPECT_EQ(outcome, OrganCurvesOutcome::kComputed);
-  const OrganCurves again = load_or_compute_organ_curves(organ->model, settings, key_of(organ->material), dir, nullptr, &outcome);
+  const OrganCurves again =
+      load_or_compute_organ_curves(organ->model, settings, key_of(organ->material), dir, nullptr, &outcome);
   EXPECT_EQ(outcome, OrganCurvesOutcome::kLoaded);
   ASSERT_EQ(again.samples.size(), first.samples.size());
   for (std::size_t i = 0; i < first.samples.size(); ++i) {
@@ -175,7 +179,8 @@ TEST(OrganCurves, CacheIsKeyedByTheMaterialAndRewrittenWhenDamaged) {
   stiffer.young_modulus *= 2;
   const auto organ2 = std::make_unique<test::Organ>(organ->mesh, stiffer, organ->fixed);
   ASSERT_NE(key_of(stiffer), key_of(organ->material));
-  const OrganCurves second = load_or_compute_organ_curves(organ2->model, settings, key_of(stiffer), dir, nullptr, &outcome);
+  const OrganCurves second =
+      load_or_compute_organ_curves(organ2->model, settings, key_of(stiffer), dir, nullptr, &outcome);
   EXPECT_EQ(outcome, OrganCurvesOutcome::kComputed);
   EXPECT_NEAR(second.samples[0].newton_force, 2 * first.samples[0].newton_force, 1e-6 * first.samples[0].newton_force);
   std::string why;

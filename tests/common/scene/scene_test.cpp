@@ -471,8 +471,8 @@ RayHit first_hit(const TetMesh& mesh, const SurfaceMesh& surface, const Eigen::V
     double s = 0;
     Eigen::Vector3d bary;
     if (mesh::segment_triangle(from, from + reach * direction, mesh.nodes.row(surface.tris(f, 0)).transpose(),
-                         mesh.nodes.row(surface.tris(f, 1)).transpose(), mesh.nodes.row(surface.tris(f, 2)).transpose(),
-                         s, bary) &&
+                               mesh.nodes.row(surface.tris(f, 1)).transpose(),
+                               mesh.nodes.row(surface.tris(f, 2)).transpose(), s, bary) &&
         (!hit.found || s * reach < hit.s)) {
       hit.found = true;
       hit.s = s * reach;

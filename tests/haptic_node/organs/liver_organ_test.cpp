@@ -102,8 +102,9 @@ TEST_F(LiverOrganTest, ModelSwappedBetweenTwoTicksAllocatesNothingAndActsAsTheNe
   // the shipped material), generation 1.
   liver::LiverModelSource stiffer{scene_->material, scene_->fixed, nonlinear::NonlinearSpec{}, false, scene_->file};
   stiffer.material.young_modulus *= 2;
-  const std::shared_ptr<const liver::LiverModel> next = liver::build_liver_model(
-      mesher::load_scene_mesh(*scene_, SURGSIM_TEST_CACHE_DIR), stiffer, SURGSIM_TEST_CACHE_DIR, nullptr, 1);
+  const std::shared_ptr<const liver::LiverModel> next =
+      liver::build_liver_model(mesher::load_scene_mesh(*scene_, SURGSIM_TEST_CACHE_DIR), stiffer,
+                               SURGSIM_TEST_CACHE_DIR, nullptr, 1);
   liver::LiverInstance alone(next, scene_->tools, scene_->liver.deformation);
 
   ContactTick t;
@@ -160,7 +161,8 @@ TEST_F(LiverOrganTest, CorotationalLiverRefusesAModelSwap) {
     FAIL() << "a corotational liver took a model swap";
   } catch (const std::exception& e) {
     EXPECT_NE(std::string(e.what()).find("needs liver.deformation linear (this liver is corotational"),
-              std::string::npos) << e.what();
+              std::string::npos)
+        << e.what();
   }
 }
 
