@@ -116,6 +116,8 @@ class HapticOrgan {
 struct OrganBuildOptions {
   int tracker_threads = 1;  // the multirate liver's tracker: CHOLMOD's OpenMP and OpenBLAS threads (haptic_node
                             // --tracker-threads)
+  bool unpaced = false;     // --speed max: the corotational liver refreshes its rotations on the loop, every 5 ms of
+                            // simulated time, instead of on a 200 Hz thread, so that a replay is reproducible
 };
 
 /// Builds the organ the scene names. `cache_dir` holds generated meshes and tensors, `ticks` the run's length (for

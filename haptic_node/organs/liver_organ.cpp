@@ -25,7 +25,7 @@ using namespace surgsim::mesher;
 namespace surgsim {
 
 LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread,
-                       int tracker_threads) {
+                       int tracker_threads, bool rotations_in_loop) {
   TetMesh mesh = load_scene_mesh(scene, cache_dir, progress);
   const bool multirate = scene.liver.deformation == LiverDeformation::kMultirate;
   if (multirate) {
@@ -54,7 +54,8 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
     multirate_->set_numeric_threads(tracker_threads);
     if (tracker_thread) multirate_->start();
   }
-  if (scene.liver.deformation == LiverDeformation::kCorotational) {
+  rotations_in_loop_ = rotations_in_loop && scene.liver.deformation == LiverDeformation::kCorotational;
+  if (scene.liver.deformation == LiverDeformation::kCorotational && !rotations_in_loop_) {
     // Off the loop thread: the rotations of every surface node at kRotationRefreshHz (the loop keeps its contact
     // nodes' own every tick); absolute deadlines, a late refresh is skipped, not caught up.
     rotation_thread_ = std::thread([this] {
@@ -186,6 +187,15 @@ void LiverOrgan::step(const InstrumentInput* inputs, int count, double dt, Conta
   }
   // An instrument whose input is lost drops its own contacts and gets zero force; the others are solved as usual.
   contacts_->step(inputs, count, out, dt);
+  // Unpaced: the background rotations refreshed here on simulated time, so a replay gives the same forces every time
+  // (on the thread they depend on how many ticks ran between two wall-clock refreshes).
+  if (rotations_in_loop_) {
+    rotation_clock_ += dt;
+    if (rotation_clock_ >= 1 / kRotationRefreshHz) {
+      rotation_clock_ -= 1 / kRotationRefreshHz;
+      contacts_->refresh_rotations();
+    }
+  }
 }
 
 ContactEntry LiverOrgan::contact_entry(int l) const noexcept {

@@ -32,8 +32,10 @@ class LiverOrgan final : public HapticOrgan {
   /// also for a surface of more than msg::kMaxBodyPoints nodes). `tracker_thread` false (tests): a multirate scene's
   /// tracker is not started; the test cycles it with multirate()->cycle_once(). `tracker_threads`: the tracker's
   /// numeric threads (MultirateContacts::set_numeric_threads).
+  /// `rotations_in_loop` (unpaced replays): a corotational liver refreshes its rotations in step(), every
+  /// 1 / kRotationRefreshHz of simulated time, instead of on its thread: the same input gives the same forces.
   LiverOrgan(const scene::Scene& scene, const std::string& cache_dir, std::ostream* progress,
-             bool tracker_thread = true, int tracker_threads = 1);
+             bool tracker_thread = true, int tracker_threads = 1, bool rotations_in_loop = false);
   /// Stops the rotation thread (corotational) and the tracker thread (multirate).
   ~LiverOrgan() override;
   LiverOrgan(const LiverOrgan&) = delete;
@@ -97,6 +99,8 @@ class LiverOrgan final : public HapticOrgan {
   // liver.deformation corotational: every surface node's rotation refreshed off the loop thread.
   static constexpr double kRotationRefreshHz = 200;
   std::atomic<bool> stop_rotations_{false};
+  bool rotations_in_loop_ = false;
+  double rotation_clock_ = 0;  // s of simulated time since the last refresh (rotations_in_loop_)
   std::thread rotation_thread_;
   // Multirate BodyState (publisher thread).
   struct InstrumentsAt {  // the instruments of one tick
