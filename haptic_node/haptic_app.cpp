@@ -108,6 +108,7 @@ HapticApp::HapticApp(const HapticOptions& options)
   // --- init: the organ the scene names (a liver builds its mesh, tensors, contacts and bucket grid; the intestine
   // its mass-spring body and nothing of the liver) ---
   organ_ = make_haptic_organ(scene_, cache, total_ticks_, progress, OrganBuildOptions{options_.tracker_threads, options_.speed <= 0});
+  if (!options_.tick_trace.empty()) organ_->time_stages(true);
   scene_hash_ = scene_.hash() ^ (organ_->mesh_hash() * 0x9E3779B97F4A7C15ull);
   for (int i = 0; i < instrument_count_; ++i) {
     instruments_[static_cast<std::size_t>(i)].force_stage =

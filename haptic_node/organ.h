@@ -79,6 +79,9 @@ class HapticOrgan {
   /// The time each stage of the last step's contact solve took (contact::ContactStage order), or null for an organ
   /// without them (the intestine): the --tick-trace columns.
   virtual const contact::ContactStageTimes* stage_times() const noexcept { return nullptr; }
+  /// Init: whether the contact step times its stages (only for --tick-trace: the timing reads the clock 6 times a
+  /// tick).
+  virtual void time_stages(bool on) {}
 
   /// Identity both nodes compare (SceneInfo): hash of the tetrahedral mesh (0 without one) and of the tensors.
   virtual std::uint64_t mesh_hash() const { return 0; }

@@ -198,14 +198,16 @@ Eigen::Vector3d ToolContacts::corrected(int l) const noexcept {
 }
 
 namespace {
-// Times the stages of one step into a ContactStageTimes: each lap() is the time since the previous one (or since the
-// clock started). Stages without a lap keep 0.
+// Times the stages of one step into a ContactStageTimes when `on`: each lap() is the time since the previous one (or
+// since the clock started). Stages without a lap keep 0. Off, it reads no clock.
 class StageClock {
  public:
-  explicit StageClock(ContactStageTimes& times) noexcept : times_(times), last_(core::monotonic_ns()) {
-    times_.ns.fill(0);
+  StageClock(ContactStageTimes& times, bool on) noexcept
+      : times_(times), on_(on), last_(on ? core::monotonic_ns() : 0) {
+    if (on_) times_.ns.fill(0);
   }
   void lap(ContactStage stage) noexcept {
+    if (!on_) return;
     const std::uint64_t now = core::monotonic_ns();
     times_.ns[static_cast<std::size_t>(stage)] =
         static_cast<std::uint32_t>(std::min<std::uint64_t>(now - last_, UINT32_MAX));
@@ -214,6 +216,7 @@ class StageClock {
 
  private:
   ContactStageTimes& times_;
+  bool on_;
   std::uint64_t last_;
 };
 }  // namespace
@@ -261,7 +264,7 @@ void ToolContacts::step(const InstrumentInput* inputs, int count, ContactTick* o
 
 // The triangle model's tick in the same stages as the patch model's (it has no friction stage: that time stays 0).
 void ToolContacts::step_triangle(double /*dt*/, ContactTick* out) noexcept {
-  StageClock clock(stage_times_);
+  StageClock clock(stage_times_, time_stages_);
   // --- track points: detection and contact update, per instrument and tool point (tip first) ---
   for (int t = 0; t < count_; ++t) {
     const ToolGeometry* geometry = geometry_[static_cast<std::size_t>(t)];
@@ -543,7 +546,7 @@ void ToolContacts::disable_patch(int p_index) noexcept {
 // The patch model's tick as its stages, each timed (stage_times()). A stage that does not run (nothing to solve, a
 // failed solve) takes 0.
 void ToolContacts::step_patch(double dt, ContactTick* out) noexcept {
-  StageClock clock(stage_times_);
+  StageClock clock(stage_times_, time_stages_);
   track_points();
   clock.lap(ContactStage::kTrackPoints);
   build_patches(dt, out);

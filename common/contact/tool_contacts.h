@@ -186,8 +186,10 @@ class ToolContacts {
   Eigen::Vector3d corrected(int l) const noexcept;
   /// Deformed position of a surface node under the current solution (rest for nodes without a column).
   Eigen::Vector3d deformed(int node) const noexcept;
-  /// The time each stage of the last step() took.
+  /// The time each stage of the last step() took (all 0 unless time_stages(true): off, step() reads no clock).
   const ContactStageTimes& stage_times() const noexcept { return stage_times_; }
+  /// Init: whether step() times its stages (haptic_node --tick-trace).
+  void time_stages(bool on) noexcept { time_stages_ = on; }
 
  private:
   static void deformed_cb(const void* self, int node, Eigen::Vector3d& out);
@@ -248,6 +250,7 @@ class ToolContacts {
   std::array<Eigen::Vector3d, compliance::kMaxContacts> lambda_{};
   long dropped_nodes_ = 0;
   ContactStageTimes stage_times_{};
+  bool time_stages_ = false;
   // --- corotational ---
   struct RotationInput {  // loop -> refresh_rotations(): the last solution's forces (world frame)
     int count = 0;

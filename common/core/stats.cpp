@@ -9,6 +9,15 @@
 
 namespace surgsim::core {
 
+namespace {
+// The q-quantile of sorted, non-empty values: the nearest rank.
+double quantile(const std::vector<double>& sorted, double q) {
+  const double clamped = std::clamp(q, 0.0, 1.0);
+  return sorted[std::min(sorted.size() - 1,
+                         static_cast<std::size_t>(clamped * static_cast<double>(sorted.size() - 1) + 0.5))];
+}
+}  // namespace
+
 SampleRecorder::SampleRecorder(std::size_t capacity, Keep keep) : samples_(capacity, 0.0), keep_(keep) {}
 
 void SampleRecorder::add(double value) noexcept {
@@ -33,13 +42,9 @@ Percentiles SampleRecorder::summary() const {
   if (stored_ == 0) return p;
   std::vector<double> v(samples_.begin(), samples_.begin() + static_cast<std::ptrdiff_t>(stored_));
   std::sort(v.begin(), v.end());
-  auto at = [&](double q) {
-    const std::size_t i = std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
-    return v[i];
-  };
-  p.p50 = at(0.50);
-  p.p90 = at(0.90);
-  p.p99 = at(0.99);
+  p.p50 = quantile(v, 0.50);
+  p.p90 = quantile(v, 0.90);
+  p.p99 = quantile(v, 0.99);
   p.max = max_;
   p.mean = sum_ / static_cast<double>(count_);
   return p;
@@ -49,8 +54,7 @@ double SampleRecorder::percentile(double q) const {
   if (stored_ == 0) return 0;
   std::vector<double> v(samples_.begin(), samples_.begin() + static_cast<std::ptrdiff_t>(stored_));
   std::sort(v.begin(), v.end());
-  const double clamped = std::clamp(q, 0.0, 1.0);
-  return v[std::min(v.size() - 1, static_cast<std::size_t>(clamped * static_cast<double>(v.size() - 1) + 0.5))];
+  return quantile(v, q);
 }
 
 nlohmann::json to_json(const Percentiles& p) {

@@ -88,6 +88,7 @@ void LiverOrgan::post_model(std::shared_ptr<const LiverModel> next) {
   collect_retired();
   if (incoming_.full()) throw_error("liver: the previous model swap has not been taken by the loop yet");
   auto instance = std::make_unique<LiverInstance>(std::move(next), tools_, deformation_);
+  instance->contacts().time_stages(time_stages_);
   incoming_.post(instance);
 }
 

@@ -48,6 +48,10 @@ class LiverOrgan final : public HapticOrgan {
   int instrument_contacts(int i) const noexcept override { return contacts_->instrument_nodes(i); }
   int contact_entries() const noexcept override { return contacts_->solution().count; }
   const contact::ContactStageTimes* stage_times() const noexcept override { return &contacts_->stage_times(); }
+  void time_stages(bool on) override {
+    time_stages_ = on;
+    contacts_->time_stages(on);
+  }
   ContactEntry contact_entry(int l) const noexcept override;
   std::uint64_t mesh_hash() const override { return instance_->model().mesh_hash; }
   std::uint64_t tensor_hash() const override { return instance_->model().tensor_hash; }
@@ -100,6 +104,7 @@ class LiverOrgan final : public HapticOrgan {
   static constexpr double kRotationRefreshHz = 200;
   std::atomic<bool> stop_rotations_{false};
   bool rotations_in_loop_ = false;
+  bool time_stages_ = false;   // time_stages(): given to every instance post_model() builds
   double rotation_clock_ = 0;  // s of simulated time since the last refresh (rotations_in_loop_)
   std::thread rotation_thread_;
   // Multirate BodyState (publisher thread).
