@@ -99,6 +99,13 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c, const Eigen::Matri
         m.noalias() += c.entry_weight[static_cast<std::size_t>(e)] * h;
       }
       if (p == q && halves == RotationHalves::kBoth) m = (0.5 * (m + m.transpose())).eval();
+      if (p == q) {
+        const double nn = c.near_normal[static_cast<std::size_t>(p)], nt = c.near_tangent[static_cast<std::size_t>(p)];
+        if (nn != 0 || nt != 0) {
+          const Eigen::Vector3d& axis = c.near_axis[static_cast<std::size_t>(p)];
+          m.noalias() += nt * Eigen::Matrix3d::Identity() + (nn - nt) * axis * axis.transpose();
+        }
+      }
       m_[static_cast<std::size_t>(p * kMaxPatches + q)] = m;
       m_[static_cast<std::size_t>(q * kMaxPatches + p)] = m.transpose();
     }

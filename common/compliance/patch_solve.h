@@ -36,10 +36,18 @@ struct PatchConstraints {
   int row_count = 0;
   std::array<int, kMaxPatchRows> row_patch{};
   std::array<Eigen::Vector3d, kMaxPatchRows> row_direction;  // unit
+  // Optional per patch: a compliance in series with the patch's mean displacement (m/N), added to M_pp as
+  // near_normal[p] a a^T + near_tangent[p] (I - a a^T) with a = near_axis[p] (unit). The contact uses it for the
+  // instrument's near field that the mesh cannot resolve (contact/near_field.h). 0: none.
+  std::array<double, kMaxPatches> near_normal{};
+  std::array<double, kMaxPatches> near_tangent{};
+  std::array<Eigen::Vector3d, kMaxPatches> near_axis;
 
   void clear() {
     node_count = patch_count = row_count = 0;
     patch_start[0] = 0;
+    near_normal.fill(0);
+    near_tangent.fill(0);
   }
 };
 

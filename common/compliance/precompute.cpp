@@ -223,6 +223,7 @@ Tensors precompute_tensors(const ElasticModel& model, const std::vector<int>& co
   for (int i = 0; i < n; ++i) t.fixed_mask[static_cast<std::size_t>(i)] = model.fixed.mask(i);
   t.precision = options.precision;
   t.method = options.method;
+  t.material = model.material;
   t.cg_tolerance = options.method == SolveMethod::kCg ? options.cg_tolerance : 0;
 
   const int s = t.column_count();

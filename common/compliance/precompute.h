@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -105,6 +106,9 @@ struct Tensors {
   fem::SolveMethod method = fem::SolveMethod::kDirect;
   double cg_tolerance = 0;  // relative residual per column when method == kCg
   std::vector<TensorBlock> blocks;
+  /// The material the responses were computed with (set by precompute_tensors, load_or_build_tensors and the
+  /// liver's tensor setup; not stored in the cache file, whose key holds it). The contact's near-field term needs it.
+  std::optional<fem::Material> material;
 
   int column_count() const { return static_cast<int>(contact_nodes.size()); }
   /// The block with this name, or nullptr.

@@ -483,7 +483,10 @@ Tensors load_or_build_tensors(const std::string& path, const ElasticModel& model
   if (!path.empty()) {
     key = tensor_cache_key(*model.mesh, model.material, model.fixed, contact_nodes, rows, options);
     o.load = load_tensor_cache(path, key, t);
-    if (o.load.status == CacheStatus::kOk) return t;
+    if (o.load.status == CacheStatus::kOk) {
+      t.material = model.material;  // part of the key
+      return t;
+    }
   } else {
     o.load = result(CacheStatus::kMissing, "no cache path given");
   }

@@ -60,6 +60,46 @@ ContactSurface::ContactSurface(const TetMesh& mesh, const SurfaceMesh& surface,
     if (len > 0) n /= len;
   }
   node_tris_ = node_triangles(surface, static_cast<int>(nv));
+  // Edge adjacency for the footprint's walk: the triangle across the edge opposite each vertex.
+  adjacent_.assign(3 * nf, -1);
+  {
+    struct Edge {
+      int a, b, f, v;
+    };
+    std::vector<Edge> edges;
+    edges.reserve(3 * nf);
+    for (std::size_t f = 0; f < nf; ++f)
+      for (int v = 0; v < 3; ++v) {
+        const int a = surface.tris(static_cast<Eigen::Index>(f), (v + 1) % 3);
+        const int b = surface.tris(static_cast<Eigen::Index>(f), (v + 2) % 3);
+        edges.push_back({std::min(a, b), std::max(a, b), static_cast<int>(f), v});
+      }
+    std::sort(edges.begin(), edges.end(), [](const Edge& x, const Edge& y) {
+      return x.a != y.a ? x.a < y.a : x.b != y.b ? x.b < y.b : x.f < y.f;
+    });
+    for (std::size_t i = 0; i < edges.size();) {
+      std::size_t j = i + 1;
+      while (j < edges.size() && edges[j].a == edges[i].a && edges[j].b == edges[i].b) ++j;
+      if (j - i == 2) {  // a manifold edge; a non-manifold one (three or more triangles) gets no neighbour
+        adjacent_[static_cast<std::size_t>(3 * edges[i].f + edges[i].v)] = edges[i + 1].f;
+        adjacent_[static_cast<std::size_t>(3 * edges[i + 1].f + edges[i + 1].v)] = edges[i].f;
+      }
+      i = j;
+    }
+  }
+  // The footprint's radial quadrature: 4-point Gauss-Legendre in u = sqrt(1 - (rho/a)^2) on [0, 1], in which the
+  // flat punch's pressure integrates with a constant density (each ring carries its Gauss weight of the load).
+  {
+    const double x[kFootprintRings] = {-0.8611363115940526, -0.3399810435848563, 0.3399810435848563,
+                                       0.8611363115940526};
+    const double w[kFootprintRings] = {0.3478548451374538, 0.6521451548625461, 0.6521451548625461,
+                                       0.3478548451374538};
+    for (int r = 0; r < kFootprintRings; ++r) {
+      const double u = 0.5 * (x[r] + 1);
+      ring_rho_[static_cast<std::size_t>(r)] = std::sqrt(1 - u * u);
+      ring_weight_[static_cast<std::size_t>(r)] = 0.5 * w[r];
+    }
+  }
   // Candidate patch nodes per triangle: surface nodes within r + circumradius of the centroid (brute force, once).
   cand_start_.assign(nf + 1, 0);
   for (std::size_t f = 0; f < nf; ++f) {
@@ -160,6 +200,101 @@ int ContactSurface::patch(const Eigen::Vector3d& c, int triangle, const Eigen::V
   if (dropped) *dropped = out;
   if (fixed) *fixed = stuck;
   return count;
+}
+
+int ContactSurface::locate(const Eigen::Vector3d& q, const Eigen::Vector3d& t1, const Eigen::Vector3d& t2,
+                           const Eigen::Vector3d& normal, int f, Eigen::Vector3d& bary) const noexcept {
+  for (int step = 0; step < kMaxWalk && f >= 0; ++step) {
+    // Only faces within about 78 degrees of the pressing direction: the projection along it is well posed.
+    if (!(face_normals_[static_cast<std::size_t>(f)].dot(normal) > 0.2)) return -1;
+    Eigen::Vector2d p[3];
+    for (int v = 0; v < 3; ++v) {
+      const Eigen::Vector3d d = node_at(mesh_, surface_.tris(f, v)) - q;
+      p[v] = Eigen::Vector2d(d.dot(t1), d.dot(t2));
+    }
+    const auto cross = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); };
+    const double area = cross(p[1] - p[0], p[2] - p[0]);
+    if (!(area > 0)) return -1;
+    bary = Eigen::Vector3d(cross(p[1], p[2]), cross(p[2], p[0]), cross(p[0], p[1])) / area;
+    int worst = 0;
+    for (int v = 1; v < 3; ++v)
+      if (bary[v] < bary[worst]) worst = v;
+    if (bary[worst] >= -1e-12) return f;
+    f = adjacent_[static_cast<std::size_t>(3 * f + worst)];
+  }
+  return -1;
+}
+
+int ContactSurface::footprint(const Eigen::Vector3d& c, int triangle, const Eigen::Vector3d& normal, double a,
+                              int capacity, int* nodes, double* weights, int* dropped, int* fixed) const noexcept {
+  if (dropped) *dropped = 0;
+  if (fixed) *fixed = 0;
+  if (triangle < 0 || triangle >= surface_.tris.rows() || capacity <= 0 || !(a > 0)) return 0;
+  Eigen::Vector3d t1 = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  t1 = (t1 - t1.dot(normal) * normal).normalized();
+  const Eigen::Vector3d t2 = normal.cross(t1);
+  constexpr int kMax = 3 * kFootprintRings * kFootprintAngles;
+  std::array<int, kMax> cand_node{};
+  std::array<double, kMax> cand_weight{};
+  int cand = 0;
+  int f = triangle;
+  constexpr double kTwoPi = 6.283185307179586;
+  for (int r = 0; r < kFootprintRings; ++r) {
+    const double rho = a * ring_rho_[static_cast<std::size_t>(r)];
+    const double share = ring_weight_[static_cast<std::size_t>(r)] / kFootprintAngles;
+    for (int k = 0; k < kFootprintAngles; ++k) {
+      const double theta = kTwoPi * (k + 0.5 * (r % 2)) / kFootprintAngles;  // rings staggered
+      const Eigen::Vector3d q = c + rho * (std::cos(theta) * t1 + std::sin(theta) * t2);
+      Eigen::Vector3d bary;
+      const int g = locate(q, t1, t2, normal, f, bary);
+      if (g < 0) continue;
+      f = g;
+      for (int v = 0; v < 3; ++v) {
+        const int node = surface_.tris(g, v);
+        const double w = share * std::max(bary[v], 0.0);
+        int i = 0;
+        while (i < cand && cand_node[static_cast<std::size_t>(i)] != node) ++i;
+        if (i == cand) {
+          cand_node[static_cast<std::size_t>(cand)] = node;
+          cand_weight[static_cast<std::size_t>(cand++)] = 0;
+        }
+        cand_weight[static_cast<std::size_t>(i)] += w;
+      }
+    }
+  }
+  int count = 0, out = 0, stuck = 0;
+  for (int i = 0; i < cand; ++i) {
+    const int n = cand_node[static_cast<std::size_t>(i)];
+    const double w = cand_weight[static_cast<std::size_t>(i)];
+    if (!(w > 0)) continue;
+    if (free_[static_cast<std::size_t>(n)] == 0) {
+      ++stuck;
+      continue;
+    }
+    // Keep the `capacity` largest weights, in descending order (ties: first found).
+    int pos = count < capacity ? count : capacity;
+    if (count >= capacity) {
+      ++out;
+      if (!(w > weights[capacity - 1])) continue;
+    }
+    while (pos > 0 && weights[pos - 1] < w) {
+      if (pos < capacity) {
+        weights[pos] = weights[pos - 1];
+        nodes[pos] = nodes[pos - 1];
+      }
+      --pos;
+    }
+    weights[pos] = w;
+    nodes[pos] = n;
+    if (count < capacity) ++count;
+  }
+  double sum = 0;
+  for (int i = 0; i < count; ++i) sum += weights[i];
+  if (sum > 0)
+    for (int i = 0; i < count; ++i) weights[i] /= sum;
+  if (dropped) *dropped = out;
+  if (fixed) *fixed = stuck;
+  return sum > 0 ? count : 0;
 }
 
 Eigen::Vector3d ContactSurface::patch_normal(const int* nodes, const double* weights, int count) const noexcept {

@@ -16,6 +16,7 @@
 // queries allocate nothing and never throw.
 #pragma once
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -66,6 +67,20 @@ class ContactSurface {
   int patch(const Eigen::Vector3d& c, int triangle, const Eigen::Vector3d& normal, int capacity, int* nodes,
             double* weights, int* dropped, int* fixed) const noexcept;
 
+  /// Footprint of a tip of radius `a` (m) centred at rest point `c` (on triangle `triangle`), pressed along
+  /// `normal`: the weight of node i is the integral of its shape function against the flat punch's pressure
+  /// p(rho) = 1 / (2 pi a sqrt(a^2 - rho^2)) over the disc of radius a in the plane normal to `normal`, projected
+  /// along `normal` onto the surface (kFootprintRings x kFootprintAngles points, exact for the pressure's radial
+  /// singularity: rho = a sqrt(1 - u^2) with u Gauss-Legendre on [0, 1]). Points that fall off the surface or on a
+  /// face turned more than about 78 degrees from `normal` are left out. Weights of nodes that carry no constraint
+  /// (fixed) are left out (`fixed` counts those nodes); up to `capacity` nodes (the largest; `dropped` counts the
+  /// rest); the kept weights normalized to sum 1. Continuous in c: the weights are integrals, not a selection.
+  /// Returns the count (0: nothing free under the tip).
+  int footprint(const Eigen::Vector3d& c, int triangle, const Eigen::Vector3d& normal, double a, int capacity,
+                int* nodes, double* weights, int* dropped, int* fixed) const noexcept;
+  static constexpr int kFootprintRings = 4;
+  static constexpr int kFootprintAngles = 12;
+
   /// The patch normal: normalized sum of w_i n_i.
   Eigen::Vector3d patch_normal(const int* nodes, const double* weights, int count) const noexcept;
 
@@ -78,6 +93,11 @@ class ContactSurface {
   mesh::NodeTriangles node_tris_;             // node -> incident triangles
   std::vector<int> cand_start_, cand_nodes_;  // triangle -> candidate patch nodes (CSR), free or fixed
   std::vector<std::uint8_t> free_;
+  std::vector<int> adjacent_;  // 3 per triangle: the triangle across the edge opposite vertex v (-1: none)
+  std::array<double, kFootprintRings> ring_rho_{}, ring_weight_{};  // rho / a and the ring's share of the load
+  /// The triangle (walking from `f`) that holds q projected along the frame's normal, with its barycentrics.
+  int locate(const Eigen::Vector3d& q, const Eigen::Vector3d& t1, const Eigen::Vector3d& t2,
+             const Eigen::Vector3d& normal, int f, Eigen::Vector3d& bary) const noexcept;
 };
 
 }  // namespace surgsim::contact

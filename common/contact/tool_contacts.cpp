@@ -72,8 +72,17 @@ ToolContacts::ToolContacts(const TetMesh& mesh, const SurfaceMesh& surface, cons
   std::vector<std::uint8_t> free(static_cast<std::size_t>(mesh.nodes.rows()), 0);
   for (std::size_t n = 0; n < free.size(); ++n)
     free[n] = tensors.column_of_node[n] >= 0 && haptic_.row_of_node[n] >= 0 && tensors.fixed_mask[n] == 0 ? 1 : 0;
-  radius_ = tool_.tip_radius > 0 ? tool_.tip_radius : kTipRadiusEdges * ContactSurface::mean_edge(mesh, surface);
+  radius_ = tool_.tip_radius;
+  if (!(radius_ > 0) || !std::isfinite(radius_))
+    throw_error("ToolContacts: tool.tip_radius ", radius_, " m: give the instrument tip's own radius (> 0, e.g. 0.0025)");
+  tip_model_ = tool_.tip_model;
   surface_ = std::make_unique<ContactSurface>(mesh, surface, free, radius_);
+  if (tip_model_ == TipModel::kFootprint) {
+    if (!tensors.material)
+      throw_error("ToolContacts: the tensors carry no material (the tip's near field needs E and nu): load them with "
+                  "load_or_build_tensors or set Tensors::material");
+    near_field_ = std::make_unique<NearField>(mesh, surface, *tensors.material, &tensors);
+  }
   patch_solver_ = std::make_unique<PatchSolver>(tensors, "haptic");
   constraints_ = std::make_unique<PatchConstraints>();
 }
@@ -655,8 +664,11 @@ void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
     }
     const RestPoint at = surface_->on_triangle(centre, tri);
     int fixed = 0, out_of_patch = 0;
-    pp.count = surface_->patch(centre, tri, at.normal, kMaxContacts, pp.nodes.data(), pp.weights.data(), &out_of_patch,
-                               &fixed);
+    pp.count = tip_model_ == TipModel::kFootprint
+                   ? surface_->footprint(centre, tri, at.normal, radius_, kMaxContacts, pp.nodes.data(),
+                                         pp.weights.data(), &out_of_patch, &fixed)
+                   : surface_->patch(centre, tri, at.normal, kMaxContacts, pp.nodes.data(), pp.weights.data(),
+                                     &out_of_patch, &fixed);
     pp.fixed = fixed;
     pp.dropped = out_of_patch;
     pp.centre = centre;
@@ -713,6 +725,11 @@ void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
     }
     k.patch_start[static_cast<std::size_t>(p_index + 1)] = start + kept;
     k.patch_count = p_index + 1;
+    // The tip's near field in series with the patch (footprint model): what the mesh cannot resolve under the tip.
+    pp.near_normal = near_field_ ? near_field_->normal(pp.nodes.data(), pp.weights.data(), kept, radius_) : 0.0;
+    k.near_normal[static_cast<std::size_t>(p_index)] = pp.near_normal;
+    k.near_tangent[static_cast<std::size_t>(p_index)] = near_field_ ? near_field_->tangential(pp.near_normal) : 0.0;
+    k.near_axis[static_cast<std::size_t>(p_index)] = n;
     patch_of_point_[si] = p_index;
     kind_[si] = kind;
     // Rows: the normal first, then two tangents for the 3-D constraints.

@@ -6,7 +6,10 @@
 // (found by a continuous segment query, or after a reset from the trocar along the shaft, so a tool already inside
 // is found again at once) its closest rest point is followed by a local walk (contact/contact_surface.h): a straight
 // press keeps its anchor and its depth grows monotonically. Its contact is one scalar constraint along the patch
-// normal n over the free surface nodes within r (smooth Wendland weights, sum 1):  sum_i w_i n.u_i = -depth,
+// normal n over the tip's footprint: w_i the shape functions integrated against the flat punch's pressure over the
+// disc of radius r (ContactSurface::footprint, sum 1), and in series the near field the mesh cannot resolve
+// (contact/near_field.h):  sum_i w_i n.u_i + dC_n lambda_n = -depth, so the force is that of a tip of radius r on
+// any mesh (tool.tip_model nodes: the earlier Wendland weights over the nodes within r, no near field). It is
 // solved through the precomputed tensors (compliance/patch_solve.h) with the other points' constraints; unilateral (a
 // constraint that would pull is dropped, active set) and frictionless, or with Coulomb friction (tool.friction = mu)
 // a sticking 3-D constraint of its patch while |F_t| <= mu F_n that slides along the surface when it would exceed it
@@ -54,6 +57,7 @@
 
 #include "contact/bucket_grid.h"
 #include "contact/contact_surface.h"
+#include "contact/near_field.h"
 #include "compliance/corotation.h"
 #include "compliance/patch_solve.h"
 #include "mesh/mesh.h"
@@ -108,6 +112,7 @@ struct PointPatch {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
   int dropped = 0;  // nodes inside the radius left out (patch capacity or the tick's contact capacity)
   int fixed = 0;    // nodes inside the radius without a constraint (fixed)
+  double near_normal = 0;  // m/N, the tip's near field in series with the patch (footprint model)
 };
 
 class ToolContacts {
@@ -116,7 +121,6 @@ class ToolContacts {
   static constexpr double kGraspOpenJaw = 0.15;   // rad: above, a grasp lets go (hysteresis)
   static constexpr double kOnsetRamp = 0.02;      // s, a new contact's initial penetration blended in
   static constexpr double kReleaseFade = 0.05;    // s, a released grasp's hold fades out
-  static constexpr double kTipRadiusEdges = 2.5;  // tip_radius 0: this many mean surface edges
   static constexpr double kDefaultDt = 1e-3;      // s, tick length when the caller gives none
 
   static constexpr int kMaxPoints = tool::kMaxInstruments * tool::kMaxShaftPoints;  // tool points of all instruments
@@ -238,7 +242,9 @@ class ToolContacts {
   std::array<int, tool::kMaxInstruments> instrument_nodes_{};    // solution nodes per instrument
   // --- patch model ---
   double radius_ = 0;
+  tool::TipModel tip_model_ = tool::TipModel::kFootprint;
   std::unique_ptr<ContactSurface> surface_;
+  std::unique_ptr<NearField> near_field_;  // footprint model
   std::unique_ptr<compliance::PatchSolver> patch_solver_;
   std::unique_ptr<compliance::PatchConstraints> constraints_;
   std::array<PointPatch, kMaxPoints> patches_{};

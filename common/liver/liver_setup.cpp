@@ -87,12 +87,18 @@ Tensors load_liver_tensors(const LiverTensorSetup& setup, const TetMesh& mesh, c
   CacheOutcome& out = outcome != nullptr ? *outcome : local;
   Tensors t;
   out.load = load_tensor_cache(setup.cache_path, setup.key, t, blocks);
-  if (out.load.status == CacheStatus::kOk) return t;
+  if (out.load.status == CacheStatus::kOk) {
+    t.material = material;  // part of the key
+    return t;
+  }
 
   // Serialize builders: whoever gets the lock second finds the cache written by the first.
   FileLock lock(setup.cache_path);
   out.load = load_tensor_cache(setup.cache_path, setup.key, t, blocks);
-  if (out.load.status == CacheStatus::kOk) return t;
+  if (out.load.status == CacheStatus::kOk) {
+    t.material = material;  // part of the key
+    return t;
+  }
   if (log != nullptr && out.load.status != CacheStatus::kMissing) {
     *log << "tensors: cache " << setup.cache_path << " is " << to_string(out.load.status) << " (" << out.load.detail
          << "); rebuilding it (nothing to do by hand; a file that keeps failing can be deleted)\n";

@@ -481,7 +481,8 @@ ToolSpec read_tool(const Reader& r, const Field& f) {
     }
   }
   if (m.has("tip_radius")) {
-    t.tip_radius = r.number(m.at("tip_radius"), closed(0, 0.1), "tip radius in m, 0..0.1 (0: 2.5 x the mean surface edge)");
+    t.tip_radius = r.number(m.at("tip_radius"), Range{0, 0.1, true, false},
+                            "the instrument tip's own radius in m, e.g. 0.0025 for a 5 mm instrument, 0.005 for 10 mm");
   }
   if (m.has("friction")) t.friction = r.number(m.at("friction"), closed(0, 10), "Coulomb friction coefficient, 0..10");
   // The contact points must lie on the shaft.
@@ -720,6 +721,7 @@ std::uint64_t Scene::hash() const {
     h.value<std::int32_t>(tool.contact_capacity);
     h.value<std::int32_t>(static_cast<std::int32_t>(tool.contact_model));
     hash_double(h, tool.tip_radius);
+    h.value<std::int32_t>(static_cast<std::int32_t>(tool.tip_model));
     hash_double(h, tool.friction);
   }
 

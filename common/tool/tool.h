@@ -11,10 +11,15 @@ namespace surgsim::tool {
 constexpr int kMaxShaftPoints = 32;
 
 /// How a liver contact is imposed on the organ: `patch` (default) spreads one constraint along the surface
-/// normal (frictionless) or a sticking 3-D constraint (friction, grasp) over every free surface node within
-/// tip_radius of the contact point with smooth weights; `triangle` is the paper's distribution of the contact
+/// normal (frictionless) or a sticking 3-D constraint (friction, grasp) over the tip's footprint (TipModel); `triangle` is the paper's distribution of the contact
 /// displacement over the three vertices of the touched triangle (alpha_v d, all three components imposed).
 enum class ContactModel : int { kPatch = 0, kTriangle = 1 };
+
+/// How the patch model sees the tip (patch model only). `footprint` (default): the shape functions integrated over
+/// the tip's disc of radius tip_radius, plus the near field the mesh cannot resolve (contact/near_field.h): the
+/// same force on any mesh. `nodes`: the earlier model, Wendland weights over the free nodes within tip_radius and no
+/// near field (its force depends on the mesh); kept for comparison in the benchmarks, not read from scenes.
+enum class TipModel : int { kFootprint = 0, kNodes = 1 };
 
 /// Laparoscopic tool through a trocar (5 DOF: pitch, yaw, insertion, roll, jaw).
 struct ToolSpec {
@@ -29,7 +34,8 @@ struct ToolSpec {
   double force_limit = 8.0;      // N, device force clamp
   int contact_capacity = 20;     // simultaneous contact nodes, 1..64 (ContactFrame bound)
   ContactModel contact_model = ContactModel::kPatch;
-  double tip_radius = 0;         // m, radius of the patch contact; 0: 2.5 x the organ's mean surface edge
+  double tip_radius = 0.0025;    // m, the tip's own radius (a 5 mm instrument), whatever the mesh
+  TipModel tip_model = TipModel::kFootprint;
   double friction = 0;           // Coulomb coefficient mu >= 0 between tip and tissue (0: frictionless)
 };
 
