@@ -46,7 +46,7 @@ fi
 for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench \
          bench/liver_error_bench bench/intestine_error_bench bench/tube_skinning_bench bench/stability_report \
          bench/rt_bench bench/two_hands_bench bench/large_deformation_bench bench/multirate_node_bench bench/frame_bench \
-         bench/haptic_signal_bench bin/surgsim-web bin/surgsim-device-sim; do
+         bench/haptic_signal_bench bench/tool_size_bench bin/surgsim-web bin/surgsim-device-sim; do
   [ -x "$build/$p" ] || { echo "report: $build/$p not found: run scripts/build.sh first" >&2; exit 1; }
 done
 build_s=$(( $(date +%s) - start_all ))
@@ -113,6 +113,7 @@ device_points="0.05,0.1,3 0.05,1,0.5 0.2,0.1,3 0.2,1,0.5 0.1,0.5,2"
 two_hands_s=5.5                         # the two-instrument trajectory (5 s), held 0.5 s
 intestine_live_max_s=                   # empty: each intestine trajectory's length + 0.5 s
 intestine_load_step=${SURGSIM_REPORT_INTESTINE_LOAD_STEP:-2:2:1.5}
+tool_size_args=()                       # tool_size_bench: livers at 1500, 5000, 20000 target nodes (the last the reference)
 large_deformation_args=()
 multirate_node_args=()
 scale_sizes=1500,5000,20000
@@ -145,6 +146,7 @@ if [ $smoke = 1 ]; then
   two_hands_s=2
   intestine_live_max_s=3
   intestine_load_step=${SURGSIM_REPORT_INTESTINE_LOAD_STEP:-1:1:1.5}
+  tool_size_args=(--meshes 500,1500)
   large_deformation_args=(--quick --only indent_10 lift_45 --durations 0.5 --motion-samples 10 --repeats 20)
   multirate_node_args=(--sample-ms 1000)
   scale_sizes=1500
@@ -212,6 +214,13 @@ device_loop() {
   "$root/scripts/device_grid.sh" --out "$out/raw/device" --points "$device_points"
 }
 step device_loop device_loop
+# The instrument's contact (tip size): a 5 mm tip slid at 5 mm depth and pressed 1-10 mm on the shipped liver meshed at
+# about 1.4k, 5k and 21k nodes, the footprint contact beside the earlier node patch, and the flat punch on a bonded slab
+# against Hayes 1972 (tool_size.csv, tool_size_slide.csv, tool_size_press.csv). Its meshes and tensors go to the run's
+# cache ($SURGSIM_CACHE_DIR, as for the other liver benchmarks): liver_error_bench has made the 21k liver's already
+# (not with --quick: then this step makes it, about 20 s); the 5k liver is meshed here on first use. --smoke: the livers
+# at 500 and 1500 target nodes.
+step tool_size "$bench/tool_size_bench" "${tool_size_args[@]}" --out "$csv"
 # Both hands. The tick with two instruments x 10 contacts on the shipped two-tool liver and the grasper's
 # force while the probe presses, against the grasper alone and a direct solve (two_hands.csv, two_hands_trace.csv);
 # then the machine's floor for as long as the live run, just before it (a row of its own in rt_floor.csv: rt_bench

@@ -15,4 +15,9 @@ BUDGETS = {
     "step_pct": 5.0,                # largest one-tick change at onset (0.1 m/s) or grasp release, % of the held force
     "tick_vs_bench_us": 15.0,       # live tick p99 within this of the benchmark's p99 for the same work
     "device_force_pct": 10.0,       # closed loop: resting force within this of the hand's
+    # The instrument's contact (tool_size_bench, footprint model): a 5 mm tip on the liver at 1.4k, 5k and 21k nodes
+    "tool_mean_force_pct": 5.0,     # mean force along the slide at 5 mm depth, 1.4k and 5k meshes against the 21k
+    "tool_depth_force_pct": 5.0,    # force at every depth 1-10 mm, 1.4k and 5k meshes against the 21k
+    "tool_ripple_pct": 5.0,         # slide at 5 mm depth: peak-to-peak of force less its 2 cm moving average, % of mean
+    "tool_punch_pct": 5.0,          # flat punch (a 5 mm, 1 mm deep) on a bottom-fixed 4 cm slab against Hayes 1972
 }

@@ -19,7 +19,7 @@ SOURCE = sys.argv.pop(1) if len(sys.argv) > 1 else os.path.join(os.path.dirname(
 REPORT_PY = os.path.join(SOURCE, "scripts", "report", "build.py")
 # The headings' numbers come from the list of sections (scripts/report/sections.py).
 sys.path.insert(0, os.path.join(SOURCE, "scripts"))
-from report import haptic_signal, intestine_live, sections  # noqa: E402
+from report import haptic_signal, intestine_live, sections, tool_size  # noqa: E402
 
 
 def write(path, text):
@@ -57,7 +57,7 @@ class ReportTest(unittest.TestCase):
         # The other sections' inputs, a few rows each in the bench programs' formats.
         for name in ("intestine_timestep", "intestine_pairs", "intestine_lod", "stability", "liver_nonlinear",
                      "liver_mesh_convergence", "node_tick", "liver_precompute", "rt_floor", "haptic_signal",
-                     "haptic_signal_slide"):
+                     "haptic_signal_slide", "tool_size", "tool_size_slide", "tool_size_press"):
             shutil.copy(os.path.join(os.path.dirname(os.path.abspath(__file__)), "fixtures", name + ".csv"),
                         os.path.join(self.dir, "csv", name + ".csv"))
         rates = os.path.join(self.dir, "raw", "rates")
@@ -202,6 +202,47 @@ class ReportTest(unittest.TestCase):
                       "`csv/rt_floor.csv` (the rt_floor_intestine_push step did not run) |", text)
         self.assertIn("| lift: haptic node at 1 kHz | missing: `raw/live_intestine_lift/haptic_stats.json` (the "
                       "live_intestine_lift step did not run) |", text)
+
+    def test_tool_size_section(self):
+        """The footprint contact's figures against their budgets, each slab on its own row (the failing one shown),
+        the tick from node_bench, the side-by-side and punch tables and both plots (fixtures from a real run)."""
+        text = self.report_text()
+        self.assertIn("## %d. The instrument's contact (tip size)" % sections.number(tool_size), text)
+        self.assertEqual(sections.number(tool_size), sections.number(haptic_signal) + 1)
+        self.assertNotIn("tool_size.py failed", text)
+        self.assertIn("| mean slide force, liver 1500 and liver 5000 against liver 20000, footprint 5 mm | "
+                      "-5.47 % (liver 1500) | within 5 % | **over** |", text)
+        self.assertIn("| force against depth 1-10 mm, liver 1500 and liver 5000 against liver 20000, footprint 5 mm, "
+                      "at every depth | -5.96 % (liver 1500) | within 5 % | **over** |", text)
+        self.assertIn("| ripple along the slide, every liver (liver 1500, liver 5000, liver 20000), footprint 5 mm | "
+                      "4.30 % (liver 5000) | <= 5 % | within |", text)
+        self.assertIn("slab 1 cm cells, footprint 5 mm | -5.65 % (0.0407 N against 0.04314 N) | within 5 % | "
+                      "**over** |", text)
+        self.assertIn("slab 5 mm cells, footprint 5 mm | -3.42 % (0.04166 N against 0.04314 N) | within 5 % | within |",
+                      text)
+        self.assertIn("| haptic tick p99 with 10 contacts (node_bench, `csv/node_tick.csv`) | p99 61.8 us (1382-node "
+                      "liver) | <= 100 us | within |", text)
+        self.assertIn("| tip size: ripple along the slide", text)  # in the headline too
+        self.assertIn("| liver 5000 | 5 | 0.2016 | 4.304 % | -2.26 % / -1.74 % | 5 | 0.1654 | 84.4 % |", text)
+        self.assertIn("| liver 20000 | 5 | 0.2063 | 2.337 % | (reference) |", text)
+        self.assertIn("| slab 5 mm cells | nodes 2.5 edges | 0.06138 | 0.04314 | +42.29 % | 2.042 % |", text)
+        for plot in ("tool_size_slide", "tool_size_press"):
+            self.assertGreater(os.path.getsize(os.path.join(self.dir, "plots", plot + ".png")), 1000)
+
+    def test_tool_size_section_with_nothing(self):
+        for name in ("tool_size", "tool_size_slide", "tool_size_press", "node_tick"):
+            os.remove(os.path.join(self.dir, "csv", name + ".csv"))
+        text = self.report_text()
+        self.assertNotIn("tool_size.py failed", text)
+        self.assertIn("**Missing**: `csv/tool_size.csv` (the tool_size step did not run).", text)
+        self.assertIn("| ripple along the slide, every liver, footprint 5 mm | **Missing**: `csv/tool_size.csv` (the "
+                      "tool_size step did not run) | <= 5 % | - |", text)
+        self.assertIn("| haptic tick p99 with 10 contacts (node_bench, `csv/node_tick.csv`) | **Missing**: "
+                      "`csv/node_tick.csv` (the node_bench step did not run) | <= 100 us | - |", text)
+        self.assertIn("**Missing**: `csv/tool_size_slide.csv`, the force along the slide (the tool_size step did not "
+                      "run).", text)
+        self.assertIn("`csv/tool_size_press.csv`", text.split("## Headline")[1].split("##")[0])  # Missing inputs
+        self.assertFalse(os.path.exists(os.path.join(self.dir, "plots", "tool_size_slide.png")))
 
     def test_sections_numbered_by_the_list(self):
         text = self.report_text()
