@@ -92,8 +92,7 @@ ContactSurface::ContactSurface(const TetMesh& mesh, const SurfaceMesh& surface,
   {
     const double x[kFootprintRings] = {-0.8611363115940526, -0.3399810435848563, 0.3399810435848563,
                                        0.8611363115940526};
-    const double w[kFootprintRings] = {0.3478548451374538, 0.6521451548625461, 0.6521451548625461,
-                                       0.3478548451374538};
+    const double w[kFootprintRings] = {0.3478548451374538, 0.6521451548625461, 0.6521451548625461, 0.3478548451374538};
     for (int r = 0; r < kFootprintRings; ++r) {
       const double u = 0.5 * (x[r] + 1);
       ring_rho_[static_cast<std::size_t>(r)] = std::sqrt(1 - u * u);

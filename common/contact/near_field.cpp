@@ -51,7 +51,7 @@ void hat_cloud(const TetMesh& mesh, const SurfaceMesh& surface, const NodeTriang
     };
     for (int i = 0; i < n; ++i)
       for (int j = 0; i + j < n; ++j) {
-        add((i + 1.0 / 3) / n, (j + 1.0 / 3) / n);                          // upward sub-triangle
+        add((i + 1.0 / 3) / n, (j + 1.0 / 3) / n);                     // upward sub-triangle
         if (i + j < n - 1) add((i + 2.0 / 3) / n, (j + 2.0 / 3) / n);  // downward
       }
   }

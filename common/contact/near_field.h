@@ -64,9 +64,9 @@ class NearField {
  private:
   const mesh::TetMesh& mesh_;
   double kernel_ = 0, tangent_ratio_ = 1;
-  std::vector<double> self_;       // per mesh node: I_ii (0 off the surface)
-  std::vector<int> start_, other_;  // CSR per mesh node: neighbouring surface nodes
-  std::vector<double> value_;       // I_ij of those pairs
+  std::vector<double> self_;                // per mesh node: I_ii (0 off the surface)
+  std::vector<int> start_, other_;          // CSR per mesh node: neighbouring surface nodes
+  std::vector<double> value_;               // I_ij of those pairs
   std::vector<double> self_local_, local_;  // L_ii per node, L_ij per pair (as self_, value_)
   std::vector<double> smooth_;              // S_i
 };

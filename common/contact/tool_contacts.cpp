@@ -74,13 +74,16 @@ ToolContacts::ToolContacts(const TetMesh& mesh, const SurfaceMesh& surface, cons
     free[n] = tensors.column_of_node[n] >= 0 && haptic_.row_of_node[n] >= 0 && tensors.fixed_mask[n] == 0 ? 1 : 0;
   radius_ = tool_.tip_radius;
   if (!(radius_ > 0) || !std::isfinite(radius_))
-    throw_error("ToolContacts: tool.tip_radius ", radius_, " m: give the instrument tip's own radius (> 0, e.g. 0.0025)");
+    throw_error("ToolContacts: tool.tip_radius ", radius_,
+                " m: give the instrument tip's own radius (> 0, e.g. 0.0025)");
   tip_model_ = tool_.tip_model;
   surface_ = std::make_unique<ContactSurface>(mesh, surface, free, radius_);
+  // Multirate: the near field stays linear and in series; the tracker makes the mesh's part non-linear.
   if (tip_model_ == TipModel::kFootprint) {
     if (!tensors.material)
-      throw_error("ToolContacts: the tensors carry no material (the tip's near field needs E and nu): load them with "
-                  "load_or_build_tensors or set Tensors::material");
+      throw_error(
+          "ToolContacts: the tensors carry no material (the tip's near field needs E and nu): load them with "
+          "load_or_build_tensors or set Tensors::material");
     near_field_ = std::make_unique<NearField>(mesh, surface, *tensors.material, &tensors);
   }
   patch_solver_ = std::make_unique<PatchSolver>(tensors, "haptic");
@@ -677,6 +680,19 @@ void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
     const Eigen::Vector3d& n = pp.normal;
     const double depth = (c.anchor - p).dot(n);
     c.depth = depth;
+    if ((kind == kSlide || kind == kStick) && near_field_) {
+      // A point less than the tip radius to the side of a deeper point of the same instrument (across that point's
+      // normal: the shaft following the tip into the dimple it made) is in that point's hole, not a contact of its
+      // own: the near field's dimple is not in the mesh's surface, so the gap below would count it as a penetration.
+      // From the points' positions only (no history, not the anchors, which drift apart on a curved surface): a
+      // resumed instrument gets the same contacts as one that pressed in.
+      for (int j = 0; j < geometry.point_count; ++j) {
+        const PointContact& o = points_[static_cast<std::size_t>(t * kMaxShaftPoints + j)];
+        if (j == i || !o.tracked || o.grasp || !(o.depth > c.depth)) continue;
+        const Eigen::Vector3d d = geometry.points[static_cast<std::size_t>(j)] - p;
+        if ((d - d.dot(o.normal) * o.normal).norm() < radius_) return;
+      }
+    }
     if ((kind == kSlide || kind == kStick) && !c.active) {
       // A new contact: only when the point penetrates the patch as the current solution deforms it.
       double gap = depth;
@@ -728,7 +744,8 @@ void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
     // The tip's near field in series with the patch (footprint model): what the mesh cannot resolve under the tip.
     pp.near_normal = near_field_ ? near_field_->normal(pp.nodes.data(), pp.weights.data(), kept, radius_) : 0.0;
     k.near_normal[static_cast<std::size_t>(p_index)] = pp.near_normal;
-    k.near_tangent[static_cast<std::size_t>(p_index)] = near_field_ ? near_field_->tangential(pp.near_normal) : 0.0;
+    pp.near_tangent = near_field_ ? near_field_->tangential(pp.near_normal) : 0.0;
+    k.near_tangent[static_cast<std::size_t>(p_index)] = pp.near_tangent;
     k.near_axis[static_cast<std::size_t>(p_index)] = n;
     patch_of_point_[si] = p_index;
     kind_[si] = kind;

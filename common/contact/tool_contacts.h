@@ -112,7 +112,8 @@ struct PointPatch {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
   int dropped = 0;  // nodes inside the radius left out (patch capacity or the tick's contact capacity)
   int fixed = 0;    // nodes inside the radius without a constraint (fixed)
-  double near_normal = 0;  // m/N, the tip's near field in series with the patch (footprint model)
+  double near_normal = 0;   // m/N, the tip's near field in series with the patch (footprint model), normal row
+  double near_tangent = 0;  // m/N, the same for the tangential rows
 };
 
 class ToolContacts {

@@ -11,8 +11,9 @@ namespace surgsim::tool {
 constexpr int kMaxShaftPoints = 32;
 
 /// How a liver contact is imposed on the organ: `patch` (default) spreads one constraint along the surface
-/// normal (frictionless) or a sticking 3-D constraint (friction, grasp) over the tip's footprint (TipModel); `triangle` is the paper's distribution of the contact
-/// displacement over the three vertices of the touched triangle (alpha_v d, all three components imposed).
+/// normal (frictionless) or a sticking 3-D constraint (friction, grasp) over the tip's footprint (TipModel); `triangle`
+/// is the paper's distribution of the contact displacement over the three vertices of the touched triangle (alpha_v d,
+/// all three components imposed).
 enum class ContactModel : int { kPatch = 0, kTriangle = 1 };
 
 /// How the patch model sees the tip (patch model only). `footprint` (default): the shape functions integrated over
@@ -34,7 +35,7 @@ struct ToolSpec {
   double force_limit = 8.0;      // N, device force clamp
   int contact_capacity = 20;     // simultaneous contact nodes, 1..64 (ContactFrame bound)
   ContactModel contact_model = ContactModel::kPatch;
-  double tip_radius = 0.0025;    // m, the tip's own radius (a 5 mm instrument), whatever the mesh
+  double tip_radius = 0.0025;  // m, the tip's own radius (a 5 mm instrument), whatever the mesh
   TipModel tip_model = TipModel::kFootprint;
   double friction = 0;           // Coulomb coefficient mu >= 0 between tip and tissue (0: frictionless)
 };

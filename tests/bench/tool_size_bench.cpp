@@ -6,12 +6,14 @@
 //
 // Cases (1 kHz ticks, the tool vertical, one contact point, the shipped scene's law and material):
 //   slide  the tip 5 mm below the REST surface (the surface's height under it, found by a vertical ray), moved at
-//          2 cm/s for 7 cm along x at y = 1 mm across the liver's curved top; the force along the slide, its mean and its
-//          ripple: peak-to-peak of the force minus its 2 cm centred moving average, over its mean (the first and last
-//          1 cm left out: the average needs 1 cm on either side).
+//          2 cm/s for 7 cm along x at y = 1 mm across the liver's curved top; the force along the slide, its mean and
+//          its ripple: peak-to-peak of the force minus its 2 cm centred moving average, over its mean (the first and
+//          last 1 cm left out: the average needs 1 cm on either side).
 //   press  a straight press at 1 cm/s at x = 0.03, y = 1 mm (under the shipped trocar) from 0.5 to 10 mm below the rest
 //          surface;
 //          the force at each mm of depth.
+//   tick   one instrument with 10 contact points 6 mm apart along x, 4 mm below the rest surface, sliding 2 cm along
+//          x at 2 cm/s: ToolContacts::step's time per tick (percentiles over 1000 ticks; a timing, not a test).
 //   punch  a 20 x 20 x 4 cm slab, bottom fixed, 1 cm and 5 mm cells: the tip pressed 1 mm at 11 positions across a
 //          cell; the mean force against 2 a E delta / (1 - nu^2) kappa(a/h, nu).
 // Prints tables with the budgets of docs/DESIGN.md ("The instrument's contact") beside each figure; --out DIR writes
@@ -21,6 +23,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -122,10 +125,62 @@ double ripple(const std::vector<double>& s, const std::vector<double>& y, double
   return n > 0 && sum > 0 ? (hi - lo) / (sum / n) : 0.0;
 }
 
+// The tick with 10 patch contacts (the haptic tick's contact work: tracking, footprints, near field, solve).
+void tick_cost(const std::string& label, const std::string& model_name, const liver::LiverModel& model, ToolSpec spec,
+               const nonlinear::NonlinearLaw* law, Out& out) {
+  constexpr int kPoints = 10;
+  constexpr double kSpacing = 0.006, kDepth = 0.004, kX0 = -0.04;
+  spec.shaft_points = kPoints;
+  spec.shaft_spacing = kSpacing;
+  ToolContacts c(model.mesh, model.surface, model.tensors, spec, law);
+  // Rest heights along the path, every 0.1 mm (the points move along x only).
+  std::vector<double> height;
+  for (double x = kX0 - 0.001; x <= kX0 + kPoints * kSpacing + 0.025; x += 1e-4)
+    height.push_back(rest_height(model.mesh, model.surface, x, kY));
+  const auto h_at = [&](double x) {
+    const double f = (x - (kX0 - 0.001)) / 1e-4;
+    const auto i = static_cast<std::size_t>(std::clamp(f, 0.0, static_cast<double>(height.size() - 2)));
+    return height[i] + (f - static_cast<double>(i)) * (height[i + 1] - height[i]);
+  };
+  ToolGeometry g{};
+  g.direction = {0, 0, -1};
+  g.jaw_normal = {1, 0, 0};
+  g.point_count = kPoints;
+  std::vector<double> us;
+  int in_contact = 0;
+  for (int k = 0; k < 1300; ++k) {
+    const double shift = k < 300 ? 0.0 : (k - 300) * kSlideSpeed * kDt;
+    const double depth = k < 300 ? -0.002 + (kDepth + 0.002) * k / 300.0 : kDepth;
+    for (int i = 0; i < kPoints; ++i) {
+      const double x = kX0 + i * kSpacing + shift;
+      g.points[static_cast<std::size_t>(i)] = Eigen::Vector3d(x, kY, h_at(x) - depth);
+    }
+    g.tip = g.points[0];
+    g.trocar = g.tip + Eigen::Vector3d(0, 0, 0.15);
+    g.jaw_tips = {g.tip, g.tip};
+    ContactTick t;
+    const auto t0 = std::chrono::steady_clock::now();
+    c.step(g, 0.5, t, kDt);
+    const auto t1 = std::chrono::steady_clock::now();
+    if (k >= 300) {
+      us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+      in_contact = std::max(in_contact, t.points_in_contact);
+    }
+  }
+  std::sort(us.begin(), us.end());
+  const auto q = [&](double p) { return us[static_cast<std::size_t>(p * static_cast<double>(us.size() - 1))]; };
+  out.figure(label, model_name, "tick", "tick_us_p50", q(0.5), "us");
+  out.figure(label, model_name, "tick", "tick_us_p99", q(0.99), "us");
+  out.figure(label, model_name, "tick", "tick_us_max", us.back(), "us");
+  out.figure(label, model_name, "tick", "contacts", in_contact, "points");
+  std::printf("  %-16s tick, %d contacts: p50 %.1f / p99 %.1f / max %.1f us (budget p99 <= 100 us: %s)\n",
+              model_name.c_str(), in_contact, q(0.5), q(0.99), us.back(), q(0.99) <= 100 ? "pass" : "FAIL");
+}
+
 struct MeshResult {
-  std::map<std::string, double> mean;                 // model -> mean slide force
-  std::map<std::string, double> ripple;               // model -> ripple
-  std::map<std::string, std::vector<double>> depth;   // model -> force at 1..10 mm
+  std::map<std::string, double> mean;                // model -> mean slide force
+  std::map<std::string, double> ripple;              // model -> ripple
+  std::map<std::string, std::vector<double>> depth;  // model -> force at 1..10 mm
 };
 
 MeshResult run_mesh(const std::string& label, int target_nodes, const std::string& cache, Out& out) {
@@ -191,6 +246,7 @@ MeshResult run_mesh(const std::string& label, int target_nodes, const std::strin
     std::printf("  %-16s tip %5.1f mm  slide mean %.4f N  ripple %5.1f %%  press 1/5/10 mm %.4f / %.4f / %.4f N\n",
                 m.name.c_str(), 1e3 * spec.tip_radius, r.mean[m.name], r.ripple[m.name], r.depth[m.name][0],
                 r.depth[m.name][4], r.depth[m.name][9]);
+    tick_cost(label, m.name, model, spec, law, out);
   }
   return r;
 }
@@ -200,9 +256,10 @@ void punch(Out& out) {
   const fem::Material mat{3000.0, 0.45};
   const double kappa = test::hayes_kappa(kRadius / h, mat.poisson_ratio);
   const double ref = test::hayes_force(kRadius, h, mat.young_modulus, mat.poisson_ratio, delta);
-  std::printf("\nflat punch: slab 20 x 20 x 4 cm, bottom fixed, E %.0f Pa, nu %.2f, tip %.0f mm, %.0f mm deep: "
-              "Hayes kappa(%.3f) = %.4f, reference %.5f N\n",
-              mat.young_modulus, mat.poisson_ratio, kRadius * 1e3, delta * 1e3, kRadius / h, kappa, ref);
+  std::printf(
+      "\nflat punch: slab 20 x 20 x 4 cm, bottom fixed, E %.0f Pa, nu %.2f, tip %.0f mm, %.0f mm deep: "
+      "Hayes kappa(%.3f) = %.4f, reference %.5f N\n",
+      mat.young_modulus, mat.poisson_ratio, kRadius * 1e3, delta * 1e3, kRadius / h, kappa, ref);
   for (int cells : {20, 40}) {
     const test::Slab slab(cells, cells, cells / 5, {0.2, 0.2, h});
     const std::string label = cells == 20 ? "slab 1 cm cells" : "slab 5 mm cells";
@@ -242,11 +299,14 @@ int main(int argc, char** argv) {
   std::string out_dir, cache;
   std::vector<int> meshes = {1500, 5000, 20000};
   bool no_liver = false;
-  CLI::App cli{"tool_size_bench: the instrument's contact on the shipped liver meshed at 1.4k, 5k and 21k nodes "
-               "(footprint against the earlier node patch, one run), and the slab's flat punch against Hayes 1972"};
+  CLI::App cli{
+      "tool_size_bench: the instrument's contact on the shipped liver meshed at 1.4k, 5k and 21k nodes "
+      "(footprint against the earlier node patch, one run), and the slab's flat punch against Hayes 1972"};
   cli.add_option("--out", out_dir, "Write tool_size.csv, tool_size_slide.csv and tool_size_press.csv here");
-  cli.add_option("--cache", cache, "Cache folder for the meshes and tensors (default $SURGSIM_CACHE_DIR or ~/.cache/surgsim)");
-  cli.add_option("--meshes", meshes, "Target node counts of the liver meshes; the last is the reference")->delimiter(',');
+  cli.add_option("--cache", cache,
+                 "Cache folder for the meshes and tensors (default $SURGSIM_CACHE_DIR or ~/.cache/surgsim)");
+  cli.add_option("--meshes", meshes, "Target node counts of the liver meshes; the last is the reference")
+      ->delimiter(',');
   cli.add_flag("--no-liver", no_liver, "The slab only (no mesh or tensor cache needed)");
   CLI11_PARSE(cli, argc, argv);
   try {
@@ -276,11 +336,12 @@ int main(int argc, char** argv) {
         }
         out.figure(labels[i], m.name, "against_reference", "mean_force_error", mean_err, "%");
         out.figure(labels[i], m.name, "against_reference", "depth_force_worst_error", worst, "%");
-        std::printf("  %-12s %-16s slide mean %+6.1f %% (budget %g %%: %s)  force-depth worst %+6.1f %% (budget %g "
-                    "%%: %s)\n",
-                    labels[i].c_str(), m.name.c_str(), mean_err, kMeanBudgetPct,
-                    std::abs(mean_err) <= kMeanBudgetPct ? "pass" : "FAIL", worst, kDepthBudgetPct,
-                    std::abs(worst) <= kDepthBudgetPct ? "pass" : "FAIL");
+        std::printf(
+            "  %-12s %-16s slide mean %+6.1f %% (budget %g %%: %s)  force-depth worst %+6.1f %% (budget %g "
+            "%%: %s)\n",
+            labels[i].c_str(), m.name.c_str(), mean_err, kMeanBudgetPct,
+            std::abs(mean_err) <= kMeanBudgetPct ? "pass" : "FAIL", worst, kDepthBudgetPct,
+            std::abs(worst) <= kDepthBudgetPct ? "pass" : "FAIL");
       }
     std::printf("\nripple (budget <= %g %% on every mesh):\n", kRippleBudgetPct);
     for (std::size_t i = 0; i < results.size(); ++i)

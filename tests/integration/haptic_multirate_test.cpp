@@ -107,7 +107,9 @@ TEST_F(HapticMultirate, GraspAndLiftRunsOnTheTrackerAndDiffersFromLinear) {
   }
   std::cout << "[multirate] lobe held lifted (3.0-3.9 s): largest difference to linear " << 100 * largest
             << " % (multirate " << f_mr.transpose() << " N, linear " << f_lin.transpose() << " N)\n";
-  EXPECT_GT(largest, 0.10);
+  // Over 10 % with the mesh-sized patch of before; the tip's near field is linear and in series (the tracker bends
+  // the mesh's part only), so the difference is a smaller share of the force.
+  EXPECT_GT(largest, 0.03);
 }
 
 }  // namespace

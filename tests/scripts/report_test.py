@@ -220,8 +220,11 @@ class ReportTest(unittest.TestCase):
                       "**over** |", text)
         self.assertIn("slab 5 mm cells, footprint 5 mm | -3.42 % (0.04166 N against 0.04314 N) | within 5 % | within |",
                       text)
-        self.assertIn("| haptic tick p99 with 10 contacts (node_bench, `csv/node_tick.csv`) | p99 61.8 us (1382-node "
-                      "liver) | <= 100 us | within |", text)
+        self.assertIn("| contact tick p99 with 10 patch contacts (footprint 5 mm, `ToolContacts::step`, every liver) | "
+                      "p99 460.3 us at worst (liver 1500 112.5 us, liver 5000 162.2 us, liver 20000 460.3 us) | "
+                      "<= 100 us | **over** |", text)
+        self.assertIn("`node_bench`'s tick with 10 point contacts (the superposition solve): p99 61.8 us (1382 nodes)",
+                      text)
         self.assertIn("| tip size: ripple along the slide", text)  # in the headline too
         self.assertIn("| liver 5000 | 5 | 0.2016 | 4.304 % | -2.26 % / -1.74 % | 5 | 0.1654 | 84.4 % |", text)
         self.assertIn("| liver 20000 | 5 | 0.2063 | 2.337 % | (reference) |", text)
@@ -237,8 +240,9 @@ class ReportTest(unittest.TestCase):
         self.assertIn("**Missing**: `csv/tool_size.csv` (the tool_size step did not run).", text)
         self.assertIn("| ripple along the slide, every liver, footprint 5 mm | **Missing**: `csv/tool_size.csv` (the "
                       "tool_size step did not run) | <= 5 % | - |", text)
-        self.assertIn("| haptic tick p99 with 10 contacts (node_bench, `csv/node_tick.csv`) | **Missing**: "
-                      "`csv/node_tick.csv` (the node_bench step did not run) | <= 100 us | - |", text)
+        self.assertIn("| contact tick p99 with 10 patch contacts (footprint 5 mm, `ToolContacts::step`, every liver) | "
+                      "**Missing**: no tick rows in `csv/tool_size.csv` (the tool_size step did not run) | <= 100 us | "
+                      "- |", text)
         self.assertIn("**Missing**: `csv/tool_size_slide.csv`, the force along the slide (the tool_size step did not "
                       "run).", text)
         self.assertIn("`csv/tool_size_press.csv`", text.split("## Headline")[1].split("##")[0])  # Missing inputs

@@ -19,6 +19,10 @@ struct ConstraintRow {
   Eigen::Vector3d d = Eigen::Vector3d::UnitZ();
   double b = 0;
   int instrument = 0;
+  // The tip's near field in series (contact/near_field.h): rows of one patch (the same group >= 0) add
+  // d_r^T near d_l to the constraint compliance.
+  int group = -1;
+  Eigen::Matrix3d near = Eigen::Matrix3d::Zero();
 };
 
 /// The rows ToolContacts (patch model) imposed for point i of instrument t in its last step: the patch's normal row
@@ -35,6 +39,9 @@ inline void add_patch_rows(const contact::ToolContacts& c, int i, int t, bool th
     row.d = three_d ? dirs[r] : p.normal;
     row.b = row.d.dot(pc.offset);
     row.instrument = t;
+    row.group = t * tool::kMaxShaftPoints + i;
+    row.near = p.near_tangent * Eigen::Matrix3d::Identity() +
+               (p.near_normal - p.near_tangent) * p.normal * p.normal.transpose();
     rows.push_back(row);
   }
 }
@@ -45,8 +52,9 @@ class DirectConstraintSolver {
   explicit DirectConstraintSolver(const fem::ElasticModel& model) : model_(model), ldlt_(model.k_ff) {}
   bool ok() const { return ldlt_.info() == Eigen::Success; }
 
-  /// Minimum energy with every row imposed: S = A K_ff^-1 A^T, mu = S^-1 b; row r pushes the ORGAN with mu_r d_r (its
-  /// weights sum to 1). Returns the force on each of `instruments` instruments: minus its rows' forces on the organ.
+  /// Minimum energy with every row imposed: S = A K_ff^-1 A^T (plus each patch's near field), mu = S^-1 b; row r pushes
+  /// the ORGAN with mu_r d_r (its weights sum to 1). Returns the force on each of `instruments` instruments: minus its
+  /// rows' forces on the organ.
   std::vector<Eigen::Vector3d> forces(const std::vector<ConstraintRow>& rows, int instruments) const {
     const auto& free_index = model_.fixed.free_index();
     const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
@@ -61,7 +69,12 @@ class DirectConstraintSolver {
         }
       b[r] = row.b;
     }
-    const Eigen::MatrixXd s = at.transpose() * ldlt_.solve(at);
+    Eigen::MatrixXd s = at.transpose() * ldlt_.solve(at);
+    for (Eigen::Index r = 0; r < m; ++r)
+      for (Eigen::Index l = 0; l < m; ++l) {
+        const ConstraintRow &x = rows[static_cast<std::size_t>(r)], &y = rows[static_cast<std::size_t>(l)];
+        if (x.group >= 0 && x.group == y.group) s(r, l) += x.d.dot(x.near * y.d);
+      }
     const Eigen::VectorXd mu = s.ldlt().solve(b);
     std::vector<Eigen::Vector3d> force(static_cast<std::size_t>(instruments), Eigen::Vector3d::Zero());
     for (Eigen::Index r = 0; r < m; ++r) {

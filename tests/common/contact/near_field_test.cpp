@@ -85,7 +85,8 @@ double raster_interaction(const Box& b, int i, int j, double cell, int n) {
   };
   const std::vector<P> a = sample(i, ci), c = sample(j, cj);
   const double h = 2 * cell / n;
-  const double self = (4.0 / 3.0 * (1 - std::sqrt(2.0)) + 4 * std::log(1 + std::sqrt(2.0))) * h * h * h / (h * h * h * h);
+  const double self =
+      (4.0 / 3.0 * (1 - std::sqrt(2.0)) + 4 * std::log(1 + std::sqrt(2.0))) * h * h * h / (h * h * h * h);
   double s = 0;
   for (const P& p : a)
     for (const P& q : c) {
@@ -103,7 +104,8 @@ TEST(NearField, InteractionsMatchAnIndependentQuadrature) {
   const int i = b.node_at(0.05, 0.05), j = b.node_at(0.06, 0.05), k = b.node_at(0.06, 0.06);
   for (const auto& [p, q] : {std::pair{i, i}, std::pair{i, j}, std::pair{i, k}}) {
     const double ref = raster_interaction(b, p, q, 0.01, 160);
-    EXPECT_NEAR(nf.interaction(p, q) / ref, 1.0, 0.02) << p << "," << q << ": " << nf.interaction(p, q) << " vs " << ref;
+    EXPECT_NEAR(nf.interaction(p, q) / ref, 1.0, 0.02)
+        << p << "," << q << ": " << nf.interaction(p, q) << " vs " << ref;
   }
   // Pairs that are not neighbours: the point formula.
   const int far = b.node_at(0.08, 0.05);

@@ -73,15 +73,18 @@ TEST_F(ToolContactsTest, PokePushesBackAndReleases) {
     previous = t.force.z();
   }
   // The imposed displacement holds once the onset ramp is over (the patch contact): the weighted mean of
-  // the patch's deformed nodes is at the tip's depth along the patch normal.
-  for (int k = 0; k < 30; ++k) step(c, pose_at_depth(0.008));
+  // the patch's deformed nodes is at the tip's depth along the patch normal, less the tip's near field (the dimple
+  // the mesh cannot show, in series: near_normal times the normal force).
+  ContactTick held;
+  for (int k = 0; k < 30; ++k) held = step(c, pose_at_depth(0.008));
   const PointPatch& pp = c.patch(0);
-  ASSERT_GT(pp.count, 3);
+  ASSERT_GE(pp.count, 3);
+  EXPECT_GT(pp.near_normal, 0.0);
   EXPECT_NEAR(pp.normal.z(), 1.0, 1e-12);
   double z = 0;
   for (int e = 0; e < pp.count; ++e)
     z += pp.weights[static_cast<std::size_t>(e)] * c.deformed(pp.nodes[static_cast<std::size_t>(e)]).z();
-  EXPECT_NEAR(z, 0.04 - 0.008, 1e-9);
+  EXPECT_NEAR(z, 0.04 - 0.008 + pp.near_normal * held.force.z(), 1e-9);
   // Back out: released, no force.
   const ContactTick out = step(c, pose_at_depth(-0.002));
   EXPECT_EQ(out.points_in_contact, 0);
@@ -112,13 +115,13 @@ TEST_F(ToolContactsTest, GraspPullsAndLetsGoWhenTheJawOpens) {
 }
 
 TEST_F(ToolContactsTest, DeviceForceIsClampedWithItsDirection) {
-  spec_.force_limit = 0.01;
+  spec_.force_limit = 0.001;
   ToolContacts c(*mesh_, *surface_, *tensors_, spec_);
   step(c, pose_at_depth(-0.005));
   const ContactTick t = step(c, pose_at_depth(0.01));
-  ASSERT_GT(t.force.norm(), 0.01);
+  ASSERT_GT(t.force.norm(), 0.001);
   EXPECT_TRUE(t.saturated);
-  EXPECT_NEAR(t.device_force.norm(), 0.01, 1e-12);
+  EXPECT_NEAR(t.device_force.norm(), 0.001, 1e-12);
   EXPECT_NEAR(t.device_force.normalized().dot(t.force.normalized()), 1.0, 1e-12);
 }
 

@@ -138,7 +138,9 @@ TEST(MultirateContactsNode, HeldDeepPressIsLinearBeforeASnapshotThenNewtons) {
             << t_mr.force.transpose() << " N (snapshot reaction sum " << f_snap.transpose()
             << " N, relative difference " << to_snapshot << "); multirate against linear " << 100 * to_linear << " %\n";
   EXPECT_LT(to_snapshot, 1e-9) << "the held press feels the converged snapshot's reactions";
-  EXPECT_GT(to_linear, 0.10) << "the non-linear force differs from the linear one by more than its known error";
+  // The tip's near field (contact/near_field.h) is linear and in series: the tracker bends the mesh's part only, so
+  // the difference is a smaller share of the force than with the mesh-sized patch of before (over 10 % then).
+  EXPECT_GT(to_linear, 0.05) << "the non-linear force differs from the linear one";
   EXPECT_GT(p.m.ticks_nonlinear(), 0u);
   EXPECT_TRUE(t_mr.device_force.allFinite());
 }

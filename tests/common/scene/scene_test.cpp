@@ -102,7 +102,7 @@ TEST(SceneLoad, MinimalSceneGetsHeaderDefaults) {
   EXPECT_EQ(s.tools[0].force_limit, tool.force_limit);
   EXPECT_EQ(s.tools[0].contact_capacity, tool.contact_capacity);
   EXPECT_EQ(s.tools[0].contact_model, ContactModel::kPatch);  // the smooth patch contact by default
-  EXPECT_EQ(s.tools[0].tip_radius, 0.0);                     // 0: 2.5 mean surface edges
+  EXPECT_EQ(s.tools[0].tip_radius, 0.0025);                   // m: a 5 mm instrument, whatever the mesh
   EXPECT_EQ(s.tools[0].friction, 0.0);                       // frictionless
   EXPECT_EQ(s.haptic.rate_hz, haptic.rate_hz);
   EXPECT_EQ(s.haptic.passivity, haptic.passivity);
@@ -777,7 +777,9 @@ INSTANTIATE_TEST_SUITE_P(
                   "[1, 64]"},
         ErrorCase{"ContactModel", kHead + "tool:\n  contact_model: sphere\n", 4, "key 'tool.contact_model'",
                   "not a contact model"},
-        ErrorCase{"TipRadiusNegative", kHead + "tool: {tip_radius: -0.001}\n", 3, "key 'tool.tip_radius'", "[0, 0.1]"},
+        ErrorCase{"TipRadiusNegative", kHead + "tool: {tip_radius: -0.001}\n", 3, "key 'tool.tip_radius'", "(0, 0.1]"},
+        // 0 once meant "2.5 mean surface edges"; the radius is now the instrument's own, in metres.
+        ErrorCase{"TipRadiusZero", kHead + "tool: {tip_radius: 0}\n", 3, "key 'tool.tip_radius'", "own radius"},
         ErrorCase{"TipRadiusHigh", kHead + "tool: {tip_radius: 1}\n", 3, "key 'tool.tip_radius'", "out of range"},
         ErrorCase{"FrictionNegative", kHead + "tool: {friction: -0.1}\n", 3, "key 'tool.friction'", "[0, 10]"},
         ErrorCase{"FrictionText", kHead + "tool: {friction: sticky}\n", 3, "key 'tool.friction'"},
@@ -856,8 +858,7 @@ INSTANTIATE_TEST_SUITE_P(
                   "not found"},
         ErrorCase{"TrajectoryIsFolder", kHead + "trajectory: .\n", 3, "key 'trajectory'", "not a regular file"},
         // The intestine section
-        ErrorCase{"IntestineForLiver", kHead + "intestine: {columns: 100}\n", 3, "key 'intestine'",
-                  "model: intestine"},
+        ErrorCase{"IntestineForLiver", kHead + "intestine: {columns: 100}\n", 3, "key 'intestine'", "model: intestine"},
         ErrorCase{"IntestineUnknownKey", kIntestine + "intestine:\n  colums: 100\n", 4, "key 'intestine.colums'",
                   "did you mean 'columns'"},
         ErrorCase{"IntestineTooManyMasses", kIntestine + "intestine:\n  rows: 5\n  columns: 500\n", 5,
@@ -879,8 +880,8 @@ INSTANTIATE_TEST_SUITE_P(
                   "key 'intestine.structural_stiffness'", "out of range"},
         ErrorCase{"IntestineMass", kIntestine + "intestine: {mesentery_node_mass: 0}\n", 3,
                   "key 'intestine.mesentery_node_mass'", "out of range"},
-        ErrorCase{"IntestineIntegrator", kIntestine + "intestine: {integrator: rk4}\n", 3,
-                  "key 'intestine.integrator'", "implicit_euler, symplectic_euler"},
+        ErrorCase{"IntestineIntegrator", kIntestine + "intestine: {integrator: rk4}\n", 3, "key 'intestine.integrator'",
+                  "implicit_euler, symplectic_euler"},
         ErrorCase{"IntestineSeedZero", kIntestine + "intestine: {seed: 0}\n", 3, "key 'intestine.seed'",
                   "out of range"},
         ErrorCase{"IntestinePairs", kIntestine + "intestine: {random_pairs: -1}\n", 3, "key 'intestine.random_pairs'",
