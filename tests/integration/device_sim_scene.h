@@ -14,7 +14,8 @@ inline std::string write_two_probe_liver(const std::string& file) {
   const std::string config = SURGSIM_TEST_CONFIG_DIR;
   const std::string probe =
       "axis: [0, 0, -1], shaft_length: 0.35, shaft_radius: 0.0025, shaft_points: 4, shaft_spacing: 0.01, "
-      "jaw_length: 0.015, force_limit: 8.0, contact_capacity: 32, contact_model: patch, friction: 0.0}\n";
+      "jaw_length: 0.015, force_limit: 8.0, contact_capacity: 32, contact_model: patch, friction: 0.0, "
+      "tip_radius: 0.0125}\n";
   std::ofstream out(file);
   out << "name: liver_two_probes\n"
          "model: liver\n"
