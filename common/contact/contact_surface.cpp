@@ -20,6 +20,35 @@ double gate(double cosine) {
   const double t = std::clamp((cosine - 0.25) / 0.5, 0.0, 1.0);
   return t * t * (3 - 2 * t);
 }
+
+// Inserts (n, w) into nodes/weights, kept in descending weight order with at most `capacity` entries; `out` counts
+// the entries that did not fit (the new one or the one it pushed out).
+void keep_largest(int n, double w, int capacity, int* nodes, double* weights, int& count, int& out) {
+  int pos = count < capacity ? count : capacity;
+  if (count >= capacity) {
+    ++out;
+    if (!(w > weights[capacity - 1])) return;
+  }
+  while (pos > 0 && weights[pos - 1] < w) {
+    if (pos < capacity) {
+      weights[pos] = weights[pos - 1];
+      nodes[pos] = nodes[pos - 1];
+    }
+    --pos;
+  }
+  weights[pos] = w;
+  nodes[pos] = n;
+  if (count < capacity) ++count;
+}
+
+// Scales weights[0..count) to sum 1 (when their sum is > 0); returns the sum before.
+double normalize(double* weights, int count) {
+  double sum = 0;
+  for (int i = 0; i < count; ++i) sum += weights[i];
+  if (sum > 0)
+    for (int i = 0; i < count; ++i) weights[i] /= sum;
+  return sum;
+}
 }  // namespace
 
 double ContactSurface::mean_edge(const TetMesh& mesh, const SurfaceMesh& surface) {
@@ -175,27 +204,9 @@ int ContactSurface::patch(const Eigen::Vector3d& c, int triangle, const Eigen::V
       ++stuck;
       continue;
     }
-    // Keep the `capacity` largest weights, in descending order (ties: candidate order, deterministic).
-    int pos = count < capacity ? count : capacity;
-    if (count >= capacity) {
-      ++out;
-      if (!(w > weights[capacity - 1])) continue;
-    }
-    while (pos > 0 && weights[pos - 1] < w) {
-      if (pos < capacity) {
-        weights[pos] = weights[pos - 1];
-        nodes[pos] = nodes[pos - 1];
-      }
-      --pos;
-    }
-    weights[pos] = w;
-    nodes[pos] = n;
-    if (count < capacity) ++count;
+    keep_largest(n, w, capacity, nodes, weights, count, out);  // ties: candidate order, deterministic
   }
-  double sum = 0;
-  for (int i = 0; i < count; ++i) sum += weights[i];
-  if (sum > 0)
-    for (int i = 0; i < count; ++i) weights[i] /= sum;
+  normalize(weights, count);
   if (dropped) *dropped = out;
   if (fixed) *fixed = stuck;
   return count;
@@ -270,27 +281,9 @@ int ContactSurface::footprint(const Eigen::Vector3d& c, int triangle, const Eige
       ++stuck;
       continue;
     }
-    // Keep the `capacity` largest weights, in descending order (ties: first found).
-    int pos = count < capacity ? count : capacity;
-    if (count >= capacity) {
-      ++out;
-      if (!(w > weights[capacity - 1])) continue;
-    }
-    while (pos > 0 && weights[pos - 1] < w) {
-      if (pos < capacity) {
-        weights[pos] = weights[pos - 1];
-        nodes[pos] = nodes[pos - 1];
-      }
-      --pos;
-    }
-    weights[pos] = w;
-    nodes[pos] = n;
-    if (count < capacity) ++count;
+    keep_largest(n, w, capacity, nodes, weights, count, out);  // ties: first found
   }
-  double sum = 0;
-  for (int i = 0; i < count; ++i) sum += weights[i];
-  if (sum > 0)
-    for (int i = 0; i < count; ++i) weights[i] /= sum;
+  const double sum = normalize(weights, count);
   if (dropped) *dropped = out;
   if (fixed) *fixed = stuck;
   return sum > 0 ? count : 0;
