@@ -21,9 +21,13 @@ PatchSolver::PatchSolver(const Tensors& tensors, const std::string& block_name)
   wuu_.setZero(3 * kMaxContacts, 3 * kMaxContacts);
   a_.setZero(kMaxPatchRows, kMaxPatchRows);
   for (auto& m : m_) m.setZero();
+  slot_node_.fill(-1);
+  slot_of_node_.assign(tensors.column_of_node.size(), -1);
+  slot_in_.setZero(3 * kMaxContacts);
+  slot_out_.setZero(3 * kMaxContacts);
 }
 
-Eigen::Matrix3d PatchSolver::g(int a, int b) const noexcept { return w_->block<3, 3>(3 * a, 3 * b); }
+Eigen::Matrix3d PatchSolver::g(int a, int b) const noexcept { return blk(a, b); }
 
 ContactStatus PatchSolver::prepare(const PatchConstraints& c, const Eigen::Matrix3d* rotations,
                                    RotationHalves halves) noexcept {
@@ -44,70 +48,111 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c, const Eigen::Matri
     if (!std::isfinite(w) || w < 0) return ContactStatus::kNonFinite;
     if (u < 0 || u >= n) return ContactStatus::kInvalidNode;
   }
-  // G of the union nodes, symmetrized from both stored halves (as Superposition::solve). The first `kept` nodes are
-  // those of the last read in the same order: their blocks are in guu_ already.
-  int kept = 0;
-  while (kept < n && kept < g_count_ &&
-         g_nodes_[static_cast<std::size_t>(kept)] == c.nodes[static_cast<std::size_t>(kept)])
-    ++kept;
-  g_count_ = 0;  // until the read below is complete
+  // Slots: the nodes of the last union keep theirs (and their blocks with one another); the others are freed and the
+  // new nodes take them. A node listed twice shares its slot.
+  ++stamp_;
+  for (int u = 0; u < n; ++u) {
+    const int s = slot_of_node_[static_cast<std::size_t>(c.nodes[static_cast<std::size_t>(u)])];
+    slot_[static_cast<std::size_t>(u)] = s;
+    fresh_[static_cast<std::size_t>(u)] = 0;
+    if (s >= 0) slot_stamp_[static_cast<std::size_t>(s)] = stamp_;
+  }
+  for (int s = 0; s < kMaxContacts; ++s) {
+    const int node = slot_node_[static_cast<std::size_t>(s)];
+    if (node >= 0 && slot_stamp_[static_cast<std::size_t>(s)] != stamp_) {
+      slot_of_node_[static_cast<std::size_t>(node)] = -1;
+      slot_node_[static_cast<std::size_t>(s)] = -1;
+    }
+  }
+  int free_slot = 0;
+  for (int u = 0; u < n; ++u) {
+    const int node = c.nodes[static_cast<std::size_t>(u)];
+    int s = slot_of_node_[static_cast<std::size_t>(node)];
+    if (s < 0) {  // n <= kMaxContacts distinct nodes: a free slot exists
+      while (slot_node_[static_cast<std::size_t>(free_slot)] >= 0) ++free_slot;
+      s = free_slot;
+      slot_node_[static_cast<std::size_t>(s)] = node;
+      slot_of_node_[static_cast<std::size_t>(node)] = s;
+      slot_stamp_[static_cast<std::size_t>(s)] = stamp_;
+      fresh_[static_cast<std::size_t>(u)] = 1;
+    }
+    slot_[static_cast<std::size_t>(u)] = s;
+  }
+  slot_end_ = 0;
+  for (int u = 0; u < n; ++u) slot_end_ = std::max(slot_end_, slot_[static_cast<std::size_t>(u)] + 1);
+  // G of the new slots against the union, symmetrized from both stored halves (as Superposition::solve; a symmetric
+  // block stores one half, read once: (x + x) / 2 == x).
   for (int b = 0; b < n; ++b) {
     const int nb = c.nodes[static_cast<std::size_t>(b)];
     const int rb = block_.row_of_node[static_cast<std::size_t>(nb)];
     const int cb = tensors_.column_of_node[static_cast<std::size_t>(nb)];
-    for (int a = std::max(b, kept); a < n; ++a) {
+    const int sb = slot_[static_cast<std::size_t>(b)];
+    for (int a = b; a < n; ++a) {
+      if (!fresh_[static_cast<std::size_t>(a)] && !fresh_[static_cast<std::size_t>(b)]) continue;
+      const int sa = slot_[static_cast<std::size_t>(a)];
       ++g_blocks_read_;
       const int na = c.nodes[static_cast<std::size_t>(a)];
       const int ra = block_.row_of_node[static_cast<std::size_t>(na)];
       const int ca = tensors_.column_of_node[static_cast<std::size_t>(na)];
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) {
-          const double v = 0.5 * (block_.at(3 * ra + i, 3 * cb + j) + block_.at(3 * rb + j, 3 * ca + i));
-          guu_(3 * a + i, 3 * b + j) = v;
-          guu_(3 * b + j, 3 * a + i) = v;
-        }
+      Eigen::Matrix3d v = block_.block3(ra, cb);
+      if (!block_.symmetric || ra != ca || rb != cb) v = 0.5 * (v + block_.block3(rb, ca).transpose());
+      guu_.block<3, 3>(3 * sa, 3 * sb) = v;
+      guu_.block<3, 3>(3 * sb, 3 * sa) = v.transpose();
     }
   }
-  for (int u = 0; u < n; ++u) g_nodes_[static_cast<std::size_t>(u)] = c.nodes[static_cast<std::size_t>(u)];
-  g_count_ = n;
   // Corotational: W_ab = R_a G_ab R_b^T (symmetric like G: the lower half, mirrored); a one-half variant is not
   // symmetric and is warped block by block.
   if (rotations != nullptr) {
     for (int b = 0; b < n; ++b) {
       const Eigen::Matrix3d& rb = rotations[b];
+      const int sb = slot_[static_cast<std::size_t>(b)];
       for (int a = halves == RotationHalves::kBoth ? b : 0; a < n; ++a) {
-        const Eigen::Matrix3d w = warp_block(rotations[a], guu_.block<3, 3>(3 * a, 3 * b), rb, halves);
-        wuu_.block<3, 3>(3 * a, 3 * b) = w;
-        if (halves == RotationHalves::kBoth && a != b) wuu_.block<3, 3>(3 * b, 3 * a) = w.transpose();
+        const int sa = slot_[static_cast<std::size_t>(a)];
+        const Eigen::Matrix3d w = warp_block(rotations[a], guu_.block<3, 3>(3 * sa, 3 * sb), rb, halves);
+        wuu_.block<3, 3>(3 * sa, 3 * sb) = w;
+        if (halves == RotationHalves::kBoth && a != b) wuu_.block<3, 3>(3 * sb, 3 * sa) = w.transpose();
       }
     }
     w_ = &wuu_;
   }
-  const Eigen::MatrixXd& w = *w_;
-  // M_pq = sum_i sum_j w_pi w_qj G_ij: first H_q(u) = sum_j w_qj G_{u j}, then M_pq = sum_i w_pi H_q(i).
+  // M_pq = sum_i sum_j w_pi w_qj G_ij for p <= q, mirrored: first H_q(u) = sum_j w_qj W_uj at the union nodes
+  // u < U_q that patches 0..q use (the union lists nodes in patch order, so they are the first U_q), then
+  // M_pq = sum_i w_pi H_q(i).
+  int used = 0;  // U_q
   for (int q = 0; q < c.patch_count; ++q) {
     const int q0 = c.patch_start[static_cast<std::size_t>(q)], q1 = c.patch_start[static_cast<std::size_t>(q + 1)];
+    for (int f = q0; f < q1; ++f) used = std::max(used, c.entry_node[static_cast<std::size_t>(f)] + 1);
+    for (int u = 0; u < used; ++u) {
+      Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
+      for (int f = q0; f < q1; ++f)
+        h.noalias() += c.entry_weight[static_cast<std::size_t>(f)] * blk(u, c.entry_node[static_cast<std::size_t>(f)]);
+      h_[static_cast<std::size_t>(u)] = h;
+    }
     for (int p = 0; p <= q; ++p) {
       const int p0 = c.patch_start[static_cast<std::size_t>(p)], p1 = c.patch_start[static_cast<std::size_t>(p + 1)];
-      Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+      Eigen::Matrix3d mpq = Eigen::Matrix3d::Zero();
       for (int e = p0; e < p1; ++e) {
         const int ue = c.entry_node[static_cast<std::size_t>(e)];
-        Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
-        for (int f = q0; f < q1; ++f)
-          h.noalias() += c.entry_weight[static_cast<std::size_t>(f)] *
-                         w.block<3, 3>(3 * ue, 3 * c.entry_node[static_cast<std::size_t>(f)]);
-        m.noalias() += c.entry_weight[static_cast<std::size_t>(e)] * h;
+        if (ue >= used) {  // not in patch order (a caller's own union): H_q at this node now
+          Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
+          for (int f = q0; f < q1; ++f)
+            h.noalias() +=
+                c.entry_weight[static_cast<std::size_t>(f)] * blk(ue, c.entry_node[static_cast<std::size_t>(f)]);
+          mpq.noalias() += c.entry_weight[static_cast<std::size_t>(e)] * h;
+        } else {
+          mpq.noalias() += c.entry_weight[static_cast<std::size_t>(e)] * h_[static_cast<std::size_t>(ue)];
+        }
       }
-      if (p == q && halves == RotationHalves::kBoth) m = (0.5 * (m + m.transpose())).eval();
+      if (p == q && halves == RotationHalves::kBoth) mpq = (0.5 * (mpq + mpq.transpose())).eval();
       if (p == q) {
         const double nn = c.near_normal[static_cast<std::size_t>(p)], nt = c.near_tangent[static_cast<std::size_t>(p)];
         if (nn != 0 || nt != 0) {
           const Eigen::Vector3d& axis = c.near_axis[static_cast<std::size_t>(p)];
-          m.noalias() += nt * Eigen::Matrix3d::Identity() + (nn - nt) * axis * axis.transpose();
+          mpq.noalias() += nt * Eigen::Matrix3d::Identity() + (nn - nt) * axis * axis.transpose();
         }
       }
-      m_[static_cast<std::size_t>(p * kMaxPatches + q)] = m;
-      m_[static_cast<std::size_t>(q * kMaxPatches + p)] = m.transpose();
+      m_[static_cast<std::size_t>(p * kMaxPatches + q)] = mpq;
+      m_[static_cast<std::size_t>(q * kMaxPatches + p)] = mpq.transpose();
     }
   }
   prepared_nodes_ = n;
@@ -185,8 +230,18 @@ void PatchSolver::node_forces(const PatchConstraints& c, const double* mu, Eigen
 Eigen::Vector3d PatchSolver::union_displacement(int u, const Eigen::Vector3d* lambda, int n) const noexcept {
   Eigen::Vector3d out = Eigen::Vector3d::Zero();
   if (u < 0 || u >= prepared_nodes_) return out;
-  for (int v = 0; v < n && v < prepared_nodes_; ++v) out.noalias() += w_->block<3, 3>(3 * u, 3 * v) * lambda[v];
+  for (int v = 0; v < n && v < prepared_nodes_; ++v) out.noalias() += blk(u, v) * lambda[v];
   return out;
+}
+
+void PatchSolver::union_displacements(const Eigen::Vector3d* lambda, int n, Eigen::Vector3d* out) noexcept {
+  n = std::min(n, prepared_nodes_);
+  const int m = 3 * slot_end_;
+  // Slots no union node holds carry no force (their blocks may be stale, but they are finite: 0 x G = 0).
+  slot_in_.head(m).setZero();
+  for (int u = 0; u < n; ++u) slot_in_.segment<3>(3 * slot_[static_cast<std::size_t>(u)]) += lambda[u];
+  slot_out_.head(m).noalias() = w_->topLeftCorner(m, m) * slot_in_.head(m);
+  for (int u = 0; u < n; ++u) out[u] = slot_out_.segment<3>(3 * slot_[static_cast<std::size_t>(u)]);
 }
 
 }  // namespace surgsim::compliance

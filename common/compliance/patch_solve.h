@@ -15,6 +15,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "compliance/corotation.h"
 #include "compliance/superposition.h"
@@ -57,10 +58,11 @@ class PatchSolver {
   PatchSolver(const Tensors& tensors, const std::string& block_name);
 
   /// Run phase: reads G of the union nodes (symmetrized, 3x3 blocks) and the patch compliances
-  /// M_pq = sum_i sum_j w_pi w_qj G_ij (m/N). G is read only for the nodes that are not the previous successful
-  /// prepare()'s first nodes in the same order (a held or pressing contact keeps its nodes: nothing is read again; a
-  /// second instrument's new nodes are read alone); the values are those a full read gives, bit for bit. Refuses fixed,
-  /// interior, non-row or out-of-range nodes, non-finite or negative weights (the status; nothing is usable then).
+  /// M_pq = sum_i sum_j w_pi w_qj G_ij (m/N). G is read only for the nodes that were not in the previous prepare()'s
+  /// union, in any order (a held contact reads nothing again; a sliding one reads the blocks of the nodes its
+  /// footprint gained, against the union): each node keeps a storage slot while it stays in the union. The values are
+  /// those a full read gives, bit for bit. Refuses fixed, interior, non-row or out-of-range nodes, non-finite or
+  /// negative weights (the status; nothing is usable then).
   ContactStatus prepare(const PatchConstraints& c) noexcept { return prepare(c, nullptr); }
   /// Corotational (compliance/corotation.h): as prepare(c), then every block is warped, W_ab = R_a G_ab R_b^T
   /// with rotations[u] the rotation of union node u (null: G unwarped, as prepare(c)). Everything after it
@@ -79,6 +81,9 @@ class PatchSolver {
   void node_forces(const PatchConstraints& c, const double* mu, Eigen::Vector3d* lambda) const noexcept;
   /// Displacement (m) of union node u under node forces lambda (union order), from the G read by prepare().
   Eigen::Vector3d union_displacement(int u, const Eigen::Vector3d* lambda, int n) const noexcept;
+  /// The displacements of union nodes 0..n-1 at once (out[u] = union_displacement(u, lambda, n) up to rounding), in
+  /// one dense product over the storage slots.
+  void union_displacements(const Eigen::Vector3d* lambda, int n, Eigen::Vector3d* out) noexcept;
   /// Patch compliance M_pq (m/N) from the last prepare().
   Eigen::Matrix3d compliance(int p, int q) const noexcept { return m_[static_cast<std::size_t>(p * kMaxPatches + q)]; }
   /// G block (m/N) between union nodes a and b from the last prepare().
@@ -87,11 +92,27 @@ class PatchSolver {
   const Tensors& tensors() const { return tensors_; }
 
  private:
+  /// Block (a, b) of the blocks in use, by union index.
+  auto blk(int a, int b) const noexcept {
+    return w_->block<3, 3>(3 * slot_[static_cast<std::size_t>(a)], 3 * slot_[static_cast<std::size_t>(b)]);
+  }
+
   const Tensors& tensors_;
   const TensorBlock& block_;
-  Eigen::MatrixXd guu_;               // 3 kMaxContacts square
-  Eigen::MatrixXd wuu_;               // 3 kMaxContacts square: the warped blocks (corotational prepare)
+  // G and its warp are stored by slot, not by union index: a node keeps its slot while it stays in the union, so its
+  // blocks with the other staying nodes are not read again when the union's order changes.
+  Eigen::MatrixXd guu_;               // 3 kMaxContacts square, by slot
+  Eigen::MatrixXd wuu_;               // 3 kMaxContacts square, by slot: the warped blocks (corotational prepare)
   const Eigen::MatrixXd* w_ = &guu_;  // the blocks in use: guu_ or wuu_
+  std::array<int, kMaxContacts> slot_{};                  // slot of each union node of the last prepare
+  std::array<int, kMaxContacts> slot_node_{};             // mesh node whose G the slot holds, or -1
+  std::array<std::uint32_t, kMaxContacts> slot_stamp_{};  // the prepare that last used the slot
+  std::array<unsigned char, kMaxContacts> fresh_{};       // union node u's slot was just assigned (its blocks to read)
+  std::vector<int> slot_of_node_;                         // per mesh node: its slot, or -1
+  std::uint32_t stamp_ = 0;
+  int slot_end_ = 0;                             // 1 + the highest slot of the last union
+  Eigen::VectorXd slot_in_, slot_out_;           // 3 kMaxContacts: union_displacements' product by slot
+  std::array<Eigen::Matrix3d, kMaxContacts> h_;  // H_q at each union node (one patch q at a time)
   std::array<Eigen::Matrix3d, kMaxPatches * kMaxPatches> m_;
   Eigen::MatrixXd a_;                       // kMaxPatchRows square: A, then its factor
   std::array<int, kMaxPatchRows> order_{};  // enabled rows in order
@@ -99,8 +120,6 @@ class PatchSolver {
   int row_count_ = 0;
   int dependent_row_ = -1;
   int prepared_nodes_ = 0;
-  std::array<int, kMaxContacts> g_nodes_{};  // the union nodes whose G is in guu_, in order
-  int g_count_ = 0;
   std::uint64_t g_blocks_read_ = 0;  // 3x3 blocks of G read from the tensors since construction
 
  public:

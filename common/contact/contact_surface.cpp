@@ -73,10 +73,14 @@ ContactSurface::ContactSurface(const TetMesh& mesh, const SurfaceMesh& surface,
   const auto nf = static_cast<std::size_t>(surface.tris.rows());
   vertex_normals_.assign(nv, Eigen::Vector3d::Zero());
   face_normals_.resize(nf);
+  corners_.resize(3 * nf);
   for (std::size_t f = 0; f < nf; ++f) {
     const auto fi = static_cast<Eigen::Index>(f);
     const Eigen::Vector3d a = node_at(mesh, surface.tris(fi, 0)), b = node_at(mesh, surface.tris(fi, 1)),
                           c = node_at(mesh, surface.tris(fi, 2));
+    corners_[3 * f] = a;
+    corners_[3 * f + 1] = b;
+    corners_[3 * f + 2] = c;
     const Eigen::Vector3d n2 = (b - a).cross(c - a);  // 2 x area, outward
     const double len = n2.norm();
     face_normals_[f] = len > 0 ? Eigen::Vector3d(n2 / len) : Eigen::Vector3d::UnitZ();
@@ -126,6 +130,12 @@ ContactSurface::ContactSurface(const TetMesh& mesh, const SurfaceMesh& surface,
       const double u = 0.5 * (x[r] + 1);
       ring_rho_[static_cast<std::size_t>(r)] = std::sqrt(1 - u * u);
       ring_weight_[static_cast<std::size_t>(r)] = 0.5 * w[r];
+      for (int k = 0; k < kFootprintAngles; ++k) {
+        constexpr double kTwoPi = 6.283185307179586;
+        const double theta = kTwoPi * (k + 0.5 * (r % 2)) / kFootprintAngles;  // rings staggered
+        angle_cos_[static_cast<std::size_t>(r * kFootprintAngles + k)] = std::cos(theta);
+        angle_sin_[static_cast<std::size_t>(r * kFootprintAngles + k)] = std::sin(theta);
+      }
     }
   }
   // Candidate patch nodes per triangle: surface nodes within r + circumradius of the centroid (brute force, once).
@@ -148,7 +158,8 @@ RestPoint ContactSurface::on_triangle(const Eigen::Vector3d& p, int f) const noe
   if (f < 0 || f >= surface_.tris.rows()) return r;
   const int ia = surface_.tris(f, 0), ib = surface_.tris(f, 1), ic = surface_.tris(f, 2);
   Eigen::Vector3d bary;
-  r.point = closest_point_triangle(p, node_at(mesh_, ia), node_at(mesh_, ib), node_at(mesh_, ic), bary);
+  const auto fc = static_cast<std::size_t>(3 * f);
+  r.point = closest_point_triangle(p, corners_[fc], corners_[fc + 1], corners_[fc + 2], bary);
   r.found = true;
   r.triangle = f;
   r.bary = bary;
@@ -219,7 +230,7 @@ int ContactSurface::locate(const Eigen::Vector3d& q, const Eigen::Vector3d& t1, 
     if (!(face_normals_[static_cast<std::size_t>(f)].dot(normal) > 0.2)) return -1;
     Eigen::Vector2d p[3];
     for (int v = 0; v < 3; ++v) {
-      const Eigen::Vector3d d = node_at(mesh_, surface_.tris(f, v)) - q;
+      const Eigen::Vector3d d = corners_[static_cast<std::size_t>(3 * f + v)] - q;
       p[v] = Eigen::Vector2d(d.dot(t1), d.dot(t2));
     }
     const auto cross = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); };
@@ -236,7 +247,8 @@ int ContactSurface::locate(const Eigen::Vector3d& q, const Eigen::Vector3d& t1, 
 }
 
 int ContactSurface::footprint(const Eigen::Vector3d& c, int triangle, const Eigen::Vector3d& normal, double a,
-                              int capacity, int* nodes, double* weights, int* dropped, int* fixed) const noexcept {
+                              int capacity, int* nodes, double* weights, int* dropped, int* fixed,
+                              int* walk) const noexcept {
   if (dropped) *dropped = 0;
   if (fixed) *fixed = 0;
   if (triangle < 0 || triangle >= surface_.tris.rows() || capacity <= 0 || !(a > 0)) return 0;
@@ -248,15 +260,17 @@ int ContactSurface::footprint(const Eigen::Vector3d& c, int triangle, const Eige
   std::array<double, kMax> cand_weight{};
   int cand = 0;
   int f = triangle;
-  constexpr double kTwoPi = 6.283185307179586;
   for (int r = 0; r < kFootprintRings; ++r) {
     const double rho = a * ring_rho_[static_cast<std::size_t>(r)];
     const double share = ring_weight_[static_cast<std::size_t>(r)] / kFootprintAngles;
     for (int k = 0; k < kFootprintAngles; ++k) {
-      const double theta = kTwoPi * (k + 0.5 * (r % 2)) / kFootprintAngles;  // rings staggered
-      const Eigen::Vector3d q = c + rho * (std::cos(theta) * t1 + std::sin(theta) * t2);
+      const auto ak = static_cast<std::size_t>(r * kFootprintAngles + k);
+      const Eigen::Vector3d q = c + rho * (angle_cos_[ak] * t1 + angle_sin_[ak] * t2);
       Eigen::Vector3d bary;
-      const int g = locate(q, t1, t2, normal, f, bary);
+      const int hint = walk != nullptr ? walk[ak] : -1;
+      int g = locate(q, t1, t2, normal, hint >= 0 && hint < surface_.tris.rows() ? hint : f, bary);
+      if (g < 0 && hint >= 0 && hint != f) g = locate(q, t1, t2, normal, f, bary);
+      if (walk != nullptr) walk[ak] = g;
       if (g < 0) continue;
       f = g;
       for (int v = 0; v < 3; ++v) {

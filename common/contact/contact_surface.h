@@ -76,10 +76,14 @@ class ContactSurface {
   /// (fixed) are left out (`fixed` counts those nodes); up to `capacity` nodes (the largest; `dropped` counts the
   /// rest); the kept weights normalized to sum 1. Continuous in c: the weights are integrals, not a selection.
   /// Returns the count (0: nothing free under the tip).
+  /// `walk` (optional, kFootprintPoints entries, in and out): the triangle each quadrature point was found on last
+  /// time (-1: none), where its walk starts (a tip that moved a little finds each point in one step); a walk that
+  /// fails from there is tried again from the previous point's triangle, as without `walk`.
   int footprint(const Eigen::Vector3d& c, int triangle, const Eigen::Vector3d& normal, double a, int capacity,
-                int* nodes, double* weights, int* dropped, int* fixed) const noexcept;
+                int* nodes, double* weights, int* dropped, int* fixed, int* walk = nullptr) const noexcept;
   static constexpr int kFootprintRings = 4;
   static constexpr int kFootprintAngles = 12;
+  static constexpr int kFootprintPoints = kFootprintRings * kFootprintAngles;
 
   /// The patch normal: normalized sum of w_i n_i.
   Eigen::Vector3d patch_normal(const int* nodes, const double* weights, int count) const noexcept;
@@ -95,6 +99,9 @@ class ContactSurface {
   std::vector<std::uint8_t> free_;
   std::vector<int> adjacent_;  // 3 per triangle: the triangle across the edge opposite vertex v (-1: none)
   std::array<double, kFootprintRings> ring_rho_{}, ring_weight_{};  // rho / a and the ring's share of the load
+  // cos and sin of each quadrature point's angle, per ring (the rings are staggered by half a step).
+  std::array<double, kFootprintRings * kFootprintAngles> angle_cos_{}, angle_sin_{};
+  std::vector<Eigen::Vector3d> corners_;  // 3 per triangle: its nodes' rest positions (the walk reads them together)
   /// The triangle (walking from `f`) that holds q projected along the frame's normal, with its barycentrics.
   int locate(const Eigen::Vector3d& q, const Eigen::Vector3d& t1, const Eigen::Vector3d& t2,
              const Eigen::Vector3d& normal, int f, Eigen::Vector3d& bary) const noexcept;

@@ -192,8 +192,15 @@ void ToolContacts::count_instrument_nodes() noexcept {
 
 Eigen::Vector3d ToolContacts::deformed(int node) const noexcept {
   Eigen::Vector3d x = mesh_.nodes.row(node).transpose();
+  if (solution_.count == 0) return x;
   Eigen::Vector3d u;
-  if (solution_.count > 0 && superposition_.displacement(node, solution_, u)) x += u;
+  // A node of the last linear patch solution has its displacement there (the same G lambda); the others are read.
+  if (model_ == ContactModel::kPatch && deformation_ != LiverDeformation::kCorotational && multirate_ == nullptr) {
+    for (int l = 0; l < solution_.count; ++l)
+      if (solution_.nodes[static_cast<std::size_t>(l)] == node)
+        return x + solution_.displacement[static_cast<std::size_t>(l)];
+  }
+  if (superposition_.displacement(node, solution_, u)) x += u;
   return x;
 }
 
@@ -667,9 +674,13 @@ void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
     }
     const RestPoint at = surface_->on_triangle(centre, tri);
     int fixed = 0, out_of_patch = 0;
+    if (tip_model_ == TipModel::kFootprint && !((centre - pp.walk_centre).norm() < radius_)) {
+      pp.walk.fill(-1);  // the hints are far away (or none): walk from the centre
+      pp.walk_centre = centre;
+    }
     pp.count = tip_model_ == TipModel::kFootprint
                    ? surface_->footprint(centre, tri, at.normal, radius_, kMaxContacts, pp.nodes.data(),
-                                         pp.weights.data(), &out_of_patch, &fixed)
+                                         pp.weights.data(), &out_of_patch, &fixed, pp.walk.data())
                    : surface_->patch(centre, tri, at.normal, kMaxContacts, pp.nodes.data(), pp.weights.data(),
                                      &out_of_patch, &fixed);
     pp.fixed = fixed;
@@ -697,10 +708,20 @@ void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
       // A new contact: only when the point penetrates the patch as the current solution deforms it.
       double gap = depth;
       if (solution_.count > 0) {
+        // A node of the last solution has its displacement there (the linear solve: the same G lambda, computed once
+        // by the solve); the others are read from the tensors. Corotational (warped) and multirate (lambda replaced)
+        // solutions read every node.
+        const bool linear = deformation_ != LiverDeformation::kCorotational && multirate_ == nullptr;
         Eigen::Vector3d mean = Eigen::Vector3d::Zero(), u;
-        for (int e = 0; e < pp.count; ++e)
-          if (superposition_.displacement(pp.nodes[static_cast<std::size_t>(e)], solution_, u))
+        for (int e = 0; e < pp.count; ++e) {
+          const int node = pp.nodes[static_cast<std::size_t>(e)];
+          int l = 0;
+          while (linear && l < solution_.count && solution_.nodes[static_cast<std::size_t>(l)] != node) ++l;
+          if (linear && l < solution_.count)
+            mean += pp.weights[static_cast<std::size_t>(e)] * solution_.displacement[static_cast<std::size_t>(l)];
+          else if (superposition_.displacement(node, solution_, u))
             mean += pp.weights[static_cast<std::size_t>(e)] * u;
+        }
         gap += n.dot(mean);
       }
       if (!(gap > 0)) return;
@@ -900,6 +921,7 @@ void ToolContacts::apply_friction() noexcept {
 void ToolContacts::distribute_forces(double dt, ContactTick* out) noexcept {
   const PatchConstraints& k = *constraints_;
   patch_solver_->node_forces(k, mu_.data(), lambda_.data());
+  patch_solver_->union_displacements(lambda_.data(), k.node_count, union_u_.data());
   ContactSolution& s = solution_;
   s = ContactSolution{};
   int count = 0;
@@ -909,7 +931,7 @@ void ToolContacts::distribute_forces(double dt, ContactTick* out) noexcept {
     node_instrument_[l] = union_instrument_[static_cast<std::size_t>(u)];
     s.nodes[l] = k.nodes[static_cast<std::size_t>(u)];
     s.lambda[l] = lambda_[static_cast<std::size_t>(u)];
-    s.displacement[l] = patch_solver_->union_displacement(u, lambda_.data(), k.node_count);
+    s.displacement[l] = union_u_[static_cast<std::size_t>(u)];
     s.corrected[l] = patch_solver_->g(u, u) * s.lambda[l];
     s.tool_force -= s.lambda[l];
   }

@@ -52,6 +52,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -114,6 +115,10 @@ struct PointPatch {
   int fixed = 0;    // nodes inside the radius without a constraint (fixed)
   double near_normal = 0;   // m/N, the tip's near field in series with the patch (footprint model), normal row
   double near_tangent = 0;  // m/N, the same for the tangential rows
+  // Where the footprint's quadrature points were found last tick (ContactSurface::footprint's `walk`), valid while
+  // the patch's centre stays within the tip radius of walk_centre.
+  std::array<int, ContactSurface::kFootprintPoints> walk{};
+  Eigen::Vector3d walk_centre = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
 };
 
 class ToolContacts {
@@ -255,6 +260,7 @@ class ToolContacts {
   std::array<double, compliance::kMaxPatchRows> b_{}, mu_{};
   std::array<unsigned char, compliance::kMaxPatchRows> enabled_{};
   std::array<Eigen::Vector3d, compliance::kMaxContacts> lambda_{};
+  std::array<Eigen::Vector3d, compliance::kMaxContacts> union_u_{};  // displacement of each union node (m)
   long dropped_nodes_ = 0;
   ContactStageTimes stage_times_{};
   bool time_stages_ = false;

@@ -133,6 +133,8 @@ void tick_cost(const std::string& label, const std::string& model_name, const li
   spec.shaft_points = kPoints;
   spec.shaft_spacing = kSpacing;
   ToolContacts c(model.mesh, model.surface, model.tensors, spec, law);
+  c.time_stages(true);
+  std::array<std::vector<double>, kContactStages> stage_us;
   // Rest heights along the path, every 0.1 mm (the points move along x only).
   std::vector<double> height;
   for (double x = kX0 - 0.001; x <= kX0 + kPoints * kSpacing + 0.025; x += 1e-4)
@@ -164,6 +166,8 @@ void tick_cost(const std::string& label, const std::string& model_name, const li
     const auto t1 = std::chrono::steady_clock::now();
     if (k >= 300) {
       us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+      for (int st = 0; st < kContactStages; ++st)
+        stage_us[static_cast<std::size_t>(st)].push_back(1e-3 * c.stage_times().ns[static_cast<std::size_t>(st)]);
       in_contact = std::max(in_contact, t.points_in_contact);
     }
   }
@@ -175,6 +179,15 @@ void tick_cost(const std::string& label, const std::string& model_name, const li
   out.figure(label, model_name, "tick", "contacts", in_contact, "points");
   std::printf("  %-16s tick, %d contacts: p50 %.1f / p99 %.1f / max %.1f us (budget p99 <= 100 us: %s)\n",
               model_name.c_str(), in_contact, q(0.5), q(0.99), us.back(), q(0.99) <= 100 ? "pass" : "FAIL");
+  std::printf("  %-16s   stages p50 / p99 us:", "");
+  for (int st = 0; st < kContactStages; ++st) {
+    std::vector<double>& v = stage_us[static_cast<std::size_t>(st)];
+    std::sort(v.begin(), v.end());
+    std::printf(" %s %.1f / %.1f", kContactStageNames[static_cast<std::size_t>(st)],
+                v[static_cast<std::size_t>(0.5 * static_cast<double>(v.size() - 1))],
+                v[static_cast<std::size_t>(0.99 * static_cast<double>(v.size() - 1))]);
+  }
+  std::printf("\n");
 }
 
 struct MeshResult {
@@ -183,7 +196,7 @@ struct MeshResult {
   std::map<std::string, std::vector<double>> depth;  // model -> force at 1..10 mm
 };
 
-MeshResult run_mesh(const std::string& label, int target_nodes, const std::string& cache, Out& out) {
+MeshResult run_mesh(const std::string& label, int target_nodes, const std::string& cache, bool tick_only, Out& out) {
   scene::Scene scene = scene::load_scene(scene::resolve_scene_path("liver"));
   scene.mesh.target_nodes = target_nodes;
   LiverOrgan organ(scene, cache, &std::cout);
@@ -199,6 +212,10 @@ MeshResult run_mesh(const std::string& label, int target_nodes, const std::strin
     spec.tip_model = m.tip;
     spec.tip_radius = m.radius > 0 ? m.radius : -m.radius * edge;
     const nonlinear::NonlinearLaw* law = model.law.identity() ? nullptr : &model.law;
+    if (tick_only) {
+      tick_cost(label, m.name, model, spec, law, out);
+      continue;
+    }
     {  // the slide
       ToolContacts c(model.mesh, model.surface, model.tensors, spec, law);
       const auto tip_at = [&](double x, double depth) {
@@ -298,7 +315,7 @@ void punch(Out& out) {
 int main(int argc, char** argv) {
   std::string out_dir, cache;
   std::vector<int> meshes = {1500, 5000, 20000};
-  bool no_liver = false;
+  bool no_liver = false, tick_only = false;
   CLI::App cli{
       "tool_size_bench: the instrument's contact on the shipped liver meshed at 1.4k, 5k and 21k nodes "
       "(footprint against the earlier node patch, one run), and the slab's flat punch against Hayes 1972"};
@@ -308,6 +325,7 @@ int main(int argc, char** argv) {
   cli.add_option("--meshes", meshes, "Target node counts of the liver meshes; the last is the reference")
       ->delimiter(',');
   cli.add_flag("--no-liver", no_liver, "The slab only (no mesh or tensor cache needed)");
+  cli.add_flag("--tick-only", tick_only, "The contact tick's cost on each liver only (no slab, slide or press)");
   CLI11_PARSE(cli, argc, argv);
   try {
     if (!out_dir.empty()) std::filesystem::create_directories(out_dir);
@@ -315,14 +333,16 @@ int main(int argc, char** argv) {
     out.figures = bench::CsvOut(out_dir, "tool_size", "mesh,model,case,metric,value,unit");
     out.slide = bench::CsvOut(out_dir, "tool_size_slide", "mesh,model,s_mm,force_N");
     out.press = bench::CsvOut(out_dir, "tool_size_press", "mesh,model,depth_mm,force_N");
-    punch(out);
+    if (!tick_only) punch(out);
     if (no_liver) return 0;
     std::vector<std::string> labels;
     std::vector<MeshResult> results;
     for (int n : meshes) {
       labels.push_back("liver " + std::to_string(n));
-      results.push_back(run_mesh(labels.back(), n, cache.empty() ? mesher::default_cache_dir() : cache, out));
+      results.push_back(
+          run_mesh(labels.back(), n, cache.empty() ? mesher::default_cache_dir() : cache, tick_only, out));
     }
+    if (tick_only) return 0;
     // Against the last (finest) mesh: mean slide force and force at every depth, same model and radius.
     const MeshResult& ref = results.back();
     std::printf("\nagainst %s (same model):\n", labels.back().c_str());

@@ -159,8 +159,8 @@ TEST_F(Faults, DeviceKilledMidPressZeroesTheForce) {
   // --input-timeout after the last command on, and hold the tool.
   const double timeout_s = 0.1;
   Process haptic(bin("haptic_node"),
-                 {"--scene", "liver", "--input", "device", "--input-timeout", "0.1", "--duration", "4",
-                  "--rt-priority", "0", "--stats", path("haptic.json"), "--log", path("haptic_log.csv")},
+                 {"--scene", "liver", "--input", "device", "--input-timeout", "0.1", "--duration", "6", "--rt-priority",
+                  "0", "--stats", path("haptic.json"), "--log", path("haptic_log.csv")},
                  env_, path("haptic.log"));
   Process device(bin("surgsim-device-sim"),
                  {"--trajectory", std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/liver_press_slide.csv", "--rate",
@@ -177,7 +177,8 @@ TEST_F(Faults, DeviceKilledMidPressZeroesTheForce) {
   const double rate = h["rate_hz"].get<double>();
   const double kill_t = static_cast<double>(kill_ns - h["loop_start_ns"].get<std::uint64_t>()) * 1e-9;
   ASSERT_GT(kill_t, 0.5);
-  ASSERT_LT(kill_t, 3.7);
+  // The loop runs 6 s: a kill up to 5.3 s in (the match seen late on a loaded machine) leaves 0.7 s to check.
+  ASSERT_LT(kill_t, 5.3);
   // Per-tick force from the --log. The kill is stamped on the wall clock and t is simulated time: allow 0.5 s of
   // loop lag on a loaded machine.
   const testing::ForceAroundLoss f = testing::force_around_loss(path("haptic_log.csv"), kill_t, 0.3, timeout_s + 0.5);

@@ -140,10 +140,16 @@ TEST(PatchSolve, EqualsTheFullSolveOfTheSameConstraint) {
 
 // A held contact keeps its union nodes from tick to tick and a second instrument appends its own: prepare()
 // reads G only for the nodes that are new or moved, and the compliances are bit-identical to a fresh full read.
-TEST(PatchSolve, ReadsGOnlyForNewNodesAndGivesTheFullReadBitForBit) {
+// Dense and packed symmetric (the shipped scenes') haptic blocks alike.
+class PatchSolveReads : public ::testing::TestWithParam<bool> {};
+
+TEST_P(PatchSolveReads, ReadsGOnlyForNewNodesAndGivesTheFullReadBitForBit) {
   const auto organ = test::box_organ(8, 6, 4);
   const std::vector<int> contacts = contactable_nodes(organ->mesh, organ->fixed);
-  const Tensors tensors = precompute_tensors(organ->model, contacts, standard_row_sets(organ->mesh, contacts), {});
+  PrecomputeOptions options;
+  if (GetParam()) options.symmetric_blocks = {"haptic"};
+  const Tensors tensors = precompute_tensors(organ->model, contacts, standard_row_sets(organ->mesh, contacts), options);
+  ASSERT_EQ(tensors.find("haptic")->symmetric, GetParam());
   ASSERT_GE(contacts.size(), 12u);
   // Patches over union nodes given as contactable-node indices, equal weights.
   const auto make = [&](const std::vector<std::vector<int>>& patches) {
@@ -187,16 +193,38 @@ TEST(PatchSolve, ReadsGOnlyForNewNodesAndGivesTheFullReadBitForBit) {
   PatchSolver fresh(tensors, "haptic");
   ASSERT_EQ(fresh.prepare(two), ContactStatus::kOk);
   EXPECT_TRUE(same(held, fresh, two));
-  ASSERT_EQ(held.prepare(moved), ContactStatus::kOk);  // the first two nodes swapped: everything read again
-  EXPECT_EQ(held.g_blocks_read(), 55u + 55u);
+  ASSERT_EQ(held.prepare(moved), ContactStatus::kOk);  // the first two nodes swapped: the same nodes, nothing read
+  EXPECT_EQ(held.g_blocks_read(), 55u);
   PatchSolver fresh_moved(tensors, "haptic");
   ASSERT_EQ(fresh_moved.prepare(moved), ContactStatus::kOk);
   EXPECT_TRUE(same(held, fresh_moved, moved));
   ASSERT_EQ(held.prepare(one), ContactStatus::kOk);  // back to fewer nodes, in another order than the last read
+  EXPECT_EQ(held.g_blocks_read(), 55u);
   PatchSolver fresh_one(tensors, "haptic");
   ASSERT_EQ(fresh_one.prepare(one), ContactStatus::kOk);
   EXPECT_TRUE(same(held, fresh_one, one));
+  // A sliding footprint: node 0 leaves, node 10 enters in the middle of the order. Only node 10's blocks against the
+  // six nodes of the union are read (its slot is node 0's, whose blocks are stale).
+  const PatchConstraints slid = make({{1, 2, 10, 3, 4, 5}});
+  ASSERT_EQ(held.prepare(slid), ContactStatus::kOk);
+  EXPECT_EQ(held.g_blocks_read(), 55u + 6u);
+  PatchSolver fresh_slid(tensors, "haptic");
+  ASSERT_EQ(fresh_slid.prepare(slid), ContactStatus::kOk);
+  EXPECT_TRUE(same(held, fresh_slid, slid));
+  // The whole ring cycled through (more nodes than slots over time): still the values of a full read.
+  for (int shift = 0; shift < 12; ++shift) {
+    std::vector<int> patch;
+    for (int e = 0; e < 6; ++e) patch.push_back((shift + e) % 12);
+    const PatchConstraints ring = make({patch});
+    ASSERT_EQ(held.prepare(ring), ContactStatus::kOk);
+    PatchSolver fresh_ring(tensors, "haptic");
+    ASSERT_EQ(fresh_ring.prepare(ring), ContactStatus::kOk);
+    EXPECT_TRUE(same(held, fresh_ring, ring)) << "shift " << shift;
+  }
 }
+
+INSTANTIATE_TEST_SUITE_P(Blocks, PatchSolveReads, ::testing::Values(false, true),
+                         [](const ::testing::TestParamInfo<bool>& info) { return info.param ? "Packed" : "Dense"; });
 
 }  // namespace
 }  // namespace surgsim
