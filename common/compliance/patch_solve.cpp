@@ -116,8 +116,8 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c, const Eigen::Matri
     w_ = &wuu_;
   }
   // M_pq = sum_i sum_j w_pi w_qj G_ij for p <= q, mirrored: first H_q(u) = sum_j w_qj W_uj at the union nodes
-  // u < U_q that patches 0..q use (the union lists nodes in patch order, so they are the first U_q), then
-  // M_pq = sum_i w_pi H_q(i).
+  // u < U_q (U_q: 1 + the highest union node of patches 0..q; a union listed in patch order, as the contact builds
+  // it, makes that about half the union on average), then M_pq = sum_i w_pi H_q(i).
   int used = 0;  // U_q
   for (int q = 0; q < c.patch_count; ++q) {
     const int q0 = c.patch_start[static_cast<std::size_t>(q)], q1 = c.patch_start[static_cast<std::size_t>(q + 1)];
@@ -131,18 +131,9 @@ ContactStatus PatchSolver::prepare(const PatchConstraints& c, const Eigen::Matri
     for (int p = 0; p <= q; ++p) {
       const int p0 = c.patch_start[static_cast<std::size_t>(p)], p1 = c.patch_start[static_cast<std::size_t>(p + 1)];
       Eigen::Matrix3d mpq = Eigen::Matrix3d::Zero();
-      for (int e = p0; e < p1; ++e) {
-        const int ue = c.entry_node[static_cast<std::size_t>(e)];
-        if (ue >= used) {  // not in patch order (a caller's own union): H_q at this node now
-          Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
-          for (int f = q0; f < q1; ++f)
-            h.noalias() +=
-                c.entry_weight[static_cast<std::size_t>(f)] * blk(ue, c.entry_node[static_cast<std::size_t>(f)]);
-          mpq.noalias() += c.entry_weight[static_cast<std::size_t>(e)] * h;
-        } else {
-          mpq.noalias() += c.entry_weight[static_cast<std::size_t>(e)] * h_[static_cast<std::size_t>(ue)];
-        }
-      }
+      for (int e = p0; e < p1; ++e)
+        mpq.noalias() += c.entry_weight[static_cast<std::size_t>(e)] *
+                         h_[static_cast<std::size_t>(c.entry_node[static_cast<std::size_t>(e)])];
       if (p == q && halves == RotationHalves::kBoth) mpq = (0.5 * (mpq + mpq.transpose())).eval();
       if (p == q) {
         const double nn = c.near_normal[static_cast<std::size_t>(p)], nt = c.near_tangent[static_cast<std::size_t>(p)];

@@ -190,17 +190,24 @@ void ToolContacts::count_instrument_nodes() noexcept {
   }
 }
 
-Eigen::Vector3d ToolContacts::deformed(int node) const noexcept {
-  Eigen::Vector3d x = mesh_.nodes.row(node).transpose();
-  if (solution_.count == 0) return x;
-  Eigen::Vector3d u;
-  // A node of the last linear patch solution has its displacement there (the same G lambda); the others are read.
+bool ToolContacts::solution_displacement(int node, Eigen::Vector3d& u) const noexcept {
+  // A node of the last linear patch solution has its displacement there (the same G lambda, computed once by the
+  // solve); the others are read from the tensors. Corotational (warped) and multirate (lambda replaced) solutions, and
+  // the triangle model's (imposed u*), read every node.
   if (model_ == ContactModel::kPatch && deformation_ != LiverDeformation::kCorotational && multirate_ == nullptr) {
     for (int l = 0; l < solution_.count; ++l)
-      if (solution_.nodes[static_cast<std::size_t>(l)] == node)
-        return x + solution_.displacement[static_cast<std::size_t>(l)];
+      if (solution_.nodes[static_cast<std::size_t>(l)] == node) {
+        u = solution_.displacement[static_cast<std::size_t>(l)];
+        return true;
+      }
   }
-  if (superposition_.displacement(node, solution_, u)) x += u;
+  return superposition_.displacement(node, solution_, u);
+}
+
+Eigen::Vector3d ToolContacts::deformed(int node) const noexcept {
+  Eigen::Vector3d x = mesh_.nodes.row(node).transpose();
+  Eigen::Vector3d u;
+  if (solution_.count > 0 && solution_displacement(node, u)) x += u;
   return x;
 }
 
@@ -708,20 +715,10 @@ void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
       // A new contact: only when the point penetrates the patch as the current solution deforms it.
       double gap = depth;
       if (solution_.count > 0) {
-        // A node of the last solution has its displacement there (the linear solve: the same G lambda, computed once
-        // by the solve); the others are read from the tensors. Corotational (warped) and multirate (lambda replaced)
-        // solutions read every node.
-        const bool linear = deformation_ != LiverDeformation::kCorotational && multirate_ == nullptr;
         Eigen::Vector3d mean = Eigen::Vector3d::Zero(), u;
-        for (int e = 0; e < pp.count; ++e) {
-          const int node = pp.nodes[static_cast<std::size_t>(e)];
-          int l = 0;
-          while (linear && l < solution_.count && solution_.nodes[static_cast<std::size_t>(l)] != node) ++l;
-          if (linear && l < solution_.count)
-            mean += pp.weights[static_cast<std::size_t>(e)] * solution_.displacement[static_cast<std::size_t>(l)];
-          else if (superposition_.displacement(node, solution_, u))
+        for (int e = 0; e < pp.count; ++e)
+          if (solution_displacement(pp.nodes[static_cast<std::size_t>(e)], u))
             mean += pp.weights[static_cast<std::size_t>(e)] * u;
-        }
         gap += n.dot(mean);
       }
       if (!(gap > 0)) return;

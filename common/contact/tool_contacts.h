@@ -196,6 +196,8 @@ class ToolContacts {
   Eigen::Vector3d corrected(int l) const noexcept;
   /// Deformed position of a surface node under the current solution (rest for nodes without a column).
   Eigen::Vector3d deformed(int node) const noexcept;
+  /// Displacement (m) of `node` under the current solution (false: the tensors cannot give it).
+  bool solution_displacement(int node, Eigen::Vector3d& u) const noexcept;
   /// The time each stage of the last step() took (all 0 unless time_stages(true): off, step() reads no clock).
   const ContactStageTimes& stage_times() const noexcept { return stage_times_; }
   /// Init: whether step() times its stages (haptic_node --tick-trace).

@@ -220,6 +220,15 @@ TEST_P(PatchSolveReads, ReadsGOnlyForNewNodesAndGivesTheFullReadBitForBit) {
     PatchSolver fresh_ring(tensors, "haptic");
     ASSERT_EQ(fresh_ring.prepare(ring), ContactStatus::kOk);
     EXPECT_TRUE(same(held, fresh_ring, ring)) << "shift " << shift;
+    // All union displacements in one product over the slots (stale slots in between) equal the per-node sums.
+    std::vector<Eigen::Vector3d> lambda(static_cast<std::size_t>(ring.node_count)), batch(lambda.size());
+    for (int u = 0; u < ring.node_count; ++u)
+      lambda[static_cast<std::size_t>(u)] = Eigen::Vector3d(0.1 * u - 0.2, 0.05 * shift, 1.0 + u);
+    held.union_displacements(lambda.data(), ring.node_count, batch.data());
+    for (int u = 0; u < ring.node_count; ++u) {
+      const Eigen::Vector3d one = fresh_ring.union_displacement(u, lambda.data(), ring.node_count);
+      EXPECT_LE((batch[static_cast<std::size_t>(u)] - one).norm(), 1e-12 * one.norm()) << "shift " << shift;
+    }
   }
 }
 
