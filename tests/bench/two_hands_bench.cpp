@@ -5,14 +5,17 @@
 //     force stage, with each instrument's contact capacity set to --capacity (10: the 2 instruments x 10
 //     contacts), percentiles over the ticks where both instruments touch, against the 100 us budget;
 //  2. the coupling: the grasper's force while the probe presses, from the two-instrument solve, from the grasper alone
-//     (the same path, no probe), and from a direct solve of the elasticity with both instruments' constraints
-//     (K_ff by Eigen's sparse LDLT, independent of the tensors: tests/support/direct_solve.h); linear (no law), the
-//     shipped capacities.
+//     (the same path, no probe), and from a direct solve of the elasticity with both instruments' constraints built
+//     from geometry (tests/support/direct_solve.h: its own stiffness, patches, offsets and near fields from the mesh,
+//     the material, the fixed nodes and the tool points' positions; which points touch, and where the grasp closed,
+//     are taken from the contacts' flags); linear (no law), the shipped capacities, ticks past every contact's onset
+//     ramp.
 // A plain program (never a pass/fail test): prints tables; --out DIR writes DIR/two_hands.csv (one row per figure:
 // metric, value, unit) and DIR/two_hands_trace.csv (per 10 ms: t, forces of each run).
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -72,7 +75,8 @@ void inputs_at(const Scene& scene, const MultiTrajectory& traj, const std::vecto
 
 int run(const std::string& scene_arg, const std::string& cache_arg, int capacity, const std::string& out_dir) {
   const Scene scene = load_scene(resolve_scene_path(scene_arg));
-  if (scene.tools.size() < 2) throw_error(scene.file, ": has ", scene.tools.size(), " instrument (give a scene with two)");
+  if (scene.tools.size() < 2)
+    throw_error(scene.file, ": has ", scene.tools.size(), " instrument (give a scene with two)");
   if (scene.trajectory.empty()) throw_error(scene.file, ": has no trajectory to replay");
   const std::string cache = cache_arg.empty() ? default_cache_dir() : cache_arg;
   const TetMesh mesh = load_scene_mesh(scene, cache, &std::cerr);
@@ -80,8 +84,8 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
   const LiverTensorSetup setup = liver_tensor_setup(scene.material, scene.fixed, mesh, cache, scene.file);
   const Tensors tensors = load_liver_tensors(setup, mesh, scene.material, {"haptic"}, &std::cerr, nullptr, scene.file);
   const NonlinearLaw law = load_nonlinear_law(scene.nonlinear, scene.material);
-  const ElasticModel model = build_elastic_model(mesh, scene.material, setup.fixed, scene.file);
-  const test::DirectConstraintSolver direct(model);
+  const test::DirectReference direct(mesh.nodes, mesh.tets, scene.material.young_modulus, scene.material.poisson_ratio,
+                                     setup.fixed.fixed_nodes());
   if (!direct.ok()) throw_error(scene.file, ": K_ff could not be factored for the direct solve");
 
   const MultiTrajectory traj = MultiTrajectory::load(scene.trajectory);
@@ -99,11 +103,12 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
     figures.row("%s,%.9g,%s", metric, v, unit);
     std::printf("  %-44s %14.6g %s\n", metric, v, unit);
   };
-  std::printf("two_hands_bench: scene %s (%d nodes, %zu surface nodes), %zu instruments (%s, %s), trajectory %s, "
-              "%llu ticks at 1 kHz\n",
-              scene.file.c_str(), static_cast<int>(mesh.nodes.rows()), surface.nodes.size(), scene.tools.size(),
-              scene.tools[0].name.c_str(), scene.tools[1].name.c_str(), scene.trajectory.c_str(),
-              static_cast<unsigned long long>(ticks));
+  std::printf(
+      "two_hands_bench: scene %s (%d nodes, %zu surface nodes), %zu instruments (%s, %s), trajectory %s, "
+      "%llu ticks at 1 kHz\n",
+      scene.file.c_str(), static_cast<int>(mesh.nodes.rows()), surface.nodes.size(), scene.tools.size(),
+      scene.tools[0].name.c_str(), scene.tools[1].name.c_str(), scene.trajectory.c_str(),
+      static_cast<unsigned long long>(ticks));
 
   // --- 1. the tick, the 2 instruments x `capacity` contacts (then the scene's own capacities), the law and
   // each force stage ---
@@ -136,8 +141,10 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
       if (r.out[0].over_capacity || r.out[1].over_capacity) ++over;
     }
     const Percentiles b = both_us.summary(), a = all_us.summary();
-    std::printf("\n1. Tick (contacts of both instruments in one solve + law + force stages), contact capacity %s per "
-                "instrument, us:\n", cap > 0 ? std::to_string(cap).c_str() : "of the scene");
+    std::printf(
+        "\n1. Tick (contacts of both instruments in one solve + law + force stages), contact capacity %s per "
+        "instrument, us:\n",
+        cap > 0 ? std::to_string(cap).c_str() : "of the scene");
     std::printf("  %-22s %8s %8s %8s %8s %8s\n", "ticks", "count", "p50", "p90", "p99", "max");
     std::printf("  %-22s %8llu %8.1f %8.1f %8.1f %8.1f\n", "both touching", static_cast<unsigned long long>(both_ticks),
                 b.p50, b.p90, b.p99, b.max);
@@ -164,6 +171,9 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
     Run r, rg, rp;
     double err_max = 0, coupling_max = 0, coupling_at = 0, grasp_alone_at = 0, grasp_both_at = 0;
     std::uint64_t compared = 0;
+    // Where each instrument's tip was when its grasp closed (the grasped material point is its rest point then).
+    std::array<Eigen::Vector3d, 2> grasp_tip{};
+    std::array<bool, 2> grasping{};
     std::printf("\n2. Coupling: the grasper's force (N, z) while the probe presses, linear (no law)\n");
     std::printf("  %7s | %10s %10s %10s %9s | %10s %10s | %s\n", "t (s)", "grasper", "alone", "direct", "rel err",
                 "probe", "alone", "contacts g/p");
@@ -171,6 +181,12 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
       const double t = static_cast<double>(k) * kDt;
       inputs_at(scene, traj, track, t, r);
       both.step(r.inputs.data(), 2, r.out.data(), kDt);
+      for (int ti = 0; ti < 2; ++ti) {
+        const auto sti = static_cast<std::size_t>(ti);
+        const bool g = both.point(0, ti).grasp;
+        if (g && !grasping[sti]) grasp_tip[sti] = r.geometry[sti].points[0];
+        grasping[sti] = g;
+      }
       rg = r;
       grasper.step(rg.inputs.data(), 1, rg.out.data(), kDt);
       rp.geometry = r.geometry;
@@ -180,16 +196,26 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
       // The direct solve wherever the grasper holds and the probe presses (no fading hold in either run).
       double direct_z = std::nan(""), err = std::nan("");
       bool comparable = r.out[0].grasp && r.out[1].points_in_contact > 0;
-      std::vector<test::ConstraintRow> rows;
+      std::vector<test::ReferenceContact> contacts;
       for (int ti = 0; ti < 2 && comparable; ++ti) {
-        for (int i = 0; i < scene.tools[static_cast<std::size_t>(ti)].shaft_points; ++i) {
+        const auto sti = static_cast<std::size_t>(ti);
+        for (int i = 0; i < scene.tools[sti].shaft_points; ++i) {
           const PointContact& pc = both.point(i, ti);
           if (pc.release_age >= 0) comparable = false;
-          if (both.patch(i, ti).count > 0 && (pc.grasp || pc.active)) test::add_patch_rows(both, i, ti, pc.grasp, rows);
+          if (both.patch(i, ti).count == 0 || !(pc.grasp || pc.active)) continue;
+          if (!pc.grasp && pc.age < ToolContacts::kOnsetRamp) comparable = false;  // its penetration still blending in
+          test::ReferenceContact rc;
+          rc.instrument = ti;
+          rc.tip = r.geometry[sti].points[static_cast<std::size_t>(i)];
+          rc.axis = r.geometry[sti].direction;
+          rc.radius = scene.tools[0].tip_radius;  // the solve takes the first instrument's tip radius
+          rc.grasp = pc.grasp;
+          rc.grasp_tip = grasp_tip[sti];
+          contacts.push_back(rc);
         }
       }
       if (comparable) {
-        const std::vector<Eigen::Vector3d> d = direct.forces(rows, 2);
+        const std::vector<Eigen::Vector3d> d = direct.forces(contacts, 2);
         direct_z = d[0].z();
         err = std::max((r.out[0].force - d[0]).norm() / d[0].norm(), (r.out[1].force - d[1]).norm() / d[1].norm());
         err_max = std::max(err_max, err);
@@ -218,10 +244,11 @@ int run(const std::string& scene_arg, const std::string& cache_arg, int capacity
     figure("grasper_fz_alone_at_max", grasp_alone_at, "N");
     figure("grasper_fz_with_probe_at_max", grasp_both_at, "N");
     figure("time_of_max_coupling", coupling_at, "s");
-    std::printf("  verdict: largest relative difference from the direct solve %.2g (budget 1e-9: %s); the probe "
-                "changes the grasper's force by up to %.1f %% (at t = %.3f s: %.4f N alone, %.4f N with the probe)\n",
-                err_max, compared > 0 && err_max <= 1e-9 ? "within" : "OVER or nothing compared", 100 * coupling_max,
-                coupling_at, grasp_alone_at, grasp_both_at);
+    std::printf(
+        "  verdict: largest relative difference from the direct solve %.2g (budget 1e-9: %s); the probe "
+        "changes the grasper's force by up to %.1f %% (at t = %.3f s: %.4f N alone, %.4f N with the probe)\n",
+        err_max, compared > 0 && err_max <= 1e-9 ? "within" : "OVER or nothing compared", 100 * coupling_max,
+        coupling_at, grasp_alone_at, grasp_both_at);
   }
   return 0;
 }

@@ -1,13 +1,18 @@
 // Two instruments on one liver, on the flat 20 x 20 x 4 cm slab of 1 cm cells fixed on its bottom face:
 // all contacts of both instruments are one constrained solve, so each instrument's force equals a direct solve of the
-// elasticity with BOTH instruments' constraints (here: K_ff factored by Eigen's sparse LDLT from the assembled
-// stiffness, independently of the precomputed tensors and of CHOLMOD) and differs from what the same instrument feels
-// alone; an instrument whose input is lost drops only its own contacts; a grasp is held by one instrument while the
-// other presses. The figures are printed: ctest -R haptic_liver_two_hands_test -V.
+// elasticity with BOTH instruments' constraints and differs from what the same instrument feels alone; an instrument
+// whose input is lost drops only its own contacts; a grasp is held by one instrument while the other presses. The
+// direct solve (tests/support/direct_solve.h) is built from geometry alone: the slab's nodes and tets, its material and
+// bottom face, each tip's position, radius and shaft; its patches, weights, offsets, near fields and stiffness are
+// coded there, not read from ToolContacts nor from the project's FEM, so a wrong patch of either instrument fails
+// here. The figures are printed: ctest -R common_contact_two_hands_test -V.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <map>
+#include <string>
 #include <vector>
 
 #include "fem/fem.h"
@@ -28,7 +33,8 @@ namespace {
 constexpr double kTop = 0.04;  // m, top face of the slab
 constexpr double kDt = 1e-3;   // s
 
-using test::ConstraintRow;
+using test::ReferenceContact;
+using test::ReferencePatch;
 
 class LiverTwoHandsTest : public ::testing::Test {
  protected:
@@ -40,7 +46,12 @@ class LiverTwoHandsTest : public ::testing::Test {
     region.plane_normal = {0, 0, -1};
     fixed_ = new FixedSet(fixed_set_from_region(slab_->mesh, region));
     model_ = new ElasticModel(build_elastic_model(slab_->mesh, Material{3000.0, 0.45}, *fixed_));
-    direct_ = new test::DirectConstraintSolver(*model_);
+    // The reference sees the geometry only: the bottom face (z = 0) is what is fixed.
+    std::vector<int> bottom;
+    for (Eigen::Index n = 0; n < slab_->mesh.nodes.rows(); ++n)
+      if (slab_->mesh.nodes(n, 2) == 0.0) bottom.push_back(static_cast<int>(n));
+    ASSERT_EQ(bottom.size(), 21u * 21u);
+    direct_ = new test::DirectReference(slab_->mesh.nodes, slab_->mesh.tets, 3000.0, 0.45, bottom);
     ASSERT_TRUE(direct_->ok());
   }
   static void TearDownTestSuite() {
@@ -79,22 +90,52 @@ class LiverTwoHandsTest : public ::testing::Test {
   }
   static Eigen::Vector3d at(double x, double y, double depth) { return {x, y, kTop - depth}; }
 
-  static std::vector<Eigen::Vector3d> direct(const std::vector<ConstraintRow>& rows, int instruments) {
-    return direct_->forces(rows, instruments);
+  // A vertical tool point of instrument t at `tip` (radius: the instruments' default tip), sliding or grasping what
+  // it held at `grasp_tip`.
+  static ReferenceContact probe(int t, const Eigen::Vector3d& tip) {
+    ReferenceContact r;
+    r.instrument = t;
+    r.tip = tip;
+    r.axis = {0, 0, -1};
+    r.radius = ToolSpec{}.tip_radius;
+    return r;
   }
-  static void add_rows(const ToolContacts& c, int t, bool three_d, std::vector<ConstraintRow>& rows) {
-    test::add_patch_rows(c, 0, t, three_d, rows);
+  static ReferenceContact grasp(int t, const Eigen::Vector3d& tip, const Eigen::Vector3d& grasp_tip) {
+    ReferenceContact r = probe(t, tip);
+    r.grasp = true;
+    r.grasp_tip = grasp_tip;
+    return r;
+  }
+  static std::vector<Eigen::Vector3d> direct(const std::vector<ReferenceContact>& contacts, int instruments) {
+    return direct_->forces(contacts, instruments);
+  }
+  // Instrument t's patch in ToolContacts against the reference's: the same nodes and weights, normal, offset and near
+  // field.
+  static void expect_same_patch(const ToolContacts& c, int t, const ReferencePatch& ref) {
+    const PointPatch& p = c.patch(0, t);
+    std::map<int, double> got;
+    for (int e = 0; e < p.count; ++e)
+      got[p.nodes[static_cast<std::size_t>(e)]] = p.weights[static_cast<std::size_t>(e)];
+    ASSERT_EQ(got.size(), ref.nodes.size()) << "instrument " << t << ": patch nodes";
+    for (std::size_t e = 0; e < ref.nodes.size(); ++e) {
+      ASSERT_EQ(got.count(ref.nodes[e]), 1u) << "instrument " << t << ": node " << ref.nodes[e] << " not in its patch";
+      EXPECT_NEAR(got[ref.nodes[e]], ref.weights[e], 1e-12)
+          << "instrument " << t << ": weight of node " << ref.nodes[e];
+    }
+    EXPECT_LE((p.normal - ref.normal).norm(), 1e-12) << "instrument " << t;
+    EXPECT_LE((c.point(0, t).offset - ref.offset).norm(), 1e-12) << "instrument " << t << ": offset";
+    EXPECT_NEAR(p.near_normal, ref.near_normal, 1e-9 * ref.near_normal) << "instrument " << t << ": near field";
   }
 
   static test::Slab* slab_;
   static FixedSet* fixed_;
   static ElasticModel* model_;
-  static test::DirectConstraintSolver* direct_;
+  static test::DirectReference* direct_;
 };
 test::Slab* LiverTwoHandsTest::slab_ = nullptr;
 FixedSet* LiverTwoHandsTest::fixed_ = nullptr;
 ElasticModel* LiverTwoHandsTest::model_ = nullptr;
-test::DirectConstraintSolver* LiverTwoHandsTest::direct_ = nullptr;
+test::DirectReference* LiverTwoHandsTest::direct_ = nullptr;
 
 double rel(const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return (a - b).norm() / b.norm(); }
 
@@ -112,10 +153,8 @@ TEST_F(LiverTwoHandsTest, EachForceIsTheDirectSolveWithBothConstraintsAndNotTheF
   }
   ASSERT_EQ(out[0].points_in_contact, 1);
   ASSERT_EQ(out[1].points_in_contact, 1);
-  std::vector<ConstraintRow> rows;
-  add_rows(c, 0, false, rows);
-  add_rows(c, 1, false, rows);
-  const std::vector<Eigen::Vector3d> d = direct(rows, 2);
+  // The reference from the tips alone.
+  const std::vector<Eigen::Vector3d> d = direct({probe(0, at(xa, y, 0.005)), probe(1, at(xb, y, 0.005))}, 2);
   std::cout << "[two hands] left " << out[0].force.transpose() << " N (direct " << d[0].transpose() << ", alone "
             << out_alone[0].force.transpose() << "), right " << out[1].force.transpose() << " N; coupling: left "
             << 100 * (out[0].force.z() - out_alone[0].force.z()) / out_alone[0].force.z() << " % vs alone\n";
@@ -128,6 +167,73 @@ TEST_F(LiverTwoHandsTest, EachForceIsTheDirectSolveWithBothConstraintsAndNotTheF
   EXPECT_GT(c.instrument_nodes(0), 0);
   EXPECT_GT(c.instrument_nodes(1), 0);
   EXPECT_EQ(c.instrument_nodes(0) + c.instrument_nodes(1), c.solution().count);
+}
+
+// The reference's own patch on the flat top of the slab, from the tip's position alone: its normal is the face's,
+// its weights are positive and sum to 1, their first moment is the tip's centre (the footprint is a symmetric load
+// and P1 shape functions reproduce linear fields), its offset is the depth below the top face; and the model's
+// 4 x 12 quadrature integrates the punch's pressure against the shape functions (a 64 x 256 rule of the same
+// integral agrees), so the rule it reproduces is the contact model's integral, not an arbitrary one.
+TEST_F(LiverTwoHandsTest, TheReferencePatchOnTheSlabHasTheSlabsInvariants) {
+  const double a = ToolSpec{}.tip_radius;
+  for (const Eigen::Vector3d& tip :
+       {at(0.085, 0.1, 0.005), at(0.115, 0.1, 0.005), at(0.0833, 0.1021, 0.0031), at(0.1171, 0.0968, 0.0007)}) {
+    const ReferencePatch p = direct_->patch(probe(1, tip));
+    ASSERT_FALSE(p.nodes.empty());
+    EXPECT_LE((p.normal - Eigen::Vector3d::UnitZ()).norm(), 1e-12);
+    EXPECT_LE((p.centre - Eigen::Vector3d(tip.x(), tip.y(), kTop)).norm(), 1e-12);
+    double sum = 0;
+    Eigen::Vector3d moment = Eigen::Vector3d::Zero();
+    for (std::size_t e = 0; e < p.nodes.size(); ++e) {
+      EXPECT_GT(p.weights[e], 0.0);
+      EXPECT_NEAR(slab_->mesh.nodes(p.nodes[e], 2), kTop, 1e-15) << "a node off the top face";
+      sum += p.weights[e];
+      moment += p.weights[e] * slab_->mesh.nodes.row(p.nodes[e]).transpose();
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-12);
+    EXPECT_LE((moment - p.centre).norm(), 1e-12);
+    EXPECT_NEAR(p.depth, kTop - tip.z(), 1e-12);
+    EXPECT_LE((p.offset - Eigen::Vector3d(0, 0, -(kTop - tip.z()))).norm(), 1e-12);
+    EXPECT_GT(p.near_normal, 0.0);
+    const auto fine = direct_->footprint(p.centre, p.normal, a, 64, 256);
+    std::map<int, double> exact(fine.begin(), fine.end());
+    double worst = 0;
+    for (std::size_t e = 0; e < p.nodes.size(); ++e)
+      worst = std::max(worst, std::abs(p.weights[e] - exact[p.nodes[e]]));
+    for (const auto& [node, w] : exact)
+      if (std::find(p.nodes.begin(), p.nodes.end(), node) == p.nodes.end()) worst = std::max(worst, w);
+    std::cout << "[two hands, reference patch] tip " << tip.transpose() << ": " << p.nodes.size()
+              << " nodes, largest weight difference from a 64 x 256 quadrature " << worst << "\n";
+    EXPECT_LT(worst, 1e-3);
+  }
+}
+
+// ToolContacts builds, for EACH instrument, the patch the reference derives from that instrument's tip: the same
+// nodes and weights, normal, offset and near field (the two tips 3 cm apart of the first test, and two tips off the
+// grid lines at other depths).
+TEST_F(LiverTwoHandsTest, EachInstrumentsPatchIsTheReferencePatchOfItsTip) {
+  const std::vector<std::vector<Eigen::Vector3d>> cases = {{at(0.085, 0.1, 0.005), at(0.115, 0.1, 0.005)},
+                                                           {at(0.0833, 0.1021, 0.003), at(0.1171, 0.0968, 0.0045)}};
+  for (const auto& tips : cases) {
+    ToolContacts c = contacts(two());
+    std::vector<ContactTick> out;
+    for (int k = 0; k <= 60; ++k) {
+      const double s = std::min(1.0, k / 40.0);
+      step(c,
+           {at(tips[0].x(), tips[0].y(), s * (kTop - tips[0].z())),
+            at(tips[1].x(), tips[1].y(), s * (kTop - tips[1].z()))},
+           out);
+    }
+    ASSERT_EQ(out[0].points_in_contact, 1);
+    ASSERT_EQ(out[1].points_in_contact, 1);
+    for (int t = 0; t < 2; ++t) {
+      SCOPED_TRACE("tip " + std::to_string(t));
+      expect_same_patch(c, t, direct_->patch(probe(t, tips[static_cast<std::size_t>(t)])));
+    }
+    const std::vector<Eigen::Vector3d> d = direct({probe(0, tips[0]), probe(1, tips[1])}, 2);
+    EXPECT_LE(rel(out[0].force, d[0]), 1e-9);
+    EXPECT_LE(rel(out[1].force, d[1]), 1e-9);
+  }
 }
 
 // The paper's triangle model: node displacements imposed, so the direct solve is StaticSolver (CHOLMOD) with every
@@ -209,16 +315,17 @@ TEST_F(LiverTwoHandsTest, AGraspHeldByOneWhileTheOtherPresses) {
     step(c, {at(xg, y, -0.004), at(0.125, y, 0.006 * std::min(1.0, k / 40.0))}, out, {0.0, 0.5});
   ASSERT_TRUE(out[0].grasp);
   ASSERT_EQ(out[1].points_in_contact, 1);
-  std::vector<ConstraintRow> rows;
-  add_rows(c, 0, true, rows);
-  add_rows(c, 1, false, rows);
-  const std::vector<Eigen::Vector3d> d = direct(rows, 2);
+  // The reference from the tips alone: the grasper holds what it closed on at 2 mm depth, now 4 mm up.
+  const std::vector<Eigen::Vector3d> d =
+      direct({grasp(0, at(xg, y, -0.004), at(xg, y, 0.002)), probe(1, at(0.125, y, 0.006))}, 2);
   std::cout << "[two hands, grasp] grasper " << holding.transpose() << " N holding alone, " << out[0].force.transpose()
             << " N while the probe presses (direct " << d[0].transpose() << "); probe " << out[1].force.transpose()
             << " N\n";
   EXPECT_LE(rel(out[0].force, d[0]), 1e-9);
   EXPECT_LE(rel(out[1].force, d[1]), 1e-9);
   EXPECT_GT(rel(out[0].force, holding), 1e-2) << "the press changes what the grasper feels";
+  expect_same_patch(c, 0, direct_->patch(grasp(0, at(xg, y, -0.004), at(xg, y, 0.002))));
+  expect_same_patch(c, 1, direct_->patch(probe(1, at(0.125, y, 0.006))));
 }
 
 // Each instrument is clamped to its own device limit, and says so only for itself.
