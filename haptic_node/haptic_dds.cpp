@@ -194,8 +194,8 @@ static_assert(kMaxContactEntries == static_cast<int>(msg::kMaxContacts), "organ.
 static_assert(kMaxInstruments == static_cast<int>(msg::kMaxInstruments), "tool/trajectory.h and the IDL disagree");
 
 void fill_instruments(const TickRecord& r, std::vector<msg::InstrumentState>& states) noexcept {
-  const std::size_t n = std::min(states.size(), static_cast<std::size_t>(std::clamp(r.instrument_count, 0,
-                                                                                      kMaxInstruments)));
+  const std::size_t n =
+      std::min(states.size(), static_cast<std::size_t>(std::clamp(r.instrument_count, 0, kMaxInstruments)));
   for (std::size_t i = 0; i < n; ++i) {
     const InstrumentRecord& ir = r.instruments[i];
     msg::InstrumentState& m = states[i];
@@ -230,7 +230,7 @@ void HapticDds::write_frame(const TickRecord& r, std::uint64_t stamp_ns) noexcep
   const int count = std::min(std::max(r.organ.contact_count, 0), kMaxContactEntries);
   entries.resize(static_cast<std::size_t>(count));  // within the reserved capacity: no allocation
   for (int l = 0; l < count; ++l) {
-    const ContactEntry& c = r.organ.contacts[static_cast<std::size_t>(l)];
+    const ContactRecord& c = r.organ.contacts[static_cast<std::size_t>(l)];
     auto& e = entries[static_cast<std::size_t>(l)];
     e.node(static_cast<std::uint32_t>(c.node));
     e.instrument(static_cast<std::uint32_t>(c.instrument));

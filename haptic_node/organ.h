@@ -40,14 +40,37 @@ struct ContactEntry {
 /// IDL's msg::kMaxContacts is the wire's, and haptic_dds.cpp checks they agree).
 inline constexpr int kMaxContactEntries = compliance::kMaxContacts;
 
+/// A 3-vector as a tick record holds it: trivially copyable (the hand-off to the publisher thread moves records
+/// word by word, concurrency/seqlock_ring.h; Eigen's vectors are not trivially copyable), converted to and from
+/// Eigen::Vector3d where it is filled and read.
+struct RecordVec3 {
+  double v[3] = {0, 0, 0};
+  RecordVec3() = default;
+  template <class Derived>
+  RecordVec3(const Eigen::MatrixBase<Derived>& e) : v{e(0), e(1), e(2)} {}  // NOLINT: implicit by design
+  operator Eigen::Vector3d() const { return {v[0], v[1], v[2]}; }           // NOLINT: implicit by design
+  Eigen::Vector3d eigen() const { return {v[0], v[1], v[2]}; }
+};
+
+/// One contact entry as a tick record holds it (ContactEntry, trivially copyable).
+struct ContactRecord {
+  int node = 0;
+  int instrument = 0;
+  RecordVec3 lambda;   // N
+  RecordVec3 u_tilde;  // m
+  ContactRecord() = default;
+  ContactRecord(const ContactEntry& e) : node(e.node), instrument(e.instrument), lambda(e.lambda), u_tilde(e.u_tilde) {}
+};
+
 /// What an organ publishes for one tick, copied out on the loop thread (fill_outputs) and written on the publisher
 /// thread (write): fixed size, no allocation. `points` is storage the hand-off owns (3 * point_capacity doubles).
+/// The contacts come last: the hand-off moves only the first contact_count of them.
 struct OrganOutputs {
   int contact_count = 0;
-  std::array<ContactEntry, kMaxContactEntries> contacts;
-  int point_count = 0;      // body positions filled (the intestine's masses)
-  int point_capacity = 0;   // output_points() of the organ
+  int point_count = 0;     // body positions filled (the intestine's masses)
+  int point_capacity = 0;  // output_points() of the organ
   double* points = nullptr;
+  std::array<ContactRecord, kMaxContactEntries> contacts;
 };
 
 class HapticOrgan {

@@ -34,23 +34,21 @@ void futex_wait(std::atomic<std::uint32_t>* word, std::uint32_t expected, std::u
 double overrun_scale(std::uint64_t missed, std::uint64_t period_ns, std::uint64_t fade_ns) noexcept {
   if (missed <= 1) return 1.0;
   if (fade_ns == 0) return 0.0;
-  const double s = 1.0 - static_cast<double>(missed - 1) * static_cast<double>(period_ns) / static_cast<double>(fade_ns);
+  const double s =
+      1.0 - static_cast<double>(missed - 1) * static_cast<double>(period_ns) / static_cast<double>(fade_ns);
   return s > 0 ? s : 0.0;
 }
 
 Publisher::Publisher(TickSink& sink, const PublisherOptions& options)
     : sink_(sink),
       options_(options),
-      ring_(std::max<std::size_t>(options.slots, 4)),
-      points_(ring_.size() * static_cast<std::size_t>(std::max(options.body_points, 0)) * 3),
+      ring_(std::max<std::size_t>(options.slots, 4), static_cast<std::size_t>(std::max(options.body_points, 0)) * 3),
+      fill_points_(static_cast<std::size_t>(std::max(options.body_points, 0)) * 3 + 3),
       copy_points_(2 * static_cast<std::size_t>(std::max(options.body_points, 0)) * 3 + 3),
       write_us_(options.samples),
       latency_us_(options.samples) {
-  const std::size_t per = static_cast<std::size_t>(std::max(options_.body_points, 0)) * 3;
-  for (std::size_t s = 0; s < ring_.size(); ++s) {
-    ring_.slot(s).record.organ.points = per > 0 ? points_.data() + s * per : nullptr;
-    ring_.slot(s).record.organ.point_capacity = options_.body_points;
-  }
+  filling_.organ.points = options_.body_points > 0 ? fill_points_.data() : nullptr;
+  filling_.organ.point_capacity = std::max(options_.body_points, 0);
   back_pressure_.store(options_.lossless || options_.back_pressure);
   if (!options_.inline_writes) thread_ = std::thread([this] { run(); });
 }
@@ -71,24 +69,24 @@ TickRecord& Publisher::begin() noexcept {
       }
     }
   }
-  TickRecord& r = ring_.begin().record;
-  r.organ.contact_count = 0;
-  r.organ.point_count = 0;
-  return r;
+  filling_.organ.contact_count = 0;
+  filling_.organ.point_count = 0;
+  return filling_;
 }
 
 void Publisher::commit() noexcept {
   const std::uint64_t i = ring_.head(std::memory_order_relaxed);
-  Entry& s = ring_.writing();
-  s.commit_ns = monotonic_ns();
-  ring_.commit();
+  TickRecord& r = filling_;
+  r.commit_ns = monotonic_ns();
+  const int points = std::clamp(r.organ.point_count, 0, std::max(options_.body_points, 0));
+  ring_.push(r, record_bytes(r), r.organ.points, static_cast<std::size_t>(points) * 3);
   if (options_.inline_writes) {  // measurement only: the writes on the loop thread (no publisher thread)
     const std::uint64_t t0 = monotonic_ns();
-    write_record_force(s.record, s.commit_ns);
-    sink_.write_frame(s.record, monotonic_ns());
+    write_record_force(r, r.commit_ns);
+    sink_.write_frame(r, monotonic_ns());
     written_.fetch_add(1, std::memory_order_relaxed);
     write_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
-    inline_last_ = s.record;
+    inline_last_ = r;
     inline_have_last_ = true;
     consumed_.store(i + 1, std::memory_order_release);
     return;
@@ -110,18 +108,15 @@ void Publisher::finish() {
   }
 }
 
-bool Publisher::read(std::uint64_t i, TickRecord& out, double* points, std::uint64_t& commit_ns) const noexcept {
-  return ring_.read(i, [&](const Entry& e) {
-    out = e.record;
-    const int count = std::min(std::max(out.organ.point_count, 0), options_.body_points);
-    if (count > 0 && points != nullptr) {
-      std::memcpy(points, e.record.organ.points, static_cast<std::size_t>(count) * 3 * sizeof(double));
-    }
-    out.organ.point_count = count;
-    out.organ.point_capacity = options_.body_points;
-    out.organ.points = points;
-    commit_ns = e.commit_ns;
-  });
+bool Publisher::read(std::uint64_t i, TickRecord& out, double* points) const noexcept {
+  std::size_t doubles = 0;
+  if (!ring_.read(i, out, points, doubles)) return false;
+  out.organ.contact_count = std::clamp(out.organ.contact_count, 0, kMaxContactEntries);
+  out.organ.point_count =
+      std::min(std::clamp(out.organ.point_count, 0, options_.body_points), static_cast<int>(doubles / 3));
+  out.organ.point_capacity = options_.body_points;
+  out.organ.points = points;
+  return true;
 }
 
 void Publisher::write_zero(const TickRecord* last) noexcept {
@@ -141,7 +136,7 @@ void Publisher::write_record_force(const TickRecord& r, std::uint64_t commit_ns)
   const int n = std::clamp(r.instrument_count, 1, kMaxInstruments);
   for (int i = 0; i < n; ++i) {
     const InstrumentRecord& ir = r.instruments[static_cast<std::size_t>(i)];
-    sink_.write_force(i, r.seq, monotonic_ns(), ir.device_force, ir.saturated, ir.flags);
+    sink_.write_force(i, r.seq, monotonic_ns(), ir.device_force.eigen(), ir.saturated, ir.flags);
   }
   forces_written_.fetch_add(1, std::memory_order_relaxed);
   const std::uint64_t now = monotonic_ns();
@@ -161,13 +156,13 @@ void Publisher::run() noexcept {
   const std::size_t per = static_cast<std::size_t>(std::max(options_.body_points, 0)) * 3;
   double* frame_points = copy_points_.data();
   double* force_points = copy_points_.data() + per;
-  TickRecord frame;        // the record whose ContactFrame is written next
-  TickRecord newest;       // the newest record (its force)
+  TickRecord frame;              // the record whose ContactFrame is written next
+  TickRecord newest;             // the newest record (its force)
   std::uint64_t next_frame = 0;  // index of the next record whose frame is due
   std::uint64_t force_done = 0;  // records whose force was sent or superseded
   // The force the device holds now: for the overrun watchdog and the final zero.
   bool have_last = false;
-  bool watch = false;            // the watchdog is armed for the last force
+  bool watch = false;             // the watchdog is armed for the last force
   std::uint64_t missed_sent = 0;  // missed periods already answered for it
   TickRecord last;
   const std::size_t lag_limit = ring_.size() / 2;
@@ -176,12 +171,11 @@ void Publisher::run() noexcept {
     const std::uint64_t h = ring_.head(std::memory_order_acquire);
     if (h > next_frame || h > force_done) {
       const std::uint64_t t0 = monotonic_ns();
-      std::uint64_t commit_ns = 0;
       if (options_.lossless) {
         // Every record in order: its force, then its frame.
         const std::uint64_t i = next_frame;
-        if (read(i, frame, frame_points, commit_ns)) {
-          write_record_force(frame, commit_ns);
+        if (read(i, frame, frame_points)) {
+          write_record_force(frame, frame.commit_ns);
           sink_.write_frame(frame, monotonic_ns());
           written_.fetch_add(1, std::memory_order_relaxed);
           last = frame;
@@ -197,8 +191,8 @@ void Publisher::run() noexcept {
         const std::uint64_t n = h - 1;
         bool newest_ok = false;
         if (n >= force_done) {
-          if (!read(n, newest, force_points, commit_ns)) continue;  // overwritten while copied: a newer one exists
-          write_record_force(newest, commit_ns);
+          if (!read(n, newest, force_points)) continue;  // overwritten while copied: a newer one exists
+          write_record_force(newest, newest.commit_ns);
           forces_skipped_.fetch_add(n - force_done, std::memory_order_relaxed);
           force_done = n + 1;
           newest_ok = true;
@@ -217,7 +211,7 @@ void Publisher::run() noexcept {
           bool ok = true;
           if (i == n && newest_ok) {
             sink_.write_frame(newest, monotonic_ns());
-          } else if ((ok = read(i, frame, frame_points, commit_ns))) {
+          } else if ((ok = read(i, frame, frame_points))) {
             sink_.write_frame(frame, monotonic_ns());
           }
           if (ok) {
@@ -253,7 +247,7 @@ void Publisher::run() noexcept {
         const int n = std::clamp(last.instrument_count, 1, kMaxInstruments);
         for (int i = 0; i < n; ++i) {
           const InstrumentRecord& ir = last.instruments[static_cast<std::size_t>(i)];
-          sink_.write_force(i, last.seq, now, ir.device_force * scale, ir.saturated && scale == 1.0,
+          sink_.write_force(i, last.seq, now, ir.device_force.eigen() * scale, ir.saturated && scale == 1.0,
                             ir.flags | kFlagHeld);
         }
         hold_ticks_.fetch_add(1, std::memory_order_relaxed);

@@ -3,13 +3,14 @@
 // loop, like the DDS threads) writes ForceFeedback first, then ContactFrame, then the organ's own topics (the
 // intestine's BodyState). The loop makes no DDS call and no allocation.
 //
-// Hand-off: a single-producer ring of `slots` records, each guarded by a sequence lock (version odd while the loop
-// writes it). The producer never waits in real-time mode (a slot the publisher has not read yet is overwritten; the
-// publisher sees the version change and skips it); the publisher copies a record out, checks the version, and writes
-// from its copy. Wake-up: the publisher sleeps on a futex; the loop calls FUTEX_WAKE only when the publisher is
-// asleep. FUTEX_WAKE never blocks (it takes a kernel hash-bucket spinlock and marks the waiter runnable): about
-// 1-3 us, against up to 100 us of added force latency (and 10 000 wake-ups a second on 2 cores) for a publisher
-// that polls every 100 us.
+// Hand-off: the loop fills a record of its own (begin()), and commit() pushes it into a single-producer ring of
+// `slots` records, each guarded by a sequence lock (version odd while the loop writes it), its payload moved through
+// relaxed atomic words (concurrency/seqlock_ring.h: no data race, only the contacts the tick has). The producer never
+// waits in real-time mode (a slot the publisher has not read yet is overwritten; the publisher sees the version change
+// and skips it); the publisher copies a record out, checks the version, and writes from its copy. Wake-up: the
+// publisher sleeps on a futex; the loop calls FUTEX_WAKE only when the publisher is asleep. FUTEX_WAKE never blocks (it
+// takes a kernel hash-bucket spinlock and marks the waiter runnable): about 1-3 us, against up to 100 us of added force
+// latency (and 10 000 wake-ups a second on 2 cores) for a publisher that polls every 100 us.
 //
 // Policies:
 //  - Real-time (paced) runs: ForceFeedback is always the NEWEST record's (a force the publisher reaches late is never
@@ -31,8 +32,10 @@
 #include <Eigen/Core>
 #include <array>
 #include <atomic>
+#include <cstddef>
 #include <cstdint>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include "concurrency/seqlock_ring.h"
@@ -50,28 +53,41 @@ inline constexpr std::uint32_t kFlagHeld = 32;
 /// One instrument's part of a tick record.
 struct InstrumentRecord {
   tool::Pose5 pose;
-  Eigen::Vector3d tip = Eigen::Vector3d::Zero();
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();         // N, on the instrument (ContactFrame)
-  Eigen::Vector3d device_force = Eigen::Vector3d::Zero();  // N, sent to its device (ForceFeedback)
-  Eigen::Vector3d direction = Eigen::Vector3d::Zero();
+  RecordVec3 tip;
+  RecordVec3 force;         // N, on the instrument (ContactFrame)
+  RecordVec3 device_force;  // N, sent to its device (ForceFeedback)
+  RecordVec3 direction;
   std::uint32_t flags = 0;
   std::uint32_t contact_points = 0;
   bool saturated = false;
 };
 
-/// One tick's outputs, everything the publisher writes. Trivially copyable (the seqlock copies it with memcpy);
-/// organ.points points into the ring's own storage.
+/// One tick's outputs, everything the publisher writes. Trivially copyable and standard layout (the hand-off moves
+/// it word by word, its organ's contacts last so that only those in use move); organ.points points into storage of
+/// the side that holds the copy (the loop's own record, the publisher's copies).
 struct TickRecord {
   std::uint64_t seq = 0;
-  double sim_time = 0;                  // s
-  std::uint64_t due_ns = 0;             // monotonic time the tick was due (0: unpaced, no overrun watchdog)
-  std::uint64_t period_ns = 0;          // loop period (0: unpaced)
-  int instrument_count = 1;             // the scene's instruments, 1..kMaxInstruments
+  double sim_time = 0;          // s
+  std::uint64_t due_ns = 0;     // monotonic time the tick was due (0: unpaced, no overrun watchdog)
+  std::uint64_t period_ns = 0;  // loop period (0: unpaced)
+  int instrument_count = 1;     // the scene's instruments, 1..kMaxInstruments
   std::array<InstrumentRecord, tool::kMaxInstruments> instruments{};
-  std::uint32_t flags = 0;              // the union of the instruments' flags
-  bool last_tick = false;               // the run's last tick: no overrun watchdog after it
-  OrganOutputs organ;
+  std::uint32_t flags = 0;      // the union of the instruments' flags
+  bool last_tick = false;       // the run's last tick: no overrun watchdog after it
+  std::uint64_t commit_ns = 0;  // monotonic time of commit() (set by the publisher)
+  OrganOutputs organ;           // last: its contacts are the record's variable-length tail
 };
+static_assert(std::is_trivially_copyable_v<TickRecord>, "the hand-off moves TickRecord word by word");
+static_assert(std::is_standard_layout_v<TickRecord>, "record_bytes() takes offsetof in TickRecord");
+
+/// The bytes of `r` the hand-off moves: everything up to its organ's contacts, and the first contact_count of those.
+inline std::size_t record_bytes(const TickRecord& r) noexcept {
+  const int n = r.organ.contact_count < 0
+                    ? 0
+                    : (r.organ.contact_count > kMaxContactEntries ? kMaxContactEntries : r.organ.contact_count);
+  return offsetof(TickRecord, organ) + offsetof(OrganOutputs, contacts) +
+         static_cast<std::size_t>(n) * sizeof(ContactRecord);
+}
 
 /// Where the publisher writes (HapticDds in the node, a recorder in tests). Called on the publisher thread only.
 class TickSink {
@@ -89,14 +105,14 @@ class TickSink {
 double overrun_scale(std::uint64_t missed, std::uint64_t period_ns, std::uint64_t fade_ns) noexcept;
 
 struct PublisherOptions {
-  std::size_t slots = 64;            // ring size (records)
-  int body_points = 0;               // organ positions per record (HapticOrgan::output_points())
-  bool lossless = false;             // write every record, producer waits when full (--speed max)
-  bool back_pressure = false;        // keep every frame, producer waits when full (implied by lossless)
-  bool inline_writes = false;        // no thread: commit() writes on the caller's thread (the pre-issue-14 loop, kept
-                                     // only to measure against: SURGSIM_HAPTIC_PUBLISHER=inline)
+  std::size_t slots = 64;              // ring size (records)
+  int body_points = 0;                 // organ positions per record (HapticOrgan::output_points())
+  bool lossless = false;               // write every record, producer waits when full (--speed max)
+  bool back_pressure = false;          // keep every frame, producer waits when full (implied by lossless)
+  bool inline_writes = false;          // no thread: commit() writes on the caller's thread (the pre-issue-14 loop, kept
+                                       // only to measure against: SURGSIM_HAPTIC_PUBLISHER=inline)
   std::uint64_t fade_ns = 10'000'000;  // overrun: from hold to zero
-  std::size_t samples = 1 << 16;     // write-time samples kept for the percentiles
+  std::size_t samples = 1 << 16;       // write-time samples kept for the percentiles
 };
 
 class Publisher {
@@ -108,10 +124,12 @@ class Publisher {
   Publisher(const Publisher&) = delete;
   Publisher& operator=(const Publisher&) = delete;
 
-  /// Producer (the loop thread only), no allocation, no lock: the record to fill for the next tick. In lossless
-  /// mode it yields while the ring is full. Its organ.points has room for body_points positions.
+  /// Producer (the loop thread only), no allocation, no lock: the record to fill for the next tick (the loop's own:
+  /// the publisher never reads it). With back-pressure it yields while the ring is full. Its organ.points has room
+  /// for body_points positions.
   TickRecord& begin() noexcept;
-  /// Hands the record over and wakes the publisher if it sleeps (one non-blocking FUTEX_WAKE).
+  /// Hands the record over (pushes it into the ring) and wakes the publisher if it sleeps (one non-blocking
+  /// FUTEX_WAKE).
   void commit() noexcept;
   /// Producer thread: wait when the ring is full instead of letting the publisher skip stale frames (for a loop that
   /// runs without SCHED_FIFO). Set before the first begin() or between ticks.
@@ -123,8 +141,8 @@ class Publisher {
 
   // Counters (exact after finish()).
   std::uint64_t committed() const { return ring_.head(std::memory_order_relaxed); }
-  std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }   // frames written
-  std::uint64_t skipped() const { return skipped_.load(std::memory_order_relaxed); }   // frames never written
+  std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }  // frames written
+  std::uint64_t skipped() const { return skipped_.load(std::memory_order_relaxed); }  // frames never written
   std::uint64_t forces_written() const { return forces_written_.load(std::memory_order_relaxed); }
   std::uint64_t forces_skipped() const { return forces_skipped_.load(std::memory_order_relaxed); }
   std::uint64_t overrun_hold_ticks() const { return hold_ticks_.load(std::memory_order_relaxed); }
@@ -139,13 +157,9 @@ class Publisher {
   core::Percentiles force_latency_us() const { return latency_us_.summary(); }
 
  private:
-  struct Entry {  // one slot of the hand-off ring
-    std::uint64_t commit_ns = 0;
-    TickRecord record;
-  };
   void run() noexcept;
   /// Copies record i out of its slot into `out` (its points into `points`); false when it was overwritten.
-  bool read(std::uint64_t i, TickRecord& out, double* points, std::uint64_t& commit_ns) const noexcept;
+  bool read(std::uint64_t i, TickRecord& out, double* points) const noexcept;
   void write_record_force(const TickRecord& r, std::uint64_t commit_ns) noexcept;
   /// The final zero force of every instrument of `last` (null: instrument 0 only, nothing was handed over).
   void write_zero(const TickRecord* last) noexcept;
@@ -153,12 +167,14 @@ class Publisher {
 
   TickSink& sink_;
   PublisherOptions options_;
-  concurrency::SeqlockRing<Entry> ring_;  // the loop's records, read by the publisher thread (a sequence lock per slot)
-  std::vector<double> points_;       // slots * body_points * 3, the slots' organ positions
-  std::vector<double> copy_points_;  // the publisher's copies: [0] the frame record, [1] the newest (force)
-  alignas(64) std::atomic<std::uint32_t> futex_{0};      // head_'s low bits, the publisher sleeps on it
+  concurrency::SeqlockRing<TickRecord> ring_;  // the loop's records, read by the publisher thread (a sequence lock per
+                                               // slot; the organ's points are each slot's tail)
+  TickRecord filling_;                         // the loop's record between begin() and commit()
+  std::vector<double> fill_points_;            // body_points * 3, filling_'s organ positions
+  std::vector<double> copy_points_;            // the publisher's copies: [0] the frame record, [1] the newest (force)
+  alignas(64) std::atomic<std::uint32_t> futex_{0};  // head_'s low bits, the publisher sleeps on it
   std::atomic<std::uint32_t> sleepers_{0};
-  alignas(64) std::atomic<std::uint64_t> consumed_{0};   // records the publisher is done with (lossless back-pressure)
+  alignas(64) std::atomic<std::uint64_t> consumed_{0};  // records the publisher is done with (lossless back-pressure)
   std::atomic<bool> stop_{false};
   std::atomic<bool> back_pressure_{false};
   std::atomic<std::uint64_t> written_{0}, skipped_{0}, forces_written_{0}, forces_skipped_{0}, hold_ticks_{0},
