@@ -49,6 +49,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(20.0, 1000.0))->capture_default_str();
   cli.add_option("--max-clients", o.max_clients, "Pages connected at once")->check(CLI::Range(1, 64))
       ->capture_default_str();
+  cli.add_option("--max-connections", o.max_connections,
+                 "Open connections at once (at most what the open-file limit leaves); beyond, the oldest whose "
+                 "request did not carry the token is closed")
+      ->check(CLI::Range(16, 1 << 20))
+      ->capture_default_str();
   cli.add_option("--max-message", o.max_ws_message, "Largest WebSocket message a page may send, bytes")
       ->check(CLI::Range(256, 1 << 20))->capture_default_str();
   cli.add_option("--duration", duration, "Stop after S seconds (default: until SIGINT/SIGTERM)");

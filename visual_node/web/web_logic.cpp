@@ -163,4 +163,27 @@ void DriveArbiter::release(std::uint64_t id) {
   if (driver_ == id) driver_ = 0;
 }
 
+std::uint64_t ConnectionTable::open(std::uint64_t id) {
+  where_[id] = untrusted_.insert(untrusted_.end(), id);
+  if (where_.size() <= capacity_) return 0;
+  // Over the capacity by this one: the oldest untrusted goes (the new one itself is untrusted, so there is one).
+  const std::uint64_t victim = untrusted_.front();
+  close(victim);
+  return victim;
+}
+
+void ConnectionTable::trust(std::uint64_t id) {
+  const auto it = where_.find(id);
+  if (it == where_.end() || it->second == untrusted_.end()) return;
+  untrusted_.erase(it->second);
+  it->second = untrusted_.end();
+}
+
+void ConnectionTable::close(std::uint64_t id) {
+  const auto it = where_.find(id);
+  if (it == where_.end()) return;
+  if (it->second != untrusted_.end()) untrusted_.erase(it->second);
+  where_.erase(it);
+}
+
 }  // namespace surgsim::web

@@ -1,11 +1,15 @@
 // surgsim-web's rules without sockets or DDS, so each is unit-tested on its own: which path a request
 // names and whether its token is right, what a browser's WebSocket message says (anything malformed is refused), who
-// drives the tool, and how the virtual device moves towards the pose the driving page asks for (clamped to the
-// device's range and slew-limited, so a key press or a wild mouse drag never makes the tool jump).
+// drives the tool, how the virtual device moves towards the pose the driving page asks for (clamped to the
+// device's range and slew-limited, so a key press or a wild mouse drag never makes the tool jump), and which
+// connection is closed first when there are too many.
 #pragma once
+#include <cstddef>
 #include <cstdint>
+#include <list>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 
 #include "tool/trajectory.h"
 
@@ -78,6 +82,37 @@ class DriveArbiter {
 
  private:
   std::uint64_t driver_ = 0;
+};
+
+/// The open connections, and which one to close when there are more than the capacity. A connection is trusted
+/// once its request carried the token; the others (a request still arriving, a refusal being answered, a file of
+/// the page) are closed first, the oldest first, so that connections without the token, however many, never keep
+/// the token holder out: its connection is the newest untrusted one until its request is read, then trusted.
+class ConnectionTable {
+ public:
+  explicit ConnectionTable(std::size_t capacity) : capacity_(capacity) {}
+  /// Connection `id` (not 0, not open) opened. Returns the connection to close now to stay within the capacity (it
+  /// is no longer in the table): 0 while there is room, else the oldest untrusted one, which is `id` itself when
+  /// every other connection is trusted.
+  std::uint64_t open(std::uint64_t id);
+  /// Connection `id`'s request carried the token (no effect when it is not open).
+  void trust(std::uint64_t id);
+  /// Connection `id` closed (no effect when it is not open).
+  void close(std::uint64_t id);
+  /// The oldest untrusted connection (0: none).
+  std::uint64_t oldest_untrusted() const { return untrusted_.empty() ? 0 : untrusted_.front(); }
+  /// A new capacity, e.g. lower when the process ran out of file descriptors below the capacity; connections
+  /// already open stay until the next open() (each one closes one while there are too many).
+  void set_capacity(std::size_t capacity) { capacity_ = capacity; }
+  std::size_t capacity() const { return capacity_; }
+  std::size_t size() const { return where_.size(); }
+  std::size_t trusted() const { return where_.size() - untrusted_.size(); }
+
+ private:
+  std::size_t capacity_;
+  std::list<std::uint64_t> untrusted_;  // oldest first
+  // id -> its place in untrusted_ (untrusted_.end() once trusted).
+  std::unordered_map<std::uint64_t, std::list<std::uint64_t>::iterator> where_;
 };
 
 }  // namespace surgsim::web

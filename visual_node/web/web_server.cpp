@@ -7,10 +7,15 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
+#include <sys/resource.h>
+
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <mutex>
@@ -18,6 +23,8 @@
 #include <optional>
 #include <sstream>
 #include <thread>
+#include <unordered_map>
+#include <utility>
 
 #include "core/clock.h"
 #include "core/stats.h"
@@ -50,6 +57,24 @@ std::string read_file(const std::string& path) {
   return s.str();
 }
 
+// File descriptors the process has open now (DDS's sockets and shared memory among them).
+std::size_t open_descriptors() {
+  std::error_code ec;
+  std::size_t n = 0;
+  for (std::filesystem::directory_iterator it("/proc/self/fd", ec), end; !ec && it != end; it.increment(ec)) ++n;
+  return n;
+}
+
+// Descriptors kept free below the process's limit when the connection cap is chosen: for what DDS (a participant
+// discovered later) and the server itself open after start-up.
+constexpr std::size_t kDescriptorReserve = 64;
+// A trusted connection (its request carried the token) has this long to read its answer (the page over a slow
+// SSH tunnel); the others have request_timeout_s.
+constexpr auto kTrustedAnswerTimeout = std::chrono::seconds(10);
+// Pauses between accept() retries after an error that closing a connection cannot cure: doubling, within these.
+constexpr auto kAcceptBackoffMin = std::chrono::milliseconds(10);
+constexpr auto kAcceptBackoffMax = std::chrono::milliseconds(1000);
+
 }  // namespace
 
 // Counters of what was served and refused (read by /stats).
@@ -57,14 +82,31 @@ struct Counters {
   std::atomic<std::uint64_t> requests{0}, pages{0}, assets{0}, stats{0}, not_found{0}, forbidden{0}, bad_request{0},
       method_not_allowed{0}, too_many_clients{0}, ws_opened{0}, ws_closed{0}, ws_oversize{0}, ws_malformed{0},
       ws_not_driver{0}, drive_refused{0}, poses{0}, commands_sent{0}, frames_to_pages{0}, frames_replaced{0};
+  // Connections: accepted, closed to make room for a newer one (none carried the token), closed because the request
+  // did not arrive in time, accept() errors; and, mirrored from the I/O thread's table, how many are open and the cap.
+  std::atomic<std::uint64_t> accepted{0}, closed_for_room{0}, request_timeouts{0}, accept_errors{0}, open{0}, cap{0};
 };
 
 class WsSession;
 
 struct WebServer::Impl {
-  Impl(const ServerOptions& o, WebDds& d) : options(o), dds(d), acceptor(io), signals(io, SIGINT, SIGTERM),
-                                            telemetry_timer(io), end_timer(io) {}
+  Impl(const ServerOptions& o, WebDds& d)
+      : options(o),
+        dds(d),
+        acceptor(io),
+        signals(io, SIGINT, SIGTERM),
+        telemetry_timer(io),
+        end_timer(io),
+        accept_timer(io) {}
   void accept();
+  /// A new connection: into the table (closing the oldest untrusted one when full), then its request is read.
+  void admit(tcp::socket socket);
+  /// Closes connection `id` to make room (it is out of the table already or is taken out).
+  void close_for_room(std::uint64_t id);
+  /// A connection ended (its session is gone): out of the table.
+  void connection_closed(std::uint64_t id);
+  /// The request of connection `id` carried the token.
+  void trust(std::uint64_t id);
   /// The newest frame to every page (I/O thread; posted by the DDS frame listener).
   void broadcast_frame();
   void on_telemetry_timer();
@@ -81,10 +123,17 @@ struct WebServer::Impl {
   ServerOptions options;
   WebDds& dds;
   std::map<std::string, std::string> files;  // asset name -> content
+  // The open connections (I/O thread only): which one to close first when there are too many, and how to close
+  // each (its session, weakly). Declared before io: sessions io still holds when it is destroyed leave these then.
+  ConnectionTable connections{0};
+  std::unordered_map<std::uint64_t, std::function<void()>> closers;
+  std::uint64_t next_connection = 1;
+  std::size_t min_connections = 0;  // the cap never comes down below this (every page and a few requests)
   net::io_context io;
   tcp::acceptor acceptor;
   net::signal_set signals;
-  net::steady_timer telemetry_timer, end_timer;
+  net::steady_timer telemetry_timer, end_timer, accept_timer;
+  std::chrono::milliseconds accept_backoff{0};                 // 0: the last accept() succeeded
   std::map<std::uint64_t, std::weak_ptr<WsSession>> sessions;  // I/O thread only
   std::uint64_t next_id = 1;
   std::uint64_t last_frame = ~0ull;
@@ -102,11 +151,31 @@ struct WebServer::Impl {
   int bound_port = 0;
 };
 
+// A connection's entry in the server's table, held by its session (moved from the HTTP session to the WebSocket
+// session on upgrade): its end takes the entry out, however the connection ended (answered, timed out, closed by
+// either side, or the server stopped with the session still pending).
+class ConnectionTicket {
+ public:
+  ConnectionTicket(WebServer::Impl& server, std::uint64_t id) : server_(&server), id_(id) {}
+  ConnectionTicket(ConnectionTicket&& o) noexcept : server_(std::exchange(o.server_, nullptr)), id_(o.id_) {}
+  ConnectionTicket(const ConnectionTicket&) = delete;
+  ConnectionTicket& operator=(const ConnectionTicket&) = delete;
+  ConnectionTicket& operator=(ConnectionTicket&&) = delete;
+  ~ConnectionTicket() {
+    if (server_) server_->connection_closed(id_);
+  }
+  std::uint64_t id() const { return id_; }
+
+ private:
+  WebServer::Impl* server_;
+  std::uint64_t id_;
+};
+
 // One page's WebSocket.
 class WsSession : public std::enable_shared_from_this<WsSession> {
  public:
-  WsSession(tcp::socket&& socket, WebServer::Impl& server, std::uint64_t id)
-      : ws_(std::move(socket)), server_(server), id_(id) {}
+  WsSession(tcp::socket&& socket, WebServer::Impl& server, std::uint64_t id, ConnectionTicket ticket)
+      : ws_(std::move(socket)), server_(server), id_(id), ticket_(std::move(ticket)) {}
   std::uint64_t id() const { return id_; }
 
   void start(http::request<http::string_body> req) {
@@ -182,6 +251,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   beast::flat_buffer buffer_;
   WebServer::Impl& server_;
   std::uint64_t id_;
+  ConnectionTicket ticket_;
   bool open_ = false, writing_ = false;
   std::shared_ptr<const std::string> pending_text_, pending_frame_, current_;
 };
@@ -189,20 +259,32 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
 // One HTTP connection: one request, then a response (and close) or the upgrade to a WebSocket.
 class HttpSession : public std::enable_shared_from_this<HttpSession> {
  public:
-  HttpSession(tcp::socket&& socket, WebServer::Impl& server) : stream_(std::move(socket)), server_(server) {}
+  HttpSession(tcp::socket&& socket, WebServer::Impl& server, ConnectionTicket ticket)
+      : stream_(std::move(socket)), server_(server), ticket_(std::move(ticket)) {}
   void start() {
     parser_.emplace();
     parser_->header_limit(8192);
     parser_->body_limit(4096);
-    stream_.expires_after(std::chrono::seconds(10));
+    // The whole request within the deadline, however slowly it trickles in: a connection that never finishes its
+    // headers holds a descriptor for this long at most.
+    stream_.expires_after(request_timeout());
     http::async_read(stream_, buffer_, *parser_,
                      [self = shared_from_this()](beast::error_code ec, std::size_t) { self->on_read(ec); });
   }
+  /// Closes the socket now (to make room for a newer connection); the pending read or write ends with an error.
+  void close() { stream_.close(); }
 
  private:
+  std::chrono::steady_clock::duration request_timeout() const {
+    return std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(server_.options.request_timeout_s));
+  }
   void on_read(beast::error_code ec) {
-    if (ec == http::error::end_of_stream || ec == beast::error::timeout || ec == net::error::eof) return;
     auto& c = server_.counters;
+    if (ec == beast::error::timeout) c.request_timeouts++;
+    // Closed to make room (aborted), by the client before a request, or out of time: nobody to answer.
+    if (ec == net::error::operation_aborted || !stream_.socket().is_open()) return;
+    if (ec == http::error::end_of_stream || ec == beast::error::timeout || ec == net::error::eof) return;
     c.requests++;
     if (ec) {
       const bool too_big = ec == http::error::header_limit || ec == http::error::body_limit ||
@@ -214,6 +296,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     }
     http::request<http::string_body> req = parser_->release();
     const Request r = parse_target(std::string_view(req.target().data(), req.target().size()));
+    // The token holder's connection is never the one closed to make room from now on, and may take its time.
+    trusted_ = token_matches(r.token, server_.options.token);
+    if (trusted_) server_.trust(ticket_.id());
     if (req.method() != http::verb::get) {
       c.method_not_allowed++;
       respond(http::status::method_not_allowed, "text/plain", "only GET\n", req.version());
@@ -224,7 +309,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       respond(http::status::not_found, "text/plain", "not found\n", req.version());
       return;
     }
-    if (r.route != Route::kAsset && !token_matches(r.token, server_.options.token)) {
+    if (r.route != Route::kAsset && !trusted_) {
       c.forbidden++;
       respond(http::status::forbidden, "text/plain",
               "forbidden: open the URL surgsim-web printed (it carries the token)\n", req.version());
@@ -236,7 +321,11 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
         respond(http::status::bad_request, "text/plain", "a WebSocket upgrade is expected here\n", req.version());
         return;
       }
-      auto ws = std::make_shared<WsSession>(stream_.release_socket(), server_, server_.next_id++);
+      const std::uint64_t connection = ticket_.id();
+      auto ws = std::make_shared<WsSession>(stream_.release_socket(), server_, server_.next_id++, std::move(ticket_));
+      server_.closers[connection] = [w = std::weak_ptr<WsSession>(ws)] {
+        if (auto s = w.lock()) s->close();
+      };
       ws->start(std::move(req));
       return;
     }
@@ -257,6 +346,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     res->keep_alive(false);
     res->body() = std::move(body);
     res->prepare_payload();
+    // A refusal not read within the request's deadline is not waited for.
+    stream_.expires_after(trusted_ ? std::chrono::steady_clock::duration(kTrustedAnswerTimeout) : request_timeout());
     http::async_write(stream_, *res, [self = shared_from_this(), res](beast::error_code, std::size_t) {
       beast::error_code ec;
       self->stream_.socket().shutdown(tcp::socket::shutdown_send, ec);
@@ -271,20 +362,73 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   WebServer::Impl& server_;
+  ConnectionTicket ticket_;
+  bool trusted_ = false;
 };
 
 void WebServer::Impl::accept() {
   acceptor.async_accept(io, [this](beast::error_code ec, tcp::socket socket) {
-    if (ec) {
-      if (acceptor.is_open()) accept();
+    if (!ec) {
+      accept_backoff = std::chrono::milliseconds(0);
+      admit(std::move(socket));
+      accept();
       return;
     }
-    auto s = std::make_shared<HttpSession>(std::move(socket), *this);
-    s->stats_body_ = [this] { return stats_text(); };
-    s->start();
-    accept();
+    if (!acceptor.is_open() || ec == net::error::operation_aborted) return;
+    counters.accept_errors++;
+    // Out of file descriptors below the cap (DDS took more, or the limit was lowered): the cap comes down to the
+    // connections open now, and the oldest without the token is closed so that the pending one fits; accepting goes
+    // on at once, each accept() now closing one connection as the cap does.
+    const bool no_descriptors =
+        ec == net::error::no_descriptors || ec == boost::system::errc::too_many_files_open_in_system;
+    if (no_descriptors && connections.oldest_untrusted() != 0) {
+      close_for_room(connections.oldest_untrusted());
+      connections.set_capacity(std::max(connections.size(), min_connections));
+      counters.cap = connections.capacity();
+      accept();
+      return;
+    }
+    // Nothing to close, or another error: retry after a pause, doubling, so that a lasting error never spins.
+    accept_backoff = std::clamp(2 * accept_backoff, kAcceptBackoffMin, kAcceptBackoffMax);
+    accept_timer.expires_after(accept_backoff);
+    accept_timer.async_wait([this](beast::error_code e) {
+      if (!e) accept();
+    });
   });
 }
+
+void WebServer::Impl::admit(tcp::socket socket) {
+  counters.accepted++;
+  const std::uint64_t id = next_connection++;
+  auto s = std::make_shared<HttpSession>(std::move(socket), *this, ConnectionTicket(*this, id));
+  closers[id] = [w = std::weak_ptr<HttpSession>(s)] {
+    if (auto p = w.lock()) p->close();
+  };
+  const std::uint64_t victim = connections.open(id);
+  if (victim != 0) close_for_room(victim);
+  counters.open = connections.size();
+  if (victim == id) return;  // every other connection is trusted: this one goes (its socket closes with `s`)
+  s->stats_body_ = [this] { return stats_text(); };
+  s->start();
+}
+
+void WebServer::Impl::close_for_room(std::uint64_t id) {
+  connections.close(id);
+  counters.closed_for_room++;
+  const auto it = closers.find(id);
+  if (it == closers.end()) return;
+  const std::function<void()> close = std::move(it->second);
+  closers.erase(it);
+  close();  // the descriptor is free now; the session ends when its aborted operation's handler runs
+}
+
+void WebServer::Impl::connection_closed(std::uint64_t id) {
+  connections.close(id);
+  closers.erase(id);
+  counters.open = connections.size();
+}
+
+void WebServer::Impl::trust(std::uint64_t id) { connections.trust(id); }
 
 bool WebServer::Impl::add_session(const std::shared_ptr<WsSession>& s) {
   std::size_t open = 0;
@@ -420,6 +564,12 @@ std::string WebServer::Impl::stats_text() {
   j["commands_sent"] = c.commands_sent.load();
   j["frames_to_pages"] = c.frames_to_pages.load();
   j["frames_replaced"] = c.frames_replaced.load();
+  j["connections"] = {{"open", c.open.load()},
+                      {"max", c.cap.load()},
+                      {"accepted", c.accepted.load()},
+                      {"closed_for_room", c.closed_for_room.load()},
+                      {"request_timeouts", c.request_timeouts.load()},
+                      {"accept_errors", c.accept_errors.load()}};
   {
     std::lock_guard<std::mutex> lock(delay_mutex);
     j["render_to_page_us"] = to_json(delay_us.summary());  // render -> the page displayed it, echoed back here
@@ -497,6 +647,17 @@ WebServer::WebServer(const ServerOptions& options, WebDds& dds) : impl_(std::mak
                              ec.message() + " (choose another --port)");
   }
   m.bound_port = m.acceptor.local_endpoint().port();
+  // The cap stays below the file descriptors the process may still open, so that a flood meets the cap (which
+  // closes connections without the token) before accept() runs out of descriptors.
+  m.min_connections = static_cast<std::size_t>(std::max(options.max_clients, 1)) + 8;
+  std::size_t cap = static_cast<std::size_t>(std::max(options.max_connections, 1));
+  rlimit limit{};
+  if (getrlimit(RLIMIT_NOFILE, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
+    const std::size_t used = open_descriptors() + kDescriptorReserve;
+    cap = std::min(cap, limit.rlim_cur > used ? static_cast<std::size_t>(limit.rlim_cur - used) : 0);
+  }
+  m.connections.set_capacity(std::max(cap, m.min_connections));
+  m.counters.cap = m.connections.capacity();
 }
 
 WebServer::~WebServer() {

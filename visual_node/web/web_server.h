@@ -11,6 +11,12 @@
 // (405), a malformed or oversized request (400 / 413), more than max_clients pages (503), a WebSocket message above
 // max_ws_message bytes (the socket is closed with "too big"), a malformed message or a pose from a page that does not
 // drive (ignored).
+// Connections are bounded so that a flood of them without the token never keeps the token holder out: a
+// request not complete within request_timeout_s is closed (and a refusal not read by then too); beyond
+// max_connections open connections (lowered to the file descriptors the process may still open), the oldest whose
+// request did not carry the token is closed (ConnectionTable); when accept() runs out of descriptors anyway, the
+// cap comes down to what fits and one such connection is closed to make room, and other accept errors are retried
+// after a pause that doubles up to 1 s, never at once.
 #pragma once
 #include <atomic>
 #include <cstdint>
@@ -30,6 +36,8 @@ struct ServerOptions {
   std::string token;                    // required in the URL of the page, /ws and /stats
   std::string www;                      // folder with index.html, app.js, style.css
   int max_clients = 8;                  // WebSocket pages at once
+  int max_connections = 256;            // open connections at once (requests being read or answered, WebSockets)
+  double request_timeout_s = 2;         // a connection's whole request must arrive within this (then it is closed)
   std::size_t max_ws_message = 4096;    // bytes; a larger message from a page closes its socket
   double command_rate_hz = 200;         // ToolCommand rate while a page drives
   double driver_silence_s = 0.5;        // a driving page silent this long stops the commands (the tab is hidden)

@@ -1,5 +1,6 @@
 // surgsim-web's rules without sockets: paths and tokens, the page's messages (malformed ones refused with
-// a reason), the virtual device's range and slew limit, and one driver at a time.
+// a reason), the virtual device's range and slew limit, one driver at a time, and which connection is closed first
+// when there are too many.
 #include "web_logic.h"
 
 #include <gtest/gtest.h>
@@ -120,6 +121,86 @@ TEST(DriveArbiter, OneDriverAtATime) {
   a.release(1);             // the driving page closed
   EXPECT_EQ(a.driver(), 0u);
   EXPECT_TRUE(a.take(2));
+}
+
+TEST(ConnectionTable, RoomThenTheOldestUntrustedGoesFirst) {
+  ConnectionTable t(3);
+  EXPECT_EQ(t.open(1), 0u);
+  EXPECT_EQ(t.open(2), 0u);
+  EXPECT_EQ(t.open(3), 0u);
+  EXPECT_EQ(t.size(), 3u);
+  t.trust(1);  // 1 showed the token: never closed to make room
+  EXPECT_EQ(t.trusted(), 1u);
+  EXPECT_EQ(t.oldest_untrusted(), 2u);
+  EXPECT_EQ(t.open(4), 2u);  // full: the oldest without the token goes, not the trusted 1 nor the new 4
+  EXPECT_EQ(t.open(5), 3u);
+  EXPECT_EQ(t.size(), 3u);
+  t.close(4);  // closed by its end (answered, timed out)
+  EXPECT_EQ(t.open(6), 0u);
+  EXPECT_EQ(t.open(7), 5u);
+  t.close(5);  // already gone: no effect
+  t.close(99);
+  EXPECT_EQ(t.size(), 3u);
+  EXPECT_EQ(t.oldest_untrusted(), 6u);
+}
+
+TEST(ConnectionTable, WhenAllOthersAreTrustedTheNewOneGoes) {
+  ConnectionTable t(2);
+  t.open(1);
+  t.open(2);
+  t.trust(1);
+  t.trust(2);
+  t.trust(2);  // again: no effect
+  EXPECT_EQ(t.oldest_untrusted(), 0u);
+  EXPECT_EQ(t.open(3), 3u);
+  EXPECT_EQ(t.size(), 2u);
+  EXPECT_EQ(t.trusted(), 2u);
+  t.close(1);  // a trusted connection closes: room again
+  EXPECT_EQ(t.trusted(), 1u);
+  EXPECT_EQ(t.open(4), 0u);
+  t.trust(77);  // not open: no effect
+  EXPECT_EQ(t.size(), 2u);
+}
+
+TEST(ConnectionTable, ALowerCapacityClosesOneAtEachOpen) {
+  ConnectionTable t(4);
+  for (std::uint64_t id = 1; id <= 4; ++id) t.open(id);
+  t.set_capacity(2);  // e.g. the descriptors ran out below the capacity
+  EXPECT_EQ(t.size(), 4u);
+  EXPECT_EQ(t.open(5), 1u);
+  EXPECT_EQ(t.open(6), 2u);
+  EXPECT_EQ(t.size(), 4u);  // one in, one out: the table shrinks only as connections end
+  t.close(3);
+  t.close(4);
+  EXPECT_EQ(t.open(7), 5u);
+  EXPECT_EQ(t.size(), 2u);
+  EXPECT_EQ(t.capacity(), 2u);
+}
+
+// A flood of connections that never show the token, and the token holder's among them: the holder's connection is
+// never the one closed, whatever the order, as long as its request is read before `capacity` newer ones arrive.
+TEST(ConnectionTable, AFloodNeverClosesTheTokenHolder) {
+  ConnectionTable t(16);
+  std::set<std::uint64_t> closed;
+  std::uint64_t id = 1;
+  for (int round = 0; round < 50; ++round) {
+    for (int k = 0; k < 100; ++k, ++id) {
+      if (const std::uint64_t v = t.open(id)) closed.insert(v);
+    }
+    const std::uint64_t holder = id++;
+    if (const std::uint64_t v = t.open(holder)) closed.insert(v);
+    for (int k = 0; k < 15; ++k, ++id) {  // fewer than the capacity arrive before the holder's request is read
+      if (const std::uint64_t v = t.open(id)) closed.insert(v);
+    }
+    t.trust(holder);
+    for (int k = 0; k < 100; ++k, ++id) {
+      if (const std::uint64_t v = t.open(id)) closed.insert(v);
+    }
+    EXPECT_EQ(closed.count(holder), 0u) << round;
+    EXPECT_EQ(t.size(), 16u);
+    t.close(holder);  // answered
+  }
+  EXPECT_EQ(t.trusted(), 0u);
 }
 
 }  // namespace
