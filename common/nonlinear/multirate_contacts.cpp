@@ -37,6 +37,7 @@ MultirateContacts::MultirateContacts(const TetMesh& mesh, const Material& materi
   last_u_.assign(nv, Eigen::Vector3d::Zero());
   velocity_.assign(nv, Eigen::Vector3d::Zero());
   last_tick_.assign(nv, 0);
+  held_at_.assign(nv, 0);
   for (int i = 0; i < 3; ++i)
     surfaces_.slot(i).u = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(surface_nodes_.size()));
   for (auto& t : cycle_tick_) t.store(0, std::memory_order_relaxed);
@@ -95,6 +96,15 @@ void MultirateContacts::run() noexcept {
 
 bool MultirateContacts::cycle_once() { return cycle_if_needed(); }
 
+bool MultirateContacts::begin_cycle() {
+  targets_.take();
+  const bool needed = !idle(targets_.front().targets);
+  if (!needed) idle_.fetch_add(1, std::memory_order_relaxed);
+  return needed;
+}
+
+bool MultirateContacts::finish_cycle(double cycle_s) { return cycle_if_needed(false, cycle_s); }
+
 namespace {
 bool same_targets(const ContactTargets& a, const ContactTargets& b) {
   if (a.count != b.count) return false;
@@ -106,11 +116,15 @@ bool same_targets(const ContactTargets& a, const ContactTargets& b) {
 }
 }  // namespace
 
-bool MultirateContacts::cycle_if_needed() {
-  targets_.take();
+bool MultirateContacts::idle(const ContactTargets& targets) const {
+  // The same targets as a cycle that converged (a held tool), or no contact with the organ already at rest.
+  return have_cycled_ && last_converged_ && same_targets(targets, cycled_);
+}
+
+bool MultirateContacts::cycle_if_needed(bool take, double replay_cycle_s) {
+  if (take) targets_.take();
   const LoopTargets& in = targets_.front();
-  // Idle: the same targets as a cycle that converged (a held tool), or no contact with the organ already at rest.
-  if (have_cycled_ && last_converged_ && same_targets(in.targets, cycled_)) {
+  if (idle(in.targets)) {
     idle_.fetch_add(1, std::memory_order_relaxed);
     return false;
   }
@@ -138,7 +152,7 @@ bool MultirateContacts::cycle_if_needed() {
   have_cycled_ = true;
   // Converged at the targets themselves (not at predicted ones): only then may the tracker sleep on them.
   last_converged_ = cy.converged && cy.published && !predicted;
-  last_cycle_s_ = cy.total_ms * 1e-3;
+  last_cycle_s_ = replay_cycle_s > 0 ? replay_cycle_s : cy.total_ms * 1e-3;
   cycle_ms_.add(cy.total_ms);
   cycles_.fetch_add(1, std::memory_order_relaxed);
   if (!cy.failure.empty()) failures_.fetch_add(1, std::memory_order_relaxed);
@@ -163,6 +177,7 @@ void MultirateContacts::hand_over(const ContactSolution& solution, double dt) no
   dt_ = dt;
   LoopTargets& out = targets_.back();
   const int m = std::clamp(solution.count, 0, kMaxContacts);
+  if (m == 0) end_contact();
   out.targets.count = m;
   out.sim_time = static_cast<double>(tick_ - 1) * dt;
   out.tick = tick_ - 1;
@@ -187,48 +202,103 @@ void MultirateContacts::hand_over(const ContactSolution& solution, double dt) no
   targets_.publish();
 }
 
+void MultirateContacts::end_contact() noexcept {
+  weight_ = 0;
+  delivered_.setZero();
+  bump_.setZero();
+  bump_step_ = 0;
+  had_local_ = false;
+  held_count_ = 0;
+}
+
 MultirateUse MultirateContacts::apply(ContactSolution& solution) noexcept {
   const int m = std::clamp(solution.count, 0, kMaxContacts);
   if (m == 0) {
+    end_contact();
     ++ticks_[0];
     return MultirateUse::kNoContact;
   }
+  ++apply_tick_;
   NonlinearTracker& tracker = *tracker_;
   tracker.snapshots().take();
   const TrackerSnapshot& s = tracker.snapshots().front();
-  const auto fallback = [&] {
-    weight_ = 0;
-    ++ticks_[3];
-    return MultirateUse::kLinearFallback;
-  };
   // The local model at the nodes the snapshot holds (f_c + S du over the common nodes, du clamped); the others keep
   // the linear solve's lambda.
   const double max_d = tracker.options().max_extrapolation;
   double largest = 0;
   const int matched = snapshot_forces(s, solution.nodes.data(), solution.displacement.data(), m, max_d, lambda_.data(),
                                       held_.data(), largest);
-  if (matched == 0) return fallback();
+  // Its correction of the linear solve's reaction sum; not finite: as if no node matched.
+  Eigen::Vector3d correction = Eigen::Vector3d::Zero();
+  for (int l = 0; l < m; ++l) {
+    const auto sl = static_cast<std::size_t>(l);
+    if (held_[sl]) correction += lambda_[sl] - solution.lambda[sl];
+  }
+  const bool local = matched > 0 && correction.allFinite();
   // Trust: a local model evaluated far from its state (a tool faster than the tracker, a released grasp fading in
   // 50 ms) hands over to the linear solve continuously: full weight up to half the extrapolation limit, none at it.
   // The weight moves by at most kBlendRate a tick, so the hand-over (and the take-over from the linear model when a
   // contact's first snapshot arrives) lasts 1 / kBlendRate ticks at least; until it reaches 0 the clamped local model
-  // is still used, with a shrinking weight.
-  const double target = std::clamp((max_d - largest) / (max_d - kTrustFraction * max_d), 0.0, 1.0);
-  weight_ = std::clamp(target, weight_ - kBlendRate, weight_ + kBlendRate);
-  const double w = weight_;
-  if (!(w > 0)) return fallback();
-  Eigen::Vector3d total = Eigen::Vector3d::Zero();
+  // is still used, with a shrinking weight. Without a local model the weight falls at the same rate.
+  if (local) {
+    const double target = std::clamp((max_d - largest) / (max_d - kTrustFraction * max_d), 0.0, 1.0);
+    weight_ = std::clamp(target, weight_ - kBlendRate, weight_ + kBlendRate);
+  } else {
+    weight_ = std::max(0.0, weight_ - kBlendRate);
+  }
+  const double w = local ? weight_ : 0.0;
+  const Eigen::Vector3d model = w * correction;
+  // A change of model (a new snapshot, another set of nodes held, the local model gone or back) would step the
+  // correction: the step is carried as the bump and fades out at kBlendRate of it a tick.
+  bool changed = local != had_local_ || (local && (s.cycle != model_cycle_ || matched != held_count_));
   for (int l = 0; l < m; ++l) {
     const auto sl = static_cast<std::size_t>(l);
-    if (held_[sl])
-      lambda_[sl] = w * lambda_[sl] + (1 - w) * solution.lambda[sl];
-    else
-      lambda_[sl] = solution.lambda[sl];
-    total += lambda_[sl];
+    if (!held_[sl]) continue;
+    const auto node = static_cast<std::size_t>(solution.nodes[sl]);
+    changed = changed || held_at_[node] + 1 != apply_tick_;
+    held_at_[node] = apply_tick_;
   }
-  if (!total.allFinite()) return fallback();
-  for (int l = 0; l < m; ++l) solution.lambda[static_cast<std::size_t>(l)] = lambda_[static_cast<std::size_t>(l)];
-  solution.tool_force = -total;
+  had_local_ = local;
+  model_cycle_ = s.cycle;
+  held_count_ = local ? matched : 0;
+  if (changed) {
+    bump_ = delivered_ - model;
+    bump_step_ = kBlendRate * bump_.norm();
+  } else {
+    const double n = bump_.norm();
+    bump_ = n > bump_step_ ? Eigen::Vector3d(bump_ * ((n - bump_step_) / n)) : Eigen::Vector3d::Zero();
+  }
+  delivered_ = model + bump_;
+  if (!delivered_.allFinite()) end_contact();  // cannot happen (finite parts); never a non-finite force
+  const bool bumped = !bump_.isZero(0);
+
+  if (local && w > 0) {
+    for (int l = 0; l < m; ++l) {
+      const auto sl = static_cast<std::size_t>(l);
+      solution.lambda[sl] =
+          held_[sl] ? Eigen::Vector3d(w * lambda_[sl] + (1 - w) * solution.lambda[sl]) : solution.lambda[sl];
+    }
+  }
+  if (bumped) {
+    // The bump on this tick's nodes in proportion to their linear lambdas (evenly if those are 0).
+    double sum = 0;
+    for (int l = 0; l < m; ++l) sum += solution.lambda[static_cast<std::size_t>(l)].norm();
+    const bool even = !(sum > 0) || !std::isfinite(sum);
+    for (int l = 0; l < m; ++l) {
+      const auto sl = static_cast<std::size_t>(l);
+      solution.lambda[sl] += (even ? 1.0 / m : solution.lambda[sl].norm() / sum) * bump_;
+    }
+  }
+  if ((local && w > 0) || bumped) {
+    Eigen::Vector3d total = Eigen::Vector3d::Zero();
+    for (int l = 0; l < m; ++l) total += solution.lambda[static_cast<std::size_t>(l)];
+    solution.tool_force = -total;
+    if (bumped || w < 1) ++blended_;
+  }
+  if (!(local && w > 0)) {
+    ++ticks_[3];
+    return MultirateUse::kLinearFallback;
+  }
 
   // --- statistics: the snapshot's age (sim time since its targets) and the extrapolation ---
   // This tick's index is tick_ (hand_over() follows apply()).
@@ -248,7 +318,6 @@ MultirateUse MultirateContacts::apply(ContactSolution& solution) noexcept {
     stale_ms_.add(1e3 * dt_ * static_cast<double>(tick_ >= since ? tick_ - since : 0));
   }
   extrapolation_mm_.add(1e3 * largest);
-  if (w < 1) ++blended_;
   const bool all = matched == m && matched == s.count;
   ++ticks_[all ? 1 : 2];
   return all ? MultirateUse::kNonlinear : MultirateUse::kPartial;

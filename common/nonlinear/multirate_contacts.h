@@ -15,13 +15,24 @@
 // whole: the nodes that change are at the patch edge, where the Wendland weights and hence the reactions go to 0,
 // and the force changes by about their reaction only. The tick is counted nonlinear (the sets are equal), partial
 // (some nodes matched) or linear fallback (no valid snapshot, no node matched, a non-finite result, or a trust weight
-// of 0: then every lambda stays the linear one). No allocation; O(m^2) with m <= kMaxContacts.
+// of 0: then every lambda is the linear one, plus the fading bump below). No allocation; O(m^2) with
+// m <= kMaxContacts.
 // Trust region: with the largest |du| of the common nodes above kTrustFraction of max_extrapolation, the local
 // model's lambdas are blended with the linear solve's, the linear weight growing linearly to 1 at max_extrapolation;
 // the weight moves by at most kBlendRate a tick (20 ticks from one model to the other, also when a contact's first
 // snapshot arrives), then linear fallback. The tracker lags a tool faster than it (and a released grasp's hold fades
 // in 50 ms): the force then goes over to the linear model, which follows the motion, over 20 ticks instead of
 // jumping when the contact ends (a grasp released after a 60 degree lift dropped 3 N in one tick without it).
+// Every hand-over is rate-limited: the correction of the linear reaction sum the tick delivers, C = w D with
+// D = sum over the held nodes of (f_c + S du - linear lambda), moves with the tool, but a change of model (a new
+// snapshot; another set of nodes held, as a node leaves the patch or the contact set jumps away from the snapshot's;
+// the local model gone: no node matched, a non-finite value; or back) would step it. On such a tick the step is
+// kept as a bump, C + bump = last tick's correction, and the bump fades out linearly in 1 / kBlendRate ticks, spread
+// over the tick's nodes in proportion to their linear lambdas. At the live cycle times (65-130 ms, the local model
+// extrapolated several mm) a new snapshot or a node leaving a sliding patch stepped the force by up to 12 % of it
+// without this. A tick without contact resets the weight and the bump: the next contact starts on the linear model
+// and the local model takes over in 20 ticks again, even when the snapshot of before still holds its nodes (a tool
+// lifted off for less than a tracker cycle).
 //
 // The tracker thread (start()): normal scheduling (it sets SCHED_OTHER itself), CHOLMOD's OpenMP and OpenBLAS on one
 // thread, started by the caller's thread so it inherits that thread's CPU set (the haptic node builds its organ after
@@ -30,7 +41,10 @@
 // set_prediction(false)), runs one tracker cycle and publishes the tracker's surface displacement (for the organ's
 // BodyState) through another TripleBuffer. It sleeps kIdleSleep instead of cycling when nothing is left to do: the
 // targets have not changed since a cycle that converged, or there is no contact and the organ is back at rest.
-// Tests drive it without the thread: cycle_once() runs one such cycle on the calling thread.
+// Tests drive it without the thread: cycle_once() runs one such cycle on the calling thread; begin_cycle() and
+// finish_cycle() replay the thread's cycles on the loop's ticks (targets taken when a cycle starts, its snapshot
+// visible when it ends, the next cycle predicting by the replayed cycle time as the live thread does by the measured
+// one), so a test runs at the live cycle times deterministically.
 #pragma once
 #include <Eigen/Core>
 #include <array>
@@ -106,6 +120,13 @@ class MultirateContacts {
   /// Tests: one tracker cycle on the calling thread, as the thread would run it (with its idle rule: returns false
   /// without cycling when it would sleep). Not while the thread runs.
   bool cycle_once();
+  /// Tests: the tracker thread's cycle replayed on the loop's ticks, in two halves. begin_cycle() takes the newest
+  /// targets, as a cycle does when it starts, and returns false when the thread would sleep instead (the idle rule:
+  /// try again a tick later). finish_cycle(cycle_s) runs that cycle on the targets taken (its snapshot is the one the
+  /// loop's next apply() uses, as at the end of a cycle that took cycle_s) and keeps cycle_s as the cycle's time: the
+  /// horizon the next cycle predicts by, which the live thread measures. Not while the thread runs.
+  bool begin_cycle();
+  bool finish_cycle(double cycle_s);
   /// Predict the targets by the last cycle's measured time (default on), or with `fixed_horizon_s` > 0 by that
   /// (deterministic: tests). Before start() / between cycle_once() calls.
   void set_prediction(bool on, double fixed_horizon_s = 0) {
@@ -129,7 +150,8 @@ class MultirateContacts {
   std::uint64_t ticks_nonlinear() const { return ticks_[1]; }
   std::uint64_t ticks_partial() const { return ticks_[2]; }
   std::uint64_t ticks_linear_fallback() const { return ticks_[3]; }
-  /// Nonlinear or partial ticks whose local model was blended with the linear solve (trust region).
+  /// Ticks whose local model was blended with the linear solve (trust region), or that carried the fading bump of a
+  /// change of model (also linear fallback ticks).
   std::uint64_t ticks_blended() const { return blended_; }
   std::uint64_t tracker_cycles() const { return cycles_.load(std::memory_order_relaxed); }
   std::uint64_t snapshots_published() const { return published_.load(std::memory_order_relaxed); }
@@ -148,8 +170,13 @@ class MultirateContacts {
 
  private:
   void run() noexcept;
-  /// One cycle towards the newest targets unless idle; the cycle's wall time goes to the ring.
-  bool cycle_if_needed();
+  /// One cycle towards the newest targets (or, with `take` false, those taken last) unless idle; the cycle's wall time
+  /// goes to the ring, and the next cycle predicts by it, or by `replay_cycle_s` when that is > 0.
+  bool cycle_if_needed(bool take = true, double replay_cycle_s = 0);
+  /// The idle rule: the same targets as a cycle that converged at them.
+  bool idle(const ContactTargets& targets) const;
+  /// No contact: the local model's weight and the bump go (the next contact starts on the linear model).
+  void end_contact() noexcept;
 
   std::unique_ptr<fem::ElasticModel> model_;
   std::unique_ptr<fem::HyperelasticSolver> solver_;
@@ -175,6 +202,17 @@ class MultirateContacts {
   std::array<std::uint64_t, 4> ticks_{};   // by MultirateUse
   std::uint64_t blended_ = 0;
   double weight_ = 0;  // the local model's weight (trust region, rate-limited)
+  // The hand-over (N, corrections of the reaction sum, the organ's side): delivered_ the last tick's correction of
+  // the linear solve's reaction sum (the weighted local model plus the bump), bump_ what a change of model would have
+  // stepped it by, fading by bump_step_ a tick.
+  Eigen::Vector3d delivered_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d bump_ = Eigen::Vector3d::Zero();
+  double bump_step_ = 0;
+  bool had_local_ = false;              // the last tick in contact had a local model
+  std::uint64_t model_cycle_ = 0;       // the cycle of its snapshot
+  int held_count_ = 0;                  // the nodes it held
+  std::uint64_t apply_tick_ = 0;        // apply() calls with contact
+  std::vector<std::uint64_t> held_at_;  // #V: the apply_tick_ a node was last held by the local model
   core::SampleRecorder age_ms_{1 << 16, core::SampleRecorder::Keep::kNewest};
   core::SampleRecorder stale_ms_{1 << 16, core::SampleRecorder::Keep::kNewest};
   std::uint64_t stale_cycle_ = 0, exact_tick_ = 0;

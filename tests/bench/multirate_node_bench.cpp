@@ -30,6 +30,7 @@
 #include "mesher/scene_mesh.h"
 #include "organs/liver_organ.h"
 #include "scene/scene.h"
+#include "support/newton_reference.h"
 #include "tool/tool.h"
 #include "tool/trajectory.h"
 
@@ -48,7 +49,7 @@ using namespace surgsim;
 namespace {
 
 struct Sample {
-  double t = 0;                      // s
+  double t = 0;  // s
   std::vector<ImposedDisplacement> targets;
   Eigen::Vector3d multirate = Eigen::Vector3d::Zero();  // N, on the tool
   Eigen::Vector3d linear = Eigen::Vector3d::Zero();     // N, on the tool, the linear scene on the same poses
@@ -70,20 +71,23 @@ int main(int argc, char** argv) {
   std::string scene_name = "liver_multirate", trajectory_path, cache, out_dir;
   double sample_ms = 50, lift0 = 1.45, lift1 = 2.95, release = 3.95;
   int tracker_threads = 1;
-  CLI::App app{"multirate_node_bench: the multirate liver's force in the haptic node against the neo-Hookean Newton "
-               "force of the same contact targets, along a trajectory in real time (the tracker thread running), "
-               "with the linear model on the same poses; per-sample table, phase summary, --out DIR writes "
-               "DIR/multirate_node.csv"};
+  CLI::App app{
+      "multirate_node_bench: the multirate liver's force in the haptic node against the neo-Hookean Newton "
+      "force of the same contact targets, along a trajectory in real time (the tracker thread running), "
+      "with the linear model on the same poses; per-sample table, phase summary, --out DIR writes "
+      "DIR/multirate_node.csv"};
   app.add_option("--scene", scene_name, "Scene (name or YAML) with liver.deformation multirate")->capture_default_str();
   app.add_option("--trajectory", trajectory_path, "Trajectory (default: the scene's)");
   app.add_option("--cache", cache, "Mesh and tensor cache folder (default: $SURGSIM_CACHE_DIR, else ~/.cache/surgsim)");
   app.add_option("--sample-ms", sample_ms, "A sample every this many ms of ticks in contact")
-      ->capture_default_str()->check(CLI::Range(1.0, 10000.0));
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 10000.0));
   app.add_option("--lift", lift0, "Start of the lift in the trajectory, s (phase table)")->capture_default_str();
   app.add_option("--hold", lift1, "Start of the hold, s")->capture_default_str();
   app.add_option("--release", release, "Start of the release, s")->capture_default_str();
   app.add_option("--tracker-threads", tracker_threads, "The tracker's numeric threads (haptic_node --tracker-threads)")
-      ->capture_default_str()->check(CLI::Range(1, 64));
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
   app.add_option("--out", out_dir, "Write multirate_node.csv to this folder (created if missing)");
   CLI11_PARSE(app, argc, argv);
 
@@ -111,7 +115,8 @@ int main(int argc, char** argv) {
     samples.reserve(static_cast<std::size_t>(ticks / every + 1));
     int since = every;
     std::uint64_t nl0 = 0, pa0 = 0, fb0 = 0;
-    std::fprintf(stderr, "multirate_node_bench: %d ticks of %s at 1 kHz in real time\n", ticks, trajectory_path.c_str());
+    std::fprintf(stderr, "multirate_node_bench: %d ticks of %s at 1 kHz in real time\n", ticks,
+                 trajectory_path.c_str());
     auto next = std::chrono::steady_clock::now();
     for (int k = 0; k < ticks; ++k) {
       const double t = k * dt;
@@ -130,10 +135,10 @@ int main(int argc, char** argv) {
           smp.targets.push_back({s.nodes[static_cast<std::size_t>(l)], s.displacement[static_cast<std::size_t>(l)], 7});
         smp.multirate = tm.force;
         smp.linear = tl.force;
-        smp.use = mr.ticks_nonlinear() != nl0   ? MultirateUse::kNonlinear
-                  : mr.ticks_partial() != pa0    ? MultirateUse::kPartial
+        smp.use = mr.ticks_nonlinear() != nl0         ? MultirateUse::kNonlinear
+                  : mr.ticks_partial() != pa0         ? MultirateUse::kPartial
                   : mr.ticks_linear_fallback() != fb0 ? MultirateUse::kLinearFallback
-                                                   : MultirateUse::kNoContact;
+                                                      : MultirateUse::kNoContact;
         samples.push_back(std::move(smp));
       }
       nl0 = mr.ticks_nonlinear();
@@ -146,16 +151,13 @@ int main(int argc, char** argv) {
     const std::uint64_t cycles = mr.tracker_cycles();
     mr.stop();
 
-    // The references: Newton on each sample's targets.
-    const LiverTensorSetup setup = liver_tensor_setup(scene.material, scene.fixed, organ.mesh(), cache, scene.file);
-    const ElasticModel model = build_elastic_model(organ.mesh(), scene.material, setup.fixed, scene.file);
-    const HyperelasticSolver newton(model);
+    // The references: Newton on each sample's targets (tests/support/newton_reference.h, shared with the haptic
+    // node's integration test).
+    const test::NewtonReference newton(scene, organ.mesh(), cache);
     double largest = 0;
     for (std::size_t i = 0; i < samples.size(); ++i) {
       Sample& smp = samples[i];
-      const HyperelasticSolution ref = newton.solve(smp.targets);
-      smp.converged = ref.converged();
-      smp.reference = -ref.total_reaction;
+      smp.converged = newton.tool_force(smp.targets, smp.reference);
       if (smp.converged) largest = std::max(largest, smp.reference.norm());
       std::fprintf(stderr, "\rmultirate_node_bench: Newton reference %zu / %zu", i + 1, samples.size());
     }
@@ -163,27 +165,29 @@ int main(int argc, char** argv) {
 
     const double floor = 0.05 * largest;
     const auto rel = [&](const Eigen::Vector3d& f, const Eigen::Vector3d& ref) {
-      return (f - ref).norm() / std::max(ref.norm(), floor);
+      return test::relative_error(f, ref, floor);
     };
     static const char* kUse[] = {"-", "nonlinear", "partial", "linear"};
-    std::printf("Multirate liver in the node (%s, %s): %zu samples every %g ms of contact; tracker %llu cycles, "
-                "p50 %.1f ms, p99 %.1f ms\n",
-                scene.file.c_str(), trajectory_path.c_str(), samples.size(), sample_ms,
-                static_cast<unsigned long long>(cycles), cycle_p50, cycle_p99);
+    std::printf(
+        "Multirate liver in the node (%s, %s): %zu samples every %g ms of contact; tracker %llu cycles, "
+        "p50 %.1f ms, p99 %.1f ms\n",
+        scene.file.c_str(), trajectory_path.c_str(), samples.size(), sample_ms, static_cast<unsigned long long>(cycles),
+        cycle_p50, cycle_p99);
     std::printf("%7s %-8s %6s | %9s %9s %9s | %9s %9s | %s\n", "t s", "phase", "nodes", "|F_ref| N", "|F_mr| N",
                 "|F_lin| N", "mr err", "lin err", "tick model");
     bench::CsvOut csv;
     if (!out_dir.empty()) {
       bench::make_dirs(out_dir);
-      csv = bench::CsvOut(out_dir, "multirate_node",
-                          "t_s,phase,nodes,f_ref_n,f_multirate_n,f_linear_n,multirate_rel_error,linear_rel_error,model");
+      csv =
+          bench::CsvOut(out_dir, "multirate_node",
+                        "t_s,phase,nodes,f_ref_n,f_multirate_n,f_linear_n,multirate_rel_error,linear_rel_error,model");
     }
     struct Phase {
       const char* name;
       std::vector<double> mr, lin;
     };
-    std::vector<Phase> phases = {{"grasp", {}, {}}, {"lift", {}, {}}, {"hold", {}, {}}, {"release", {}, {}},
-                                 {"all", {}, {}}};
+    std::vector<Phase> phases = {
+        {"grasp", {}, {}}, {"lift", {}, {}}, {"hold", {}, {}}, {"release", {}, {}}, {"all", {}, {}}};
     int unconverged = 0;
     for (const Sample& smp : samples) {
       const char* ph = phase_of(smp.t, lift0, lift1, release);
@@ -205,8 +209,9 @@ int main(int argc, char** argv) {
           p.lin.push_back(el);
         }
     }
-    std::printf("\nforce error against Newton on the same targets, %% (p50 / p99 / max); budget: 5 %% (lift to 45 "
-                "degrees), 10 %% (to 90)\n");
+    std::printf(
+        "\nforce error against Newton on the same targets, %% (p50 / p99 / max); budget: 5 %% (lift to 45 "
+        "degrees), 10 %% (to 90)\n");
     std::printf("%-8s %7s | %26s | %26s\n", "phase", "samples", "multirate", "linear");
     for (const Phase& p : phases) {
       if (p.mr.empty()) continue;

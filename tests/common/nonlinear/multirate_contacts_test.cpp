@@ -1,12 +1,18 @@
 // The multirate liver in the haptic node (liver.deformation: multirate; nonlinear/multirate_contacts.h) on the
 // shipped scene config/liver_multirate.yaml (the 1.4k liver, tensors from the cache), with the tool moved over the
 // thick part of the liver (liver.yaml's trocar) and a device limit out of the way. The tracker runs without its
-// thread: the test cycles it with cycle_once() between ticks, so every figure is deterministic.
+// thread: the test replays the thread's cycles on the ticks (LiveCycles: the node's cycle times on this liver,
+// 65-130 ms, each cycle's targets taken when it starts and its snapshot used from its end on, predicted by the
+// previous cycle's time as the live thread predicts by the measured one), so every figure is deterministic.
 //   - a held deep press: before any snapshot the force is the linear model's; once the tracker converged it is the
 //     snapshot's reaction sum (Newton's) and differs from the linear force by more than the linear model's error at
 //     that depth;
 //   - a slide under the press changes the patch's node set: those ticks take the partial match, stay finite and
 //     change the force by no more than the linear model's own largest step on the same slide plus 5 % of the force;
+//   - every hand-over is rate-limited (at the live cycle times a new snapshot or a node leaving the sliding patch
+//     stepped the force by 12 % of it): a contact set that jumps away from the snapshot's nodes fades the local
+//     model's correction out over 20 ticks, and a contact that ends and starts again (sooner than a tracker cycle)
+//     starts on the linear model;
 //   - the tick allocates nothing; the tracker sleeps when nothing changes.
 // Figures are printed: ctest -R haptic_liver_multirate -V.
 #include "nonlinear/multirate_contacts.h"
@@ -14,6 +20,7 @@
 #include <dlfcn.h>
 #include <gtest/gtest.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -64,23 +71,63 @@ Scene with_model(Scene s, ContactModel model) {
   return s;
 }
 
+// The tracker thread of the live node replayed on the loop's ticks (MultirateContacts::begin_cycle / finish_cycle):
+// a cycle takes the newest targets when it starts and its snapshot is the loop's from the tick after it ends; the
+// next cycle starts at once (an idle start, nothing to do, tries again a tick later, as the thread sleeps 1.5 ms).
+// The cycles take kCycleMs in turn: the node's cycle times on this liver, 65-130 ms (README, live runs: tracker cycle
+// p50 63-67 ms, p99 124-128 ms). Each cycle predicts its targets by the previous cycle's time, the horizon the live
+// thread takes from its measured cycle time (prediction on, as in the node).
+constexpr std::array<int, 8> kCycleMs = {65, 118, 83, 130, 72, 104, 91, 126};
+
+struct LiveCycles {
+  explicit LiveCycles(MultirateContacts& tracker) : m(tracker) {}
+  MultirateContacts& m;
+  std::size_t next = 0;  // the next cycle's index into kCycleMs
+  int duration = 0;      // ticks (ms) of the running cycle
+  int left = -1;         // ticks until it ends; -1: none running
+  int finished = 0;      // cycles that ran
+
+  // After each tick of the organ: the running cycle ends (its snapshot is the next tick's) or the next one starts.
+  // True when a cycle ended.
+  bool after_tick() {
+    bool ended = false;
+    if (left > 0 && --left == 0) {
+      m.finish_cycle(1e-3 * duration);
+      ++finished;
+      left = -1;
+      ended = true;
+    }
+    if (left < 0 && m.begin_cycle()) {
+      duration = kCycleMs[next++ % kCycleMs.size()];
+      left = duration;
+    }
+    return ended;
+  }
+  // Between cycles: the tracker idle (converged at the unchanged targets, nothing started).
+  bool idle() const { return left < 0; }
+};
+
 struct Pair {
   explicit Pair(ContactModel model = ContactModel::kPatch)
       : mr_scene(with_model(test_scene(LiverDeformation::kMultirate), model)),
-        lin_scene(with_model(test_scene(LiverDeformation::kLinear), model)) {
-    m.set_prediction(true, 0.030);  // deterministic: the horizon of a 30-tick cycle, not a measured one
-  }
+        lin_scene(with_model(test_scene(LiverDeformation::kLinear), model)) {}
   Scene mr_scene;
   Scene lin_scene;
   LiverOrgan mr{mr_scene, SURGSIM_TEST_CACHE_DIR, nullptr, false};
   LiverOrgan lin{lin_scene, SURGSIM_TEST_CACHE_DIR, nullptr, false};
   MultirateContacts& m = *mr.multirate();
+  LiveCycles live{m};
 
-  // One tick of both organs with a vertical tool whose tip is at `tip` (jaw open).
+  // One tick of both organs with a vertical tool whose tip is at `tip` (jaw open), without tracker cycles.
   void step(const Eigen::Vector3d& tip, ContactTick& t_mr, ContactTick& t_lin) {
     const ToolGeometry g = test::vertical_tool(tip);
     mr.step(&g, 0.5, kDt, t_mr);
     lin.step(&g, 0.5, kDt, t_lin);
+  }
+  // One tick, then the replayed tracker thread's (true when a cycle ended).
+  bool live_step(const Eigen::Vector3d& tip, ContactTick& t_mr, ContactTick& t_lin) {
+    step(tip, t_mr, t_lin);
+    return live.after_tick();
   }
 };
 
@@ -101,16 +148,16 @@ void press(Pair& p, double depth, ContactTick& t_mr, ContactTick& t_lin, double*
   }
 }
 
-// Ticks at `tip` with a tracker cycle between them until the tracker goes idle (converged at unchanged targets).
+// Ticks at `tip` with the replayed tracker thread until it goes idle (converged at the unchanged targets) and the
+// 20-tick hand-overs are over; the tracker cycles it took (-1: not within 60 cycles).
 int hold_until_converged(Pair& p, const Eigen::Vector3d& tip, ContactTick& t_mr, ContactTick& t_lin) {
-  for (int c = 1; c <= 120; ++c) {
-    p.step(tip, t_mr, t_lin);
-    if (!p.m.cycle_once()) {
-      p.step(tip, t_mr, t_lin);
-      return c;
-    }
+  const int start = p.live.finished;
+  int idle_ticks = 0;
+  for (int k = 0; k < 60 * 130 && idle_ticks < 25; ++k) {
+    p.live_step(tip, t_mr, t_lin);
+    idle_ticks = p.live.idle() ? idle_ticks + 1 : 0;
   }
-  return -1;
+  return idle_ticks >= 25 ? p.live.finished - start : -1;
 }
 
 TEST(MultirateContactsNode, HeldDeepPressIsLinearBeforeASnapshotThenNewtons) {
@@ -188,11 +235,11 @@ struct Slide {
   double extrapolation_mean = 0, extrapolation_max = 0;  // m
 };
 
-// Pressed 10 mm and converged, then 2 cm along x at 0.05 m/s (the patch's edge nodes enter and leave) with a tracker
-// cycle every 30 ticks (about the node's cycle time on this liver), its targets predicted 30 ms ahead or not.
+// Pressed 10 mm and converged, then 2 cm along x at 0.05 m/s (the patch's edge nodes enter and leave) with the
+// replayed tracker thread, its targets predicted by the previous cycle's time (the live node's) or not.
 Slide slide(bool predict) {
   Pair p;
-  p.m.set_prediction(predict, 0.030);
+  p.m.set_prediction(predict);
   Slide r;
   const double depth = 0.010;
   ContactTick t_mr, t_lin;
@@ -219,7 +266,7 @@ Slide slide(bool predict) {
     r.extrapolation_max = std::max(r.extrapolation_max, e);
     prev_mr = t_mr.force;
     prev_lin = t_lin.force;
-    if (k % 30 == 0) p.m.cycle_once();
+    p.live.after_tick();
   }
   r.partial = p.m.ticks_partial() - partial0;
   return r;
@@ -270,7 +317,7 @@ TEST(MultirateContactsNode, PredictedTargetsShortenTheExtrapolation) {
 }
 
 // The shipped grasp-and-lift (config/trajectories/liver_grasp_lift.csv: the free lobe grasped, lifted 60 degrees in
-// 1.5 s, held, released out of the tissue, whose hold fades in 50 ms) with a tracker cycle every 30 ticks: the
+// 1.5 s, held, released out of the tissue, whose hold fades in 50 ms) with the replayed tracker thread: the
 // force never steps by more than the linear model's own largest step plus 5 % of the held force. Without the trust
 // region the release dropped about 3 N in one tick (the local model, 4 cm from its state with du clamped at 1 cm,
 // held 3 N until the contact ended).
@@ -281,7 +328,7 @@ TEST(MultirateContactsNode, GraspAndLiftAndReleaseHaveNoForceStep) {
   mr_scene.tools[0].force_limit = lin_scene.tools[0].force_limit = 1000;
   LiverOrgan mr(mr_scene, SURGSIM_TEST_CACHE_DIR, nullptr, false);
   LiverOrgan lin(lin_scene, SURGSIM_TEST_CACHE_DIR, nullptr, false);
-  mr.multirate()->set_prediction(true, 0.030);
+  LiveCycles live(*mr.multirate());
   const MultiTrajectory traj = MultiTrajectory::load(mr_scene.trajectory);
   Eigen::Vector3d prev_mr = Eigen::Vector3d::Zero(), prev_lin = Eigen::Vector3d::Zero(), held = Eigen::Vector3d::Zero();
   double step_mr = 0, step_lin = 0, step_release = 0;
@@ -301,7 +348,7 @@ TEST(MultirateContactsNode, GraspAndLiftAndReleaseHaveNoForceStep) {
     if (k == 3800) held = t_mr.force;
     prev_mr = t_mr.force;
     prev_lin = t_lin.force;
-    if (k % 30 == 0) mr.multirate()->cycle_once();
+    live.after_tick();
   }
   const MultirateContacts& m = *mr.multirate();
   const double bound = step_lin + 0.05 * held.norm();
@@ -312,6 +359,125 @@ TEST(MultirateContactsNode, GraspAndLiftAndReleaseHaveNoForceStep) {
   EXPECT_TRUE(finite);
   EXPECT_GT(held.norm(), 1.0);
   EXPECT_LE(step_mr, bound);
+}
+
+// The rest surface's height above (x, y): the highest point where the vertical line there crosses its triangles.
+double top_z(const LiverOrgan& organ, double x, double y) {
+  const Eigen::MatrixX3d& v = organ.mesh().nodes;
+  const Eigen::MatrixX3i& tris = organ.surface().tris;
+  double top = -HUGE_VAL;
+  for (Eigen::Index f = 0; f < tris.rows(); ++f) {
+    const Eigen::Vector3d a = v.row(tris(f, 0)), b = v.row(tris(f, 1)), c = v.row(tris(f, 2));
+    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
+    if (std::abs(det) < 1e-14) continue;
+    const double s = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
+    const double t = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
+    if (s >= 0 && t >= 0 && s + t <= 1) top = std::max(top, a.z() + s * (b.z() - a.z()) + t * (c.z() - a.z()));
+  }
+  return top;
+}
+
+// The two organs' contact kinematics agree (the same nodes and imposed displacements): then the multirate force
+// minus the linear twin's is exactly the local model's correction of the multirate organ's own linear solve.
+bool same_kinematics(const LiverOrgan& a, const LiverOrgan& b) {
+  const ContactSolution& x = a.liver_contacts().solution();
+  const ContactSolution& y = b.liver_contacts().solution();
+  if (x.count != y.count) return false;
+  for (int l = 0; l < x.count; ++l) {
+    const auto sl = static_cast<std::size_t>(l);
+    if (x.nodes[sl] != y.nodes[sl] || x.displacement[sl] != y.displacement[sl]) return false;
+  }
+  return true;
+}
+
+// A contact set that jumps: held 10 mm deep and converged (the local model at full weight), the tool jumps 5 cm
+// along x in one tick (no node of the snapshot is in the new contact: at 4 cm along y an edge node still was) to 10 mm
+// under the surface there, and stays, the replayed tracker cycling on. Until the first snapshot of the new nodes
+// arrives the local model cannot be evaluated; its correction of the linear force fades out at the trust region's rate
+// (kBlendRate of it a tick, 20 ticks) instead of vanishing in the jump's tick.
+TEST(MultirateContactsNode, ContactSetThatJumpsHandsOverAtTheBlendRate) {
+  Pair p;
+  const double depth = 0.010;
+  ContactTick t_mr, t_lin;
+  press(p, depth, t_mr, t_lin);
+  ASSERT_GT(hold_until_converged(p, Eigen::Vector3d(0.03, 0.0, kTopZ - depth), t_mr, t_lin), 0);
+  ASSERT_TRUE(same_kinematics(p.mr, p.lin));
+  const Eigen::Vector3d before = t_mr.force - t_lin.force;  // the converged local model's correction, full weight
+  ASSERT_GT(before.norm(), 0.02 * t_lin.force.norm()) << "the non-linear correction is worth a hand-over";
+  const int cycles0 = p.live.finished;
+  const std::uint64_t fallback0 = p.m.ticks_linear_fallback();
+  const double x = -0.02, y = 0.0;
+  const Eigen::Vector3d there(x, y, top_z(p.mr, x, y) - depth);
+  ASSERT_TRUE(std::isfinite(there.z()));
+  Eigen::Vector3d prev = before;
+  double largest_step = 0, first = 0;
+  int ticks = 0, faded_at = -1;
+  // Until the first cycle that took the new targets has ended (its snapshot is the next tick's).
+  while (p.live.finished == cycles0) {
+    p.live_step(there, t_mr, t_lin);
+    ++ticks;
+    ASSERT_GT(p.mr.contacts(), 0) << "tick " << ticks << ": the contact holds through the jump";
+    ASSERT_TRUE(same_kinematics(p.mr, p.lin)) << "tick " << ticks;
+    ASSERT_EQ(p.m.ticks_linear_fallback() - fallback0, static_cast<std::uint64_t>(ticks))
+        << "tick " << ticks << ": no node of the snapshot is in the contact";
+    const Eigen::Vector3d c = t_mr.force - t_lin.force;
+    if (ticks == 1) first = c.norm();
+    largest_step = std::max(largest_step, (c - prev).norm());
+    if (faded_at < 0 && c.norm() <= 1e-12 * t_lin.force.norm()) faded_at = ticks;
+    prev = c;
+  }
+  const double rate = MultirateContacts::kBlendRate;
+  std::cout << "[jump] 5 cm in one tick at 10 mm depth: correction before " << before.norm() << " N ("
+            << 100 * before.norm() / t_lin.force.norm() << " % of the linear force), after the jump " << first
+            << " N; largest step of the correction " << largest_step << " N; faded out at tick " << faded_at << " of "
+            << ticks << " before the first snapshot of the new nodes\n";
+  EXPECT_GE(first, (1 - rate) * before.norm() * (1 - 1e-9)) << "the correction did not vanish in the jump's tick";
+  EXPECT_LE(largest_step, rate * before.norm() * (1 + 1e-9)) << "at most kBlendRate of the correction a tick";
+  EXPECT_GE(faded_at, static_cast<int>(std::lround(1 / rate))) << "the hand-over lasts 20 ticks";
+}
+
+// A contact that ends starts again on the linear model: held 8 mm deep and converged (the local model at full
+// weight), the tool lifted clear for 3 ticks and put back in the same place, sooner than any tracker cycle ends (the
+// snapshot of the press still holds the contact's nodes). In the first tick back the local model's correction, computed
+// here from that snapshot (snapshot_forces on the contact's nodes and displacements against the linear solve's
+// lambdas), has at most kBlendRate of its weight: the take-over from the linear model of a new contact.
+TEST(MultirateContactsNode, ContactThatEndsStartsAgainOnTheLinearModel) {
+  Pair p;
+  const double depth = 0.008;
+  const Eigen::Vector3d here(0.03, 0.0, kTopZ - depth), above(0.03, 0.0, kTopZ + 0.003);
+  ContactTick t_mr, t_lin;
+  press(p, depth, t_mr, t_lin);
+  ASSERT_GT(hold_until_converged(p, here, t_mr, t_lin), 0);
+  const Eigen::Vector3d held = t_mr.force - t_lin.force;
+  ASSERT_GT(held.norm(), 0.02 * t_lin.force.norm());
+  const int cycles0 = p.live.finished;
+  for (int k = 0; k < 3; ++k) {
+    p.live_step(above, t_mr, t_lin);
+    ASSERT_EQ(p.mr.contacts(), 0);
+  }
+  p.live_step(here, t_mr, t_lin);
+  ASSERT_EQ(p.live.finished, cycles0) << "no tracker cycle ended in the gap";
+  ASSERT_GT(p.mr.contacts(), 0);
+  ASSERT_TRUE(same_kinematics(p.mr, p.lin));
+  // The local model's full correction this tick, from the snapshot the loop holds.
+  const ContactSolution& sol = p.lin.liver_contacts().solution();
+  std::array<Eigen::Vector3d, kMaxContacts> local;
+  std::array<bool, kMaxContacts> held_nodes;
+  double largest = 0;
+  const int matched =
+      snapshot_forces(p.m.snapshot(), sol.nodes.data(), sol.displacement.data(), sol.count,
+                      MultirateContacts::node_options().max_extrapolation, local.data(), held_nodes.data(), largest);
+  ASSERT_GT(matched, 0) << "the snapshot of the press holds nodes of the contact";
+  Eigen::Vector3d full = Eigen::Vector3d::Zero();  // N, on the tool
+  for (int l = 0; l < sol.count; ++l)
+    if (held_nodes[static_cast<std::size_t>(l)])
+      full -= local[static_cast<std::size_t>(l)] - sol.lambda[static_cast<std::size_t>(l)];
+  ASSERT_GT(full.norm(), 0.01 * t_lin.force.norm()) << "the local model corrects the linear force here";
+  const Eigen::Vector3d c = t_mr.force - t_lin.force;
+  std::cout << "[again] held correction " << held.norm() << " N; back in contact after 3 ticks: " << matched
+            << " nodes held by the snapshot, full correction " << full.norm() << " N, applied " << c.norm() << " N\n";
+  EXPECT_LE(c.norm(), MultirateContacts::kBlendRate * full.norm() * (1 + 1e-9))
+      << "the new contact starts on the linear model";
 }
 
 // A liver whose surface has more nodes than a BodyState carries is refused at init, naming the scene file, the
