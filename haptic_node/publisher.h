@@ -5,7 +5,7 @@
 //
 // Hand-off: the loop fills a record of its own (begin()), and commit() pushes it into a single-producer ring of
 // `slots` records, each guarded by a sequence lock (version odd while the loop writes it), its payload moved through
-// relaxed atomic words (concurrency/seqlock_ring.h: no data race, only the contacts the tick has). The producer never
+// atomic words (concurrency/seqlock_ring.h: no data race, only the contacts the tick has). The producer never
 // waits in real-time mode (a slot the publisher has not read yet is overwritten; the publisher sees the version change
 // and skips it); the publisher copies a record out, checks the version, and writes from its copy. Wake-up: the
 // publisher sleeps on a futex; the loop calls FUTEX_WAKE only when the publisher is asleep. FUTEX_WAKE never blocks (it

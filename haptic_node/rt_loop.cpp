@@ -36,12 +36,17 @@ RealtimeStatus enter_realtime(int priority, bool lock_memory, int cpu) {
     note += "normal scheduling (--rt-priority 0)";
   }
   if (lock_memory) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+    // A sanitizer reserves terabytes of shadow memory: locking every mapping would try to fault all of it in.
+    note += ", mlockall skipped (sanitizer build)";
+#else
     if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
       s.locked = true;
       note += ", memory locked";
     } else {
       note += std::string(", mlockall refused (") + std::strerror(errno) + ")";
     }
+#endif
   }
   if (prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0) == 0) s.slack = true;
   s.note = note;

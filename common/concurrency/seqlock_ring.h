@@ -2,10 +2,12 @@
 // producer never waits (it overwrites the oldest slot); a reader copies value i out and learns from the slot's
 // version whether the producer overwrote it meanwhile (a sequence lock per slot).
 //
-// The payload moves through relaxed atomic 64-bit words, never through plain loads and stores: a reader that copies
-// a slot while the producer rewrites it reads atomics the producer writes, which is defined behaviour (the copy is
-// torn, and the version check discards it), where a plain copy of the same bytes would be a data race. On x86-64 a
-// relaxed atomic word is an ordinary move. Each value carries its own length, so a record with a variable-length
+// The payload moves through atomic 64-bit words, never through plain loads and stores: a reader that copies a slot
+// while the producer rewrites it reads atomics the producer writes, which is defined behaviour (the copy is torn, and
+// the version check discards it), where a plain copy of the same bytes would be a data race. The producer stores the
+// words with release order and the reader loads them with acquire order (no fences, which ThreadSanitizer does not
+// model): a reader that sees any word of a new value also sees the odd version stored before it, and its second
+// version load cannot move before its word loads. On x86-64 both are ordinary moves. Each value carries its own length, so a record with a variable-length
 // tail (the contacts a tick has, out of the 64 it may have) moves only the bytes in use, and a second, optional
 // array of doubles per slot (the intestine's body positions) moves the same way.
 #pragma once
@@ -47,28 +49,27 @@ class SeqlockRing {
     const std::uint64_t i = head_.load(std::memory_order_relaxed);
     const std::size_t s = static_cast<std::size_t>(i % slots_);
     Version& v = versions_[s];
-    v.version.store(2 * i + 1, std::memory_order_relaxed);
-    std::atomic_thread_fence(std::memory_order_release);  // the odd version is visible before any word changes
+    v.version.store(2 * i + 1, std::memory_order_relaxed);  // ordered before the words by their release stores
     std::atomic<std::uint64_t>* w = &words_[s * stride_];
     const auto* src = reinterpret_cast<const unsigned char*>(&value);
     const std::size_t full = bytes / 8;
     for (std::size_t k = 0; k < full; ++k) {
       std::uint64_t x;
       std::memcpy(&x, src + 8 * k, 8);
-      w[k].store(x, std::memory_order_relaxed);
+      w[k].store(x, std::memory_order_release);
     }
     if (bytes % 8 != 0) {
       std::uint64_t x = 0;
       std::memcpy(&x, src + 8 * full, bytes % 8);
-      w[full].store(x, std::memory_order_relaxed);
+      w[full].store(x, std::memory_order_release);
     }
     for (std::size_t k = 0; k < tail_count; ++k) {
       std::uint64_t x;
       std::memcpy(&x, tail + k, 8);
-      w[kValueWords + k].store(x, std::memory_order_relaxed);
+      w[kValueWords + k].store(x, std::memory_order_release);
     }
-    v.bytes.store(static_cast<std::uint32_t>(bytes), std::memory_order_relaxed);
-    v.tail.store(static_cast<std::uint32_t>(tail_count), std::memory_order_relaxed);
+    v.bytes.store(static_cast<std::uint32_t>(bytes), std::memory_order_release);
+    v.tail.store(static_cast<std::uint32_t>(tail_count), std::memory_order_release);
     v.version.store(2 * (i + 1), std::memory_order_release);
     head_.store(i + 1, std::memory_order_release);
   }
@@ -82,28 +83,27 @@ class SeqlockRing {
     const Version& v = versions_[s];
     const std::uint64_t v1 = v.version.load(std::memory_order_acquire);
     if (v1 != 2 * (i + 1)) return false;
-    std::size_t bytes = v.bytes.load(std::memory_order_relaxed);
-    std::size_t count = v.tail.load(std::memory_order_relaxed);
+    std::size_t bytes = v.bytes.load(std::memory_order_acquire);
+    std::size_t count = v.tail.load(std::memory_order_acquire);
     if (bytes > sizeof(T)) bytes = sizeof(T);  // torn lengths: bounded here, discarded below
     if (count > tail_doubles_) count = tail_doubles_;
     const std::atomic<std::uint64_t>* w = &words_[s * stride_];
     auto* dst = reinterpret_cast<unsigned char*>(&out);
     const std::size_t full = bytes / 8;
     for (std::size_t k = 0; k < full; ++k) {
-      const std::uint64_t x = w[k].load(std::memory_order_relaxed);
+      const std::uint64_t x = w[k].load(std::memory_order_acquire);
       std::memcpy(dst + 8 * k, &x, 8);
     }
     if (bytes % 8 != 0) {
-      const std::uint64_t x = w[full].load(std::memory_order_relaxed);
+      const std::uint64_t x = w[full].load(std::memory_order_acquire);
       std::memcpy(dst + 8 * full, &x, bytes % 8);
     }
     if (tail != nullptr) {
       for (std::size_t k = 0; k < count; ++k) {
-        const std::uint64_t x = w[kValueWords + k].load(std::memory_order_relaxed);
+        const std::uint64_t x = w[kValueWords + k].load(std::memory_order_acquire);
         std::memcpy(tail + k, &x, 8);
       }
     }
-    std::atomic_thread_fence(std::memory_order_acquire);  // every word above is read before the version again
     tail_count = tail != nullptr ? count : 0;
     return v.version.load(std::memory_order_relaxed) == v1;
   }

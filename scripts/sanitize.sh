@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Builds surgsim under sanitizers in a folder of its own and runs the suite there, less the tests that assert wall-clock
+# behaviour (ctest label `timing`: a sanitized program runs 2-15 times slower on the same clock).
+#
+# Usage: scripts/sanitize.sh address|thread [--threaded] [ctest arguments...]
+#   address     AddressSanitizer (with LeakSanitizer) + UndefinedBehaviorSanitizer, in build-asan/
+#   thread      ThreadSanitizer + UndefinedBehaviorSanitizer, in build-tsan/
+#   --threaded  only the tests labelled `threaded` and the targets they need (what .ci/run runs under TSan)
+# Any report fails the test that triggered it: UBSan aborts (no recovery), ASan and TSan exit non-zero, and the
+# real-process tests inherit the options, so a report in haptic_node, visual_node or surgsim-web fails its test too.
+# Suppressions, each justified in its file: scripts/sanitize/*.supp.
+#
+# Environment:
+#   SURGSIM_SANITIZE_DIR      build folder (default build-asan / build-tsan beside build/)
+#   SURGSIM_SANITIZE_TARGETS  build only these targets (space-separated; default: everything)
+#   SURGSIM_TEST_JOBS         ctest -j (default 2)
+# Example (what .ci/run runs): scripts/sanitize.sh thread --threaded
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+
+usage() { sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; }
+kind=${1:-}
+case "$kind" in
+  address) default_dir=$root/build-asan ;;
+  thread) default_dir=$root/build-tsan ;;
+  -h | --help) usage; exit 0 ;;
+  *)
+    echo "sanitize.sh: expected 'address' or 'thread' as the first argument, got '${kind}'" >&2
+    usage >&2
+    exit 2
+    ;;
+esac
+shift
+threaded_args=()
+if [[ ${1:-} == --threaded ]]; then
+  shift
+  # The programs of the threaded tests, and the real processes those tests launch.
+  SURGSIM_SANITIZE_TARGETS=${SURGSIM_SANITIZE_TARGETS:-"common_concurrency_test haptic_publisher_test
+    haptic_async_writer_test common_nonlinear_multirate_test common_nonlinear_multirate_contacts_test
+    common_compliance_corotation_test visual_frame_output_test visual_frame_stream_test alloc_counter_test
+    haptic_node visual_node surgsim_device_sim surgsim_web_app integration_haptic_replay_test"}
+  threaded_args=(-L '^threaded$')
+fi
+build=${SURGSIM_SANITIZE_DIR:-$default_dir}
+start=$(date +%s)
+
+"$root/scripts/setup.sh"
+# RelWithDebInfo: -O2 keeps the numerics fast enough under the sanitizer, -g names the lines of a report.
+cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSURGSIM_SANITIZE="$kind" >/dev/null
+targets=()
+for t in ${SURGSIM_SANITIZE_TARGETS:-}; do targets+=(--target "$t"); done
+cmake --build "$build" -j "${SURGSIM_JOBS:-$(nproc)}" "${targets[@]}"
+built=$(date +%s)
+
+supp=$root/scripts/sanitize
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:suppressions=$supp/ubsan.supp"
+export ASAN_OPTIONS="detect_leaks=1:halt_on_error=1:check_initialization_order=1:strict_init_order=1"
+export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
+export TSAN_OPTIONS="halt_on_error=0:exitcode=66:second_deadlock_stack=1:suppressions=$supp/tsan.supp:print_suppressions=0"
+# One OpenBLAS / OpenMP thread: their pools are not instrumented (their synchronisation is invisible to TSan) and
+# the project uses one thread beside the loop anyway (README, "OpenBLAS").
+export OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1
+
+cd "$build"
+status=0
+ctest --output-on-failure -j "${SURGSIM_TEST_JOBS:-2}" --timeout 1500 -LE timing "${threaded_args[@]}" "$@" || status=$?
+end=$(date +%s)
+echo "sanitize ($kind): build $((built - start)) s, tests $((end - built)) s, ctest status $status"
+exit "$status"
