@@ -30,6 +30,7 @@
 //    written), then a final zero ForceFeedback (seq = last tick + 1, the last tick's flags | kFlagHeld).
 #pragma once
 #include <Eigen/Core>
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cstddef>
@@ -82,9 +83,7 @@ static_assert(std::is_standard_layout_v<TickRecord>, "record_bytes() takes offse
 
 /// The bytes of `r` the hand-off moves: everything up to its organ's contacts, and the first contact_count of those.
 inline std::size_t record_bytes(const TickRecord& r) noexcept {
-  const int n = r.organ.contact_count < 0
-                    ? 0
-                    : (r.organ.contact_count > kMaxContactEntries ? kMaxContactEntries : r.organ.contact_count);
+  const int n = std::clamp(r.organ.contact_count, 0, kMaxContactEntries);
   return offsetof(TickRecord, organ) + offsetof(OrganOutputs, contacts) +
          static_cast<std::size_t>(n) * sizeof(ContactRecord);
 }

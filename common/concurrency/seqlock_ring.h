@@ -45,7 +45,8 @@ class SeqlockRing {
   /// doubles of `tail` (at most tail_capacity()). A reader copying the value this slot held now fails.
   void push(const T& value, std::size_t bytes, const double* tail = nullptr, std::size_t tail_count = 0) noexcept {
     if (bytes > sizeof(T)) bytes = sizeof(T);
-    if (tail == nullptr || tail_count > tail_doubles_) tail_count = tail == nullptr ? 0 : tail_doubles_;
+    if (tail == nullptr) tail_count = 0;
+    if (tail_count > tail_doubles_) tail_count = tail_doubles_;
     const std::uint64_t i = head_.load(std::memory_order_relaxed);
     const std::size_t s = static_cast<std::size_t>(i % slots_);
     Version& v = versions_[s];
