@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """Every test named in a surgsim_label() list (tests/CMakeLists.txt: the `timing` tests the sanitizers leave out) is
 a test ctest knows: ctest ignores a label set on a name it does not know, so a renamed test would silently lose its
-label (and run, slow and failing, under the sanitizers). Also checks that no test carries both `timing` and
-`threaded`, and that the `timing` and `threaded` selections are not empty.
+label (and run, slow and failing, under the sanitizers). Also checks that the `timing` and `threaded` selections are
+not empty. A test may carry both (a threaded program with one wall-clock test): scripts/sanitize.sh --threaded selects
+`-L threaded -LE timing`, so the timing one still stays out.
 Usage: check_labels.py BUILD_DIR"""
 import glob
 import os
@@ -27,15 +28,12 @@ timing = names('-L', '^timing$')
 threaded = names('-L', '^threaded$')
 failures = [f'{name} (labelled in {f}) is not a test ctest knows: renamed or removed? Fix tests/CMakeLists.txt'
             for name, f in listed if name not in known]
-both = sorted(timing & threaded)
-if both:
-    failures.append('tests labelled both timing and threaded (the sanitizers leave timing out): ' + ', '.join(both))
 if not timing:
     failures.append('no test carries the label timing')
 if not threaded:
     failures.append('no test carries the label threaded')
 for f in failures:
     print('check_labels:', f)
-print(f'check_labels: {len(listed)} names listed, {len(timing)} timing, {len(threaded)} threaded, '
-      f'{len(failures)} problems')
+print(f'check_labels: {len(listed)} names listed, {len(timing)} timing, {len(threaded)} threaded '
+      f'({len(timing & threaded)} of them also timing, left out by sanitize.sh), {len(failures)} problems')
 sys.exit(1 if failures else 0)
