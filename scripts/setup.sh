@@ -18,6 +18,7 @@ packages=(
 )
 [ "${SURGSIM_WITH_VIDEO:-0}" = 1 ] && packages+=(ffmpeg)
 [ "${SURGSIM_WITH_REPORT:-0}" = 1 ] && packages+=(python3-numpy python3-matplotlib)   # scripts/report.sh plots
+[ "${SURGSIM_WITH_FUZZ:-0}" = 1 ] && packages+=(clang libclang-rt-dev)   # scripts/fuzz.sh: libFuzzer + sanitizers
 
 missing=()
 for p in "${packages[@]}"; do

@@ -23,7 +23,8 @@ constexpr char kMagic[8] = {'S', 'U', 'R', 'G', 'T', 'N', 'S', 'R'};
 // 1: dense blocks only. 2: a u32 layout per block (0 dense 3R x 3S, 1 symmetric packed half).
 constexpr std::uint32_t kVersion = 2;
 constexpr std::uint32_t kByteOrder = 0x01020304u;
-constexpr std::size_t kHeaderBytes = 8 + 4 * 4 + 8 + 3 * 8 + 4 * 8 + 3 * 8;
+constexpr std::size_t kHeaderBytes = kTensorCacheHeaderBytes;
+static_assert(kHeaderBytes == 8 + 4 * 4 + 8 + 3 * 8 + 4 * 8 + 3 * 8, "the header's fields");
 
 // Streaming 64-bit checksum over 8-byte words (FNV-1a style mixing per word; 8x faster than per byte).
 class Checksum {
@@ -249,6 +250,12 @@ TensorCacheKey tensor_cache_key(const TetMesh& mesh, const Material& material, c
   k.fixed = fixed.hash();
   k.settings = precompute_settings_hash(contact_nodes, rows, options);
   return k;
+}
+
+std::uint64_t tensor_cache_checksum(const void* data, std::size_t bytes) {
+  Checksum c;
+  c.update(data, bytes);
+  return c.digest();
 }
 
 const char* to_string(CacheStatus status) {

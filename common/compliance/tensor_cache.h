@@ -10,6 +10,7 @@
 // the stored precision. Version 2 (version 1 had no layout field): a file of another version is stale,
 // never parsed.
 #pragma once
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -44,6 +45,12 @@ enum class CacheStatus {
   kCorrupt,  // not a cache, truncated, or a checksum mismatch (detail: why)
 };
 const char* to_string(CacheStatus status);
+
+/// Bytes of the header (the layout above), the payload following.
+inline constexpr std::size_t kTensorCacheHeaderBytes = 112;
+/// The checksum the header and the payload carry (64-bit, over 8-byte words): for a test or a fuzz target that makes
+/// or alters a file by hand and seals it as save_tensor_cache does.
+std::uint64_t tensor_cache_checksum(const void* data, std::size_t bytes);
 
 struct CacheLoad {
   CacheStatus status = CacheStatus::kMissing;
