@@ -29,6 +29,7 @@
 #include "core/clock.h"
 #include "core/stats.h"
 #include "web_dds.h"
+#include "web_request.h"
 
 using namespace surgsim::core;
 using namespace surgsim::tool;
@@ -263,8 +264,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       : stream_(std::move(socket)), server_(server), ticket_(std::move(ticket)) {}
   void start() {
     parser_.emplace();
-    parser_->header_limit(8192);
-    parser_->body_limit(4096);
+    limit_request_parser(*parser_);
     // The whole request within the deadline, however slowly it trickles in: a connection that never finishes its
     // headers holds a descriptor for this long at most.
     stream_.expires_after(request_timeout());
@@ -286,57 +286,60 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (ec == net::error::operation_aborted || !stream_.socket().is_open()) return;
     if (ec == http::error::end_of_stream || ec == beast::error::timeout || ec == net::error::eof) return;
     c.requests++;
-    if (ec) {
-      const bool too_big = ec == http::error::header_limit || ec == http::error::body_limit ||
-                           ec == http::error::buffer_overflow;
-      c.bad_request++;
-      respond(too_big ? http::status::payload_too_large : http::status::bad_request, "text/plain",
-              too_big ? "request too large\n" : "malformed request\n", 11);
-      return;
-    }
-    http::request<http::string_body> req = parser_->release();
-    const Request r = parse_target(std::string_view(req.target().data(), req.target().size()));
+    http::request<http::string_body> req;
+    if (!ec) req = parser_->release();
+    const RequestAnswer a = answer_request(ec, req, server_.options.token);
     // The token holder's connection is never the one closed to make room from now on, and may take its time.
-    trusted_ = token_matches(r.token, server_.options.token);
+    trusted_ = a.trusted;
     if (trusted_) server_.trust(ticket_.id());
-    if (req.method() != http::verb::get) {
-      c.method_not_allowed++;
-      respond(http::status::method_not_allowed, "text/plain", "only GET\n", req.version());
-      return;
-    }
-    if (r.route == Route::kNotFound) {
-      c.not_found++;
-      respond(http::status::not_found, "text/plain", "not found\n", req.version());
-      return;
-    }
-    if (r.route != Route::kAsset && !trusted_) {
-      c.forbidden++;
-      respond(http::status::forbidden, "text/plain",
-              "forbidden: open the URL surgsim-web printed (it carries the token)\n", req.version());
-      return;
-    }
-    if (r.route == Route::kWebSocket) {
-      if (!websocket::is_upgrade(req)) {
+    switch (a.answer) {
+      case Answer::kTooLarge:
+      case Answer::kMalformed:
+      case Answer::kIncomplete:
         c.bad_request++;
-        respond(http::status::bad_request, "text/plain", "a WebSocket upgrade is expected here\n", req.version());
+        respond(a.answer == Answer::kTooLarge ? http::status::payload_too_large : http::status::bad_request,
+                "text/plain", a.answer == Answer::kTooLarge ? "request too large\n" : "malformed request\n",
+                a.version);
+        return;
+      case Answer::kMethodNotAllowed:
+        c.method_not_allowed++;
+        respond(http::status::method_not_allowed, "text/plain", "only GET\n", a.version);
+        return;
+      case Answer::kNotFound:
+        c.not_found++;
+        respond(http::status::not_found, "text/plain", "not found\n", a.version);
+        return;
+      case Answer::kForbidden:
+        c.forbidden++;
+        respond(http::status::forbidden, "text/plain",
+                "forbidden: open the URL surgsim-web printed (it carries the token)\n", a.version);
+        return;
+      case Answer::kNotUpgrade:
+        c.bad_request++;
+        respond(http::status::bad_request, "text/plain", "a WebSocket upgrade is expected here\n", a.version);
+        return;
+      case Answer::kWebSocket: {
+        const std::uint64_t connection = ticket_.id();
+        auto ws =
+            std::make_shared<WsSession>(stream_.release_socket(), server_, server_.next_id++, std::move(ticket_));
+        server_.closers[connection] = [w = std::weak_ptr<WsSession>(ws)] {
+          if (auto s = w.lock()) s->close();
+        };
+        ws->start(std::move(req));
         return;
       }
-      const std::uint64_t connection = ticket_.id();
-      auto ws = std::make_shared<WsSession>(stream_.release_socket(), server_, server_.next_id++, std::move(ticket_));
-      server_.closers[connection] = [w = std::weak_ptr<WsSession>(ws)] {
-        if (auto s = w.lock()) s->close();
-      };
-      ws->start(std::move(req));
-      return;
+      case Answer::kStats:
+        c.stats++;
+        respond(http::status::ok, "application/json", stats_body_(), a.version);
+        return;
+      case Answer::kFile: {
+        const bool page = a.request.route == Route::kPage;
+        const std::string name = page ? "index.html" : a.request.asset;
+        (page ? c.pages : c.assets)++;
+        respond(http::status::ok, content_type(name), server_.files.at(name), a.version);
+        return;
+      }
     }
-    if (r.route == Route::kStats) {
-      c.stats++;
-      respond(http::status::ok, "application/json", stats_body_(), req.version());
-      return;
-    }
-    const std::string name = r.route == Route::kPage ? "index.html" : r.asset;
-    (r.route == Route::kPage ? c.pages : c.assets)++;
-    respond(http::status::ok, content_type(name), server_.files.at(name), req.version());
   }
   void respond(http::status status, const char* type, std::string body, unsigned version) {
     auto res = std::make_shared<http::response<http::string_body>>(status, version);
@@ -360,7 +363,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
  private:
   beast::tcp_stream stream_;
   beast::flat_buffer buffer_;
-  std::optional<http::request_parser<http::string_body>> parser_;
+  std::optional<RequestParser> parser_;
   WebServer::Impl& server_;
   ConnectionTicket ticket_;
   bool trusted_ = false;
