@@ -406,12 +406,8 @@ int HapticApp::run() {
     tick_us_.add(static_cast<double>(t1 - t0) * 1e-3);
     if (k < tick_trace_.size()) {
       // Unpaced, a tick has no deadline: its start stands for it.
-      tick_trace_[k] = TickTrace{(paced ? tick_due_ns_ : t0) - loop_start_ns_,
-                                 static_cast<std::uint32_t>(late_ns),
-                                 static_cast<std::uint32_t>(std::min<std::uint64_t>(t1 - t0, UINT32_MAX)),
-                                 static_cast<std::uint32_t>(std::min<std::uint64_t>(c1 - c0, UINT32_MAX)),
-                                 static_cast<std::uint32_t>(timer.misses()),
-                                 {}};
+      tick_trace_[k] =
+          tick_trace_row((paced ? tick_due_ns_ : t0) - loop_start_ns_, late_ns, t1 - t0, c1 - c0, timer.misses());
       if (const contact::ContactStageTimes* st = organ_->stage_times()) tick_trace_[k].stage_ns = st->ns;
     }
     ticks_done_ = k + 1;
@@ -442,16 +438,8 @@ int HapticApp::run() {
 
 void HapticApp::write_tick_trace() {
   if (tick_trace_file_ == nullptr) return;
-  std::fprintf(tick_trace_file_, "tick,due_us,wake_late_us,tick_us,tick_cpu_us,misses");
-  for (const char* stage : contact::kContactStageNames) std::fprintf(tick_trace_file_, ",%s_us", stage);
-  std::fputc('\n', tick_trace_file_);
-  for (std::uint64_t k = 0; k < ticks_done_ && k < tick_trace_.size(); ++k) {
-    const TickTrace& r = tick_trace_[static_cast<std::size_t>(k)];
-    std::fprintf(tick_trace_file_, "%llu,%.3f,%.3f,%.3f,%.3f,%u", static_cast<unsigned long long>(k),
-                 static_cast<double>(r.due_ns) * 1e-3, r.late_ns * 1e-3, r.wall_ns * 1e-3, r.cpu_ns * 1e-3, r.misses);
-    for (const std::uint32_t ns : r.stage_ns) std::fprintf(tick_trace_file_, ",%.3f", ns * 1e-3);
-    std::fputc('\n', tick_trace_file_);
-  }
+  surgsim::write_tick_trace(tick_trace_file_, tick_trace_.data(),
+                            static_cast<std::size_t>(std::min<std::uint64_t>(ticks_done_, tick_trace_.size())));
   std::fclose(tick_trace_file_);
   tick_trace_file_ = nullptr;
 }

@@ -15,6 +15,7 @@
 #include "force_stage.h"
 #include "organ.h"
 #include "scene/scene.h"
+#include "tick_trace.h"
 #include "tool/trajectory.h"
 
 namespace surgsim {
@@ -122,14 +123,6 @@ class HapticApp {
   core::SampleRecorder tick_us_;
   core::SampleRecorder tick_cpu_us_;  // the loop thread's CPU time per tick (tick_us_ is wall time)
   /// --tick-trace: one row per tick, kept in memory during the loop (preallocated) and written after it.
-  struct TickTrace {
-    std::uint64_t due_ns = 0;   // the tick's deadline from the loop's start
-    std::uint32_t late_ns = 0;  // wake-up after the deadline
-    std::uint32_t wall_ns = 0;  // the tick's wall time
-    std::uint32_t cpu_ns = 0;   // the loop thread's CPU time during it
-    std::uint32_t misses = 0;   // missed deadlines counted up to this tick's wake-up (a late tick k shows at k + 1)
-    std::array<std::uint32_t, contact::kContactStages> stage_ns{};  // the contact step's stages (0: none, intestine)
-  };
   std::vector<TickTrace> tick_trace_;
   std::FILE* tick_trace_file_ = nullptr;
   void write_tick_trace();
