@@ -327,6 +327,15 @@ TEST(OsMesaRenderer, DeterministicAcrossFramesAndInstances) {
   const Image a1 = render_surface(*first, sphere);
   const Image b1 = render_surface(*second, sphere);
   const Image a2 = render_surface(*first, sphere);
+  // The pictures show the organ (two empty pictures would be identical too): the sphere covers a good part of each,
+  // and the centre is its red-brown.
+  for (const Image* image : {&a1, &b1, &a2}) {
+    ASSERT_EQ(image->width, kWidth);
+    ASSERT_EQ(image->height, kHeight);
+    ASSERT_GT(foreground_fraction(*image), 0.2);
+    const std::uint8_t* centre = image->at(kWidth / 2, kHeight / 2);
+    ASSERT_GT(centre[0], centre[1] + 40) << "centre should be the organ's red-brown";
+  }
   EXPECT_TRUE(a1.rgb == a2.rgb);
   EXPECT_TRUE(a1.rgb == b1.rgb);
 }
