@@ -1,5 +1,6 @@
-// Counts heap allocations (malloc/calloc/realloc, which operator new and Eigen use) made by the current thread
-// inside a scope. Defined in alloc_counter.cpp, which interposes the C allocator for the whole test program.
+// Counts heap allocations (malloc, calloc, realloc, aligned_alloc, posix_memalign, memalign, valloc, pvalloc: what
+// operator new, aligned operator new and Eigen use) made by the current thread inside a scope. Defined in
+// alloc_counter.cpp, which interposes the C allocator for the whole test program.
 #pragma once
 
 namespace surgsim::test {

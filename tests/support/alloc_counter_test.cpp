@@ -1,14 +1,16 @@
 // The allocation counter the loop tests rely on: it must see malloc, operator new and Eigen's heap storage on the
-// counting thread only, in the normal build and under AddressSanitizer or ThreadSanitizer (where it uses the
-// sanitizer's allocation hook instead of interposing malloc). A counter that saw nothing would make every
-// "allocates nothing" test pass.
+// counting thread only, and every other allocating entry (calloc, realloc, the aligned ones, aligned operator new), in
+// the normal build and under AddressSanitizer or ThreadSanitizer (where it uses the sanitizer's allocation hook instead
+// of interposing malloc). A counter that saw nothing would make every "allocates nothing" test pass.
 #include "support/alloc_counter.h"
 
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
 #include <cstdlib>
+#include <malloc.h>
 #include <memory>
+#include <new>
 #include <thread>
 #include <vector>
 
@@ -44,6 +46,46 @@ TEST(AllocationCounter, CountsNothingOutsideItsScope) {
   AllocationCounter again;
   EXPECT_EQ(again.count(), 0);
   EXPECT_EQ(inside, 0);
+}
+
+// Each allocating entry of the C allocator counts once, the aligned ones too, and aligned operator new (libstdc++ takes
+// its memory from aligned_alloc): a loop that allocated through an entry the counter missed would pass its
+// "allocates nothing" test.
+TEST(AllocationCounter, SeesEveryAllocatingEntry) {
+  struct Entry {
+    const char* name;
+    void* (*allocate)();
+  };
+  const Entry entries[] = {
+      {"calloc", [] { return std::calloc(4, 16); }},
+      {"realloc of nothing", [] { return std::realloc(nullptr, 64); }},
+      {"aligned_alloc", [] { return std::aligned_alloc(64, 128); }},
+      {"posix_memalign",
+       [] {
+         void* p = nullptr;
+         return posix_memalign(&p, 64, 128) == 0 ? p : nullptr;
+       }},
+      {"memalign", [] { return memalign(64, 128); }},
+      {"valloc", [] { return valloc(128); }},
+      {"pvalloc", [] { return pvalloc(128); }},
+  };
+  AllocationCounter counter;
+  for (const Entry& e : entries) {
+    const long before = counter.count();
+    void* volatile p = e.allocate();  // volatile: the compiler may not elide the call
+    EXPECT_NE(p, nullptr) << e.name;
+    EXPECT_EQ(counter.count() - before, 1) << e.name;
+    std::free(p);
+  }
+  void* volatile grown = std::malloc(16);
+  long before = counter.count();
+  grown = std::realloc(grown, std::size_t{1} << 16);
+  EXPECT_EQ(counter.count() - before, 1) << "realloc to a larger block";
+  std::free(grown);
+  before = counter.count();
+  void* volatile aligned = ::operator new (256, std::align_val_t{64});
+  EXPECT_EQ(counter.count() - before, 1) << "aligned operator new";
+  ::operator delete (aligned, std::align_val_t{64});
 }
 
 }  // namespace
