@@ -53,6 +53,7 @@ struct PngReadState {
   char message[256] = {0};
   std::vector<png_byte> data;
   std::vector<png_bytep> rows;
+  long file_bytes = 0;  // size of the file, bounding the samples it can hold
   int width = 0, height = 0, channels = 0, depth = 0, colour = 0;
   ~PngReadState() {
     if (png != nullptr) png_destroy_read_struct(&png, info != nullptr ? &info : nullptr, nullptr);
@@ -60,11 +61,28 @@ struct PngReadState {
   }
 };
 
-// Reads the raw samples (after unpacking sub-byte depths) into state; returns false on a libpng error.
+// The largest expansion of deflate (RFC 1951): a run of 258 bytes costs at least 2 bits.
+constexpr double kDeflateMaxRatio = 1032;
+
+// Reads the raw samples (after unpacking sub-byte depths) into state; returns false on a libpng error or a header
+// declaring more than the file can hold (then `message` says which).
 bool png_read_samples(PngReadState* s) {
   if (setjmp(png_jmpbuf(s->png))) return false;
   png_init_io(s->png, s->file);
   png_read_info(s->png, s->info);
+  // Deflate expands at most 1032-fold, so a file declaring more (filtered) rows than that of its own size is
+  // truncated or corrupt: refused before the rows are allocated, since a header of a few bytes may declare up to
+  // 1e6 x 1e6 pixels.
+  const double declared = static_cast<double>(png_get_image_height(s->png, s->info)) *
+                          (1.0 + static_cast<double>(png_get_rowbytes(s->png, s->info)));
+  if (declared > kDeflateMaxRatio * static_cast<double>(s->file_bytes)) {
+    std::snprintf(s->message, sizeof s->message,
+                  "declares %u x %u pixels (%.0f bytes of rows), more than its %ld bytes can hold at deflate's best "
+                  "ratio (%.0f:1): the file is truncated or corrupt (export the slice again)",
+                  png_get_image_width(s->png, s->info), png_get_image_height(s->png, s->info), declared, s->file_bytes,
+                  kDeflateMaxRatio);
+    return false;
+  }
   s->colour = png_get_color_type(s->png, s->info);
   s->depth = png_get_bit_depth(s->png, s->info);
   if (s->depth < 8) png_set_packing(s->png);  // one byte per sample, values kept (not scaled)
@@ -87,6 +105,9 @@ PngPixels read_png(const std::string& path) {
   auto s = std::make_unique<PngReadState>();
   s->file = std::fopen(path.c_str(), "rb");
   if (s->file == nullptr) throw_error(path, ": cannot open: ", std::strerror(errno));
+  if (std::fseek(s->file, 0, SEEK_END) != 0 || (s->file_bytes = std::ftell(s->file)) < 0 ||
+      std::fseek(s->file, 0, SEEK_SET) != 0)
+    throw_error(path, ": cannot read: ", std::strerror(errno));
   png_byte signature[8] = {0};
   if (std::fread(signature, 1, 8, s->file) != 8 || png_sig_cmp(signature, 0, 8) != 0)
     throw_error(path, ": not a PNG file");

@@ -5,9 +5,11 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "support/error_test_util.h"
@@ -120,6 +122,45 @@ TEST_F(VolumeIoTest, BadSliceFoldersAreRefusedNamingTheFile) {
   EXPECT_TRUE(contains(e, path("missing"))) << e;
   e = error_of([&] { read_png_slices(path("gap"), Eigen::Vector3d(1e-3, 0.0, 1e-3)); });
   EXPECT_TRUE(contains(e, "spacing")) << e;
+}
+
+// The CRC-32 of PNG chunks (ISO 3309, bit by bit), to patch a header and keep the file well-formed.
+std::uint32_t png_crc(const std::string& bytes) {
+  std::uint32_t c = 0xffffffffu;
+  for (unsigned char b : bytes) {
+    c ^= b;
+    for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xedb88320u & (0u - (c & 1u)));
+  }
+  return c ^ 0xffffffffu;
+}
+
+TEST_F(VolumeIoTest, APngHeaderDeclaringMoreThanItsFileCanHoldIsRefusedBeforeAllocating) {
+  // A valid 2 x 2 slice whose header then says 1e6 x 1e6 pixels (a terabyte of rows from a file of ~70 bytes):
+  // deflate cannot expand that much, so the file is corrupt, and the rows must not be allocated first.
+  LabelVolume v;
+  v.grid.size = Eigen::Vector3i(2, 2, 1);
+  v.labels = {0, 1, 1, 0};
+  write_png_slices(v, path("huge"));
+  std::string bytes;
+  {
+    std::ifstream in(path("huge/slice_0000.png"), std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  ASSERT_EQ(bytes.substr(12, 4), "IHDR");
+  for (int k = 0; k < 2; ++k) {  // width, then height: 1000000 = 0x000f4240, big-endian
+    const char big[4] = {0x00, 0x0f, 0x42, 0x40};
+    bytes.replace(16 + 4 * static_cast<std::size_t>(k), 4, big, 4);
+  }
+  const std::uint32_t crc = png_crc(bytes.substr(12, 4 + 13));
+  for (int k = 0; k < 4; ++k) bytes[29 + static_cast<std::size_t>(k)] = static_cast<char>(crc >> (24 - 8 * k));
+  {
+    std::ofstream out(path("huge/slice_0000.png"), std::ios::binary | std::ios::trunc);
+    out << bytes;
+  }
+  const std::string e = error_of([&] { read_png_slices(path("huge"), Eigen::Vector3d(1e-3, 1e-3, 1e-3)); });
+  EXPECT_TRUE(contains(e, "huge/slice_0000.png") && contains(e, "1000000 x 1000000 pixels") &&
+              contains(e, "truncated or corrupt"))
+      << e;
 }
 
 TEST_F(VolumeIoTest, NrrdRoundTripsEveryTypeAttachedAndDetached) {
