@@ -74,8 +74,10 @@ struct MeshValidation {
 };
 
 /// Validates (and, if allowed, repairs orientation of) a mesh: non-finite coordinates, out-of-range indices,
-/// repeated nodes in a tet, zero-volume tets, inverted tets (when not fixing), unreferenced nodes,
-/// non-manifold boundary (an edge shared by other than two boundary faces; a face shared by more than two tets).
+/// repeated nodes in a tet, zero-volume tets, inverted tets (when not fixing), unreferenced nodes, folded tets (two
+/// tets whose apexes lie on the same side of their shared face, so that they overlap though both have positive
+/// volume, e.g. an inverted tet that fix_orientation flipped), non-manifold boundary (an edge shared by other than
+/// two boundary faces; a face shared by more than two tets).
 /// Throws surgsim::core::Error naming the file and the element (file id) at fault; on error the mesh is left unchanged.
 void validate_mesh(TetMesh& mesh, const MeshValidation& opts = {});
 

@@ -1,5 +1,6 @@
-// validate_mesh: coordinates, connectivity, volumes (orientation repaired when allowed), unused nodes and a
-// manifold boundary, each refusal naming the file and the element at fault.
+// validate_mesh: coordinates, connectivity, volumes (orientation repaired when allowed), unused nodes, neighbours
+// on opposite sides of their shared face and a manifold boundary, each refusal naming the file and the element at
+// fault.
 #include "mesh/mesh.h"
 
 #include <algorithm>
@@ -35,6 +36,47 @@ std::string tet_nodes_text(const TetMesh& mesh, const Eigen::MatrixX4i& tets, in
              : std::to_string(v);
   }
   return s + ")";
+}
+
+// The side of the plane through face.key (in its sorted order) on which the tet's apex, the node opposite the face,
+// lies: +1 or -1, the sign of det[k1 - k0, k2 - k0, apex - k0]. The tet is positively oriented (the volume check has
+// flipped the others), and that determinant is the tet's own under a permutation of its nodes, so the side is the
+// permutation's parity: read from the node order, not evaluated again in floating point, it cannot disagree with the
+// sign the volume check judged.
+int apex_side(const Eigen::MatrixX4i& tets, const Face& face) {
+  std::array<int, 4> order{};  // positions in the tet of key[0], key[1], key[2] and the apex
+  for (int k = 0; k < 3; ++k) {
+    for (int a = 0; a < 4; ++a) {
+      if (tets(face.tet, a) == face.key[k]) order[k] = a;
+    }
+  }
+  order[3] = face.local;
+  int inversions = 0;
+  for (int a = 0; a < 4; ++a) {
+    for (int b = a + 1; b < 4; ++b) inversions += order[a] > order[b] ? 1 : 0;
+  }
+  return inversions % 2 == 0 ? 1 : -1;
+}
+
+// Two tets on the same side of their shared face (`tets` as repaired, `vol` the volumes before the repair).
+[[noreturn]] void throw_folded(const TetMesh& mesh, const Eigen::MatrixX4i& tets, const std::vector<double>& vol,
+                               const Face& f1, const Face& f2) {
+  const auto& k = f1.key;
+  const int apex1 = tets(f1.tet, f1.local), apex2 = tets(f2.tet, f2.local);
+  std::string why;
+  if (apex1 == apex2) {
+    why = "they are the same element twice: remove the duplicate or re-mesh";
+  } else {
+    why = "their apexes " + node_name(mesh, apex1) + " and " + node_name(mesh, apex2) +
+          " lie on the same side of it, so the elements overlap (e.g. a node pushed through the face)";
+    for (const int t : {f1.tet, f2.tet}) {
+      if (vol[t] < 0) why += "; " + tet_name(mesh, t) + " was inverted and flipped by fix_orientation";
+    }
+    why += ": re-mesh, or move the node back to its side of the face";
+  }
+  throw_error(mesh_name(mesh), ": ", tet_name(mesh, f1.tet), tet_nodes_text(mesh, mesh.tets, f1.tet), " and ",
+              tet_name(mesh, f2.tet), tet_nodes_text(mesh, mesh.tets, f2.tet), " are folded over their shared face (",
+              node_name(mesh, k[0]), ", ", node_name(mesh, k[1]), ", ", node_name(mesh, k[2]), "): ", why);
 }
 
 }  // namespace
@@ -116,7 +158,9 @@ void validate_mesh(TetMesh& mesh, const MeshValidation& opts) {
                 " unused node(s) in all): remove them, e.g. export only the volume mesh");
   }
 
-  // Each face belongs to one or two tets.
+  // Each face belongs to one or two tets, and two tets sharing a face lie on opposite sides of it. Two positive
+  // tets with their apexes on the same side overlap: a node pushed through a face (a tangled mesh whose inverted
+  // element fix_orientation flipped, or whose writer re-ordered it) or the same element twice.
   const std::vector<Face> faces = sorted_faces(tets);
   std::vector<std::array<int, 3>> boundary;
   std::vector<int> boundary_tet;
@@ -128,6 +172,9 @@ void validate_mesh(TetMesh& mesh, const MeshValidation& opts) {
       throw_error(file, ": the face (", node_name(mesh, k[0]), ", ", node_name(mesh, k[1]), ", ", node_name(mesh, k[2]),
                   ") is shared by ", j - i, " tets, e.g. ", tet_name(mesh, faces[i].tet), " and ",
                   tet_name(mesh, faces[i + 2].tet), ": overlapping or duplicated elements; re-mesh");
+    }
+    if (j - i == 2 && apex_side(tets, faces[i]) == apex_side(tets, faces[i + 1])) {
+      throw_folded(mesh, tets, vol, faces[i], faces[i + 1]);
     }
     if (j - i == 1) {
       boundary.push_back(faces[i].key);
