@@ -207,6 +207,35 @@ class PayloadReader {
 
 CacheLoad result(CacheStatus s, const std::string& detail) { return CacheLoad{s, detail}; }
 
+// Limits of the header's counts, and the bytes a block holds before its row nodes (u32 name length, i64 row count,
+// u32 layout).
+constexpr std::int64_t kMaxNodes = std::int64_t{1} << 30;
+constexpr std::int64_t kMaxBlocks = 1024;
+constexpr std::uint64_t kBlockFixedBytes = 4 + 8 + 4;
+
+// Whether `count` items of `size` bytes fit in `left` bytes: a count read from the file is checked against the bytes
+// that remain before anything is sized from it (a division, so no product that could wrap).
+bool fits(std::uint64_t count, std::uint64_t size, std::uint64_t left) { return count <= left / size; }
+
+// a * b + c, or false when it passes 2^64 (forged counts must not wrap to a small size).
+bool mul_add(std::uint64_t a, std::uint64_t b, std::uint64_t c, std::uint64_t& out) {
+  return !__builtin_mul_overflow(a, b, &out) && !__builtin_add_overflow(out, c, &out);
+}
+
+// The least payload the header's counts imply: the contact list, a fixed-mask byte per node and each block's fixed
+// fields. False when that passes 2^64. The counts are non-negative here.
+bool least_payload(const Header& h, std::uint64_t& out) {
+  std::uint64_t blocks = 0, contacts = 0;
+  return mul_add(static_cast<std::uint64_t>(h.blocks), kBlockFixedBytes, 0, blocks) &&
+         mul_add(static_cast<std::uint64_t>(h.contacts), sizeof(std::int32_t), blocks, contacts) &&
+         mul_add(static_cast<std::uint64_t>(h.nodes), 1, contacts, out);
+}
+
+std::string counts_text(const Header& h) {
+  return std::to_string(h.nodes) + " nodes, " + std::to_string(h.contacts) + " contact nodes, " +
+         std::to_string(h.blocks) + " blocks";
+}
+
 }  // namespace
 
 std::uint64_t TensorCacheKey::combined() const {
@@ -394,12 +423,24 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
   // Sizes.
   if (h.precision != 4 && h.precision != 8) return result(CacheStatus::kCorrupt, "bad precision field");
   if (h.method > 1) return result(CacheStatus::kCorrupt, "bad method field");
-  if (h.nodes < 0 || h.nodes > (1 << 30) || h.contacts < 0 || h.contacts > h.nodes || h.blocks < 0 || h.blocks > 1024)
-    return result(CacheStatus::kCorrupt, "bad counts in header");
+  if (h.nodes < 0 || h.nodes > kMaxNodes || h.contacts < 0 || h.contacts > h.nodes || h.blocks < 0 ||
+      h.blocks > kMaxBlocks)
+    return result(CacheStatus::kCorrupt, "header counts out of range (" + counts_text(h) +
+                                             "; the format allows 0 <= contact nodes <= nodes <= 2^30 and at most " +
+                                             std::to_string(kMaxBlocks) + " blocks)");
   if (file_size != kHeaderBytes + h.payload_bytes)
     return result(CacheStatus::kCorrupt, "file is " + std::to_string(file_size) + " bytes, header says " +
                                              std::to_string(kHeaderBytes + h.payload_bytes) +
                                              " (truncated or extended)");
+  // Every vector below is sized from a count the payload has been shown to hold, so a forged header gets this
+  // message, not std::bad_alloc or gigabytes of node tables.
+  std::uint64_t least = 0;
+  const bool counted = least_payload(h, least);
+  if (!counted || least > h.payload_bytes)
+    return result(CacheStatus::kCorrupt, "header counts (" + counts_text(h) + ") need at least " +
+                                             (counted ? std::to_string(least) : "2^64") +
+                                             " payload bytes, the file holds " + std::to_string(h.payload_bytes) +
+                                             " (a damaged or forged header)");
 
   // Payload, checksummed while read; parsed with bounds checks.
   Tensors t;
@@ -423,12 +464,14 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
   const Eigen::Index cols = 3 * static_cast<Eigen::Index>(h.contacts);
   for (std::int64_t k = 0; k < h.blocks; ++k) {
     std::uint32_t name_len = 0;
-    if (!r.get(name_len) || name_len > 4096) return corrupt("bad block name");
+    if (!r.get(name_len) || name_len > 4096 || name_len > r.left()) return corrupt("bad block name");
     TensorBlock b;
     b.name.resize(name_len);
     if (!r.read(b.name.data(), name_len)) return corrupt("truncated block name");
     std::int64_t rows = 0;
-    if (!r.get(rows) || rows < 0 || rows > h.nodes) return corrupt("bad row count in block '" + b.name + "'");
+    if (!r.get(rows) || rows < 0 || rows > h.nodes || !fits(static_cast<std::uint64_t>(rows), 4, r.left()))
+      return corrupt("bad row count " + std::to_string(rows) + " in block '" + b.name + "' (" +
+                     std::to_string(r.left()) + " payload bytes left)");
     b.row_nodes.resize(static_cast<std::size_t>(rows));
     if (!r.read(b.row_nodes.data(), b.row_nodes.size() * sizeof(int)))
       return corrupt("truncated rows of '" + b.name + "'");
@@ -436,11 +479,13 @@ CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expec
     if (!r.get(layout) || layout > 1) return corrupt("bad layout of block '" + b.name + "'");
     if (layout == 1 && rows != h.contacts)
       return corrupt("symmetric block '" + b.name + "' is not contacts x contacts");
+    // rows and contacts are at most 2^30, so the entries fit in 64 bits; their bytes are checked.
     const auto urows = static_cast<std::uint64_t>(rows);
     const std::uint64_t entries =
         layout == 1 ? 9ull * urows * (urows + 1) / 2 : 9ull * urows * static_cast<std::uint64_t>(h.contacts);
-    const std::uint64_t bytes = entries * h.precision;
-    if (bytes > r.left()) return corrupt("block '" + b.name + "' runs past the end of the file");
+    std::uint64_t bytes = 0;
+    if (!mul_add(entries, h.precision, 0, bytes) || bytes > r.left())
+      return corrupt("block '" + b.name + "' runs past the end of the file");
     const bool keep = blocks.empty() || std::find(blocks.begin(), blocks.end(), b.name) != blocks.end();
     if (!keep) {
       if (!r.skip(bytes)) return corrupt("truncated block '" + b.name + "'");

@@ -62,7 +62,9 @@ void save_tensor_cache(const std::string& path, const Tensors& tensors, const Te
 
 /// Loads a cache if it matches `expected`. `blocks`: names of the blocks to keep (empty = all; others are read for
 /// the checksum and dropped, so a visual node need not hold the haptic rows); a requested block missing from the file
-/// makes it stale. On anything but kOk, `out` is left empty. Never throws for a bad file.
+/// makes it stale. On anything but kOk, `out` is left empty. Never throws for a bad file: every count in the header
+/// and the payload is checked against the bytes the file holds before anything is sized from it (no vector takes more
+/// than four times the file), so a damaged or forged count is reported as kCorrupt instead of std::bad_alloc.
 CacheLoad load_tensor_cache(const std::string& path, const TensorCacheKey& expected, Tensors& out,
                             const std::vector<std::string>& blocks = {});
 

@@ -54,14 +54,16 @@ void keep_blocks(Tensors& t, const std::vector<std::string>& blocks) {
 
 }  // namespace
 
+Precision scene_precision(std::size_t double_bytes, std::size_t float_above_mib) {
+  return double_bytes > (float_above_mib << 20) ? Precision::kFloat : Precision::kDouble;
+}
+
 PrecomputeOptions scene_precompute_options(int contact_count, const std::vector<RowSet>& rows) {
-  // The haptic block (contacts x contacts) is stored as one half; float once double would pass kFloatAboveMiB (a
-  // 21k-node liver: 2.2 GiB in double, 1.1 GiB in float, relative error ~1e-7).
+  // The haptic block (contacts x contacts) is stored as one half; the precision from its size in double.
   PrecomputeOptions o;
   o.symmetric_blocks = {"haptic"};
   o.precision = Precision::kDouble;
-  const double double_mib = static_cast<double>(estimate_tensor_bytes(contact_count, rows, o)) / (1024.0 * 1024.0);
-  if (double_mib > kFloatAboveMiB) o.precision = Precision::kFloat;
+  o.precision = scene_precision(estimate_tensor_bytes(contact_count, rows, o));
   return o;
 }
 

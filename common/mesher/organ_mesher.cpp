@@ -11,14 +11,18 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <iterator>
 #include <map>
 #include <mutex>
 #include <ostream>
+#include <sstream>
 #include <system_error>
 #include <utility>
 
 #include "core/error.h"
+#include "core/hash.h"
 #include "mesh/tri_surface.h"
 
 using namespace surgsim::core;
@@ -517,6 +521,46 @@ TetMesh mesh_to_node_count(GmshSession& gmsh_session, const std::string& context
   return best;
 }
 
+// The $SurgsimOrganMesh section that ends a cached .msh (organ_mesher.h): what made the file, for which spec, and the
+// checksum of every byte before its checksum line.
+constexpr const char* kCacheSection = "$SurgsimOrganMesh";
+constexpr const char* kCacheSectionEnd = "$EndSurgsimOrganMesh";
+
+std::string cache_identity(const OrganSpec& spec, int generator, const std::string& gmsh_version) {
+  return "generator " + std::to_string(generator) + " gmsh " + gmsh_version + " shape " + spec.shape + " nodes " +
+         std::to_string(spec.target_nodes);
+}
+
+std::string checksum_hex(const std::string& text, std::size_t bytes) {
+  Hasher h;
+  h.bytes(text.data(), bytes);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h.digest()));
+  return hex;
+}
+
+// The whole file; false if it cannot be read.
+bool read_file(const std::string& path, std::string& text) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return false;
+  text.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  return !f.bad();
+}
+
+// Writes the mesh as a Gmsh v2.2 .msh followed by its $SurgsimOrganMesh section.
+void write_cached_msh(const std::string& path, const TetMesh& mesh, const OrganSpec& spec) {
+  write_msh(path, mesh);
+  std::string text;
+  if (!read_file(path, text)) throw_error(path, ": cannot read back the mesh just written");
+  const std::size_t mesh_bytes = text.size();
+  text += std::string(kCacheSection) + "\n" + cache_identity(spec, kOrganMeshVersion, GMSH_API_VERSION) + "\n";
+  text += "checksum " + checksum_hex(text, text.size()) + "\n" + kCacheSectionEnd + "\n";
+  std::ofstream f(path, std::ios::binary | std::ios::app);
+  f.write(text.data() + mesh_bytes, static_cast<std::streamsize>(text.size() - mesh_bytes));
+  f.close();
+  if (!f) throw_error(path, ": cannot write the mesh's checksum section (disk full?)");
+}
+
 }  // namespace
 
 const std::vector<std::string>& organ_shapes() {
@@ -636,19 +680,65 @@ TetMesh mesh_closed_surface(const TriSurface& surface, int target_nodes, std::os
   return best;
 }
 
-std::string organ_mesh_path(const OrganSpec& spec, const std::string& cache_dir) {
-  return (std::filesystem::path(cache_dir) / (spec.shape + "-" + std::to_string(spec.target_nodes) + ".msh"))
-      .string();
+std::string organ_mesh_path(const OrganSpec& spec, const std::string& cache_dir, int generator) {
+  const std::string name =
+      spec.shape + "-" + std::to_string(spec.target_nodes) + "-g" + std::to_string(generator) + ".msh";
+  return (std::filesystem::path(cache_dir) / name).string();
+}
+
+std::string cached_organ_mesh_problem(const std::string& path, const OrganSpec& spec) {
+  std::string text;
+  if (!read_file(path, text)) return "cannot be read";
+  const std::string opening = "\n" + std::string(kCacheSection) + "\n";
+  const std::size_t section = text.rfind(opening);
+  if (section == std::string::npos)
+    return "no " + std::string(kCacheSection) + " section at its end (cut short, or cached by an older surgsim)";
+  // The section's three lines: identity, checksum, end tag; nothing after them.
+  std::istringstream lines(text.substr(section + opening.size()));
+  std::string identity, checksum_line, end, rest;
+  std::getline(lines, identity);
+  const std::size_t checksum_at = section + opening.size() + identity.size() + 1;
+  std::getline(lines, checksum_line);
+  std::getline(lines, end);
+  std::getline(lines, rest, '\0');
+  if (checksum_line.rfind("checksum ", 0) != 0 || end != kCacheSectionEnd || !rest.empty() || checksum_at > text.size())
+    return "its " + std::string(kCacheSection) + " section is damaged or cut short";
+  if (checksum_line.substr(9) != checksum_hex(text, checksum_at))
+    return "checksum mismatch: the file was altered or damaged after it was written";
+  // Intact: now what made it, and for which spec.
+  std::istringstream fields(identity);
+  std::string generator_word, gmsh_word, gmsh_version, shape_word, shape, nodes_word;
+  int generator = 0, nodes = 0;
+  fields >> generator_word >> generator >> gmsh_word >> gmsh_version >> shape_word >> shape >> nodes_word >> nodes;
+  if (!fields || generator_word != "generator" || gmsh_word != "gmsh" || shape_word != "shape" || nodes_word != "nodes")
+    return "its " + std::string(kCacheSection) + " section does not say what made it";
+  if (generator != kOrganMeshVersion)
+    return "made by organ mesher generator version " + std::to_string(generator) + ", this build's is " +
+           std::to_string(kOrganMeshVersion);
+  if (gmsh_version != GMSH_API_VERSION)
+    return "meshed with Gmsh " + gmsh_version + ", this build uses Gmsh " + GMSH_API_VERSION;
+  if (shape != spec.shape || nodes != spec.target_nodes)
+    return "made for " + shape + " at " + std::to_string(nodes) + " nodes, not " + spec.shape + " at " +
+           std::to_string(spec.target_nodes);
+  return "";
 }
 
 std::string ensure_organ_mesh(const OrganSpec& spec, const std::string& cache_dir, std::ostream* progress,
-                              bool* generated) {
+                              OrganMeshCacheOutcome* outcome) {
   namespace fs = std::filesystem;
   check_organ_spec(spec);
   const std::string path = organ_mesh_path(spec, cache_dir);
-  if (generated != nullptr) *generated = false;
+  OrganMeshCacheOutcome local;
+  OrganMeshCacheOutcome& out = outcome != nullptr ? *outcome : local;
+  out = OrganMeshCacheOutcome();
   std::error_code ec;
-  if (fs::is_regular_file(path, ec)) return path;
+  if (fs::is_regular_file(path, ec)) {
+    out.rejected = cached_organ_mesh_problem(path, spec);
+    if (out.rejected.empty()) return path;
+    if (progress != nullptr)
+      *progress << "organ " << spec.shape << ": cached " << path << " not used (" << out.rejected
+                << "); generating it again\n";
+  }
 
   fs::create_directories(cache_dir, ec);
   if (ec) throw_error(cache_dir, ": cannot create the mesh cache folder (", ec.message(), ")");
@@ -676,8 +766,8 @@ std::string ensure_organ_mesh(const OrganSpec& spec, const std::string& cache_di
     }
   };
   publish(fs::path(path).replace_extension(".vtk").string(), [&mesh](const std::string& p) { write_vtk(p, mesh); });
-  publish(path, [&mesh](const std::string& p) { write_msh(p, mesh); });
-  if (generated != nullptr) *generated = true;
+  publish(path, [&mesh, &spec](const std::string& p) { write_cached_msh(p, mesh, spec); });
+  out.generated = true;
   if (progress != nullptr) *progress << "organ " << spec.shape << ": cached " << path << '\n';
   return path;
 }

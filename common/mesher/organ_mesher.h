@@ -1,5 +1,5 @@
 // Generated organs (plate, cylinder, liver-shaped solid) tetrahedralized with Gmsh's C++ API, with a node-count
-// control and an on-disk cache of .msh/.vtk files.
+// control and an on-disk cache of .msh/.vtk files (keyed by spec and generator version, checksummed).
 //
 // Gmsh keeps global state and is not thread-safe: every function here that meshes takes a process-wide lock,
 // initializes Gmsh, and finalizes it before returning. Do not call them while your own code holds a Gmsh session
@@ -71,15 +71,35 @@ mesh::TetMesh mesh_closed_surface(const mesh::TriSurface& surface, int target_no
 /// mesh_closed_surface. 0 for non-positive inputs.
 int closed_surface_nodes(double volume, double area, int target_nodes);
 
-/// The cache path of a spec: `<cache_dir>/<shape>-<target_nodes>.msh`.
-std::string organ_mesh_path(const OrganSpec& spec, const std::string& cache_dir);
+/// Version of what generate_organ makes: part of the cache key (the file name) and recorded in the cached file. Bump it
+/// whenever generate_organ's output changes (shapes, sizing, Gmsh options), so that meshes cached by the older mesher
+/// are generated again instead of used.
+inline constexpr int kOrganMeshVersion = 1;
 
-/// Returns organ_mesh_path(spec, cache_dir), generating the mesh first if that file does not exist (a Gmsh v2.2
-/// .msh, with a VTK .vtk beside it). Files are written to a unique temporary name in cache_dir and renamed into
-/// place, so a concurrent reader or a second process generating the same spec never sees a partial file.
-/// `generated`, if given, is set to true when this call meshed and wrote the file, false when it was cached.
+/// The cache path of a spec: `<cache_dir>/<shape>-<target_nodes>-g<generator>.msh`.
+std::string organ_mesh_path(const OrganSpec& spec, const std::string& cache_dir, int generator = kOrganMeshVersion);
+
+/// Why the cached mesh at `path` may not be used for `spec` ("" when it may). A cached .msh ends with a section
+///   $SurgsimOrganMesh
+///   generator <kOrganMeshVersion> gmsh <Gmsh version> shape <shape> nodes <target_nodes>
+///   checksum <16 hex digits: core::Hasher (FNV-1a) of every byte of the file before this line>
+///   $EndSurgsimOrganMesh
+/// (Gmsh and read_mesh skip a section they do not know), so a truncated or altered file, one of another generator or
+/// Gmsh version, or one made for another spec is refused. Never throws.
+std::string cached_organ_mesh_problem(const std::string& path, const OrganSpec& spec);
+
+/// What ensure_organ_mesh found in the cache and did.
+struct OrganMeshCacheOutcome {
+  bool generated = false;  // this call meshed and wrote the file (it was missing or refused)
+  std::string rejected;    // why a cached file was refused (cached_organ_mesh_problem); "" if none was or it was used
+};
+
+/// Returns organ_mesh_path(spec, cache_dir), generating the mesh first if that file does not exist or is refused by
+/// cached_organ_mesh_problem (a Gmsh v2.2 .msh with its $SurgsimOrganMesh section, and a VTK .vtk beside it; a refused
+/// file is said on `progress`, then replaced). Files are written to a unique temporary name in cache_dir and renamed
+/// into place, so a concurrent reader or a second process generating the same spec never sees a partial file.
 /// Creates cache_dir if missing. Throws surgsim::core::Error on a bad spec or when the folder is not writable.
 std::string ensure_organ_mesh(const OrganSpec& spec, const std::string& cache_dir, std::ostream* progress = nullptr,
-                              bool* generated = nullptr);
+                              OrganMeshCacheOutcome* outcome = nullptr);
 
 }  // namespace surgsim::mesher

@@ -37,7 +37,10 @@ TetMesh load_scene_mesh(const Scene& scene, const std::string& cache_dir, std::o
     spec.shape = scene.mesh.generate;
     spec.target_nodes = scene.mesh.target_nodes;
     if (progress != nullptr) *progress << "mesh: " << spec.shape << " ~" << spec.target_nodes << " nodes (cache " << cache_dir << ")\n";
-    path = ensure_organ_mesh(spec, cache_dir);
+    OrganMeshCacheOutcome outcome;
+    path = ensure_organ_mesh(spec, cache_dir, nullptr, &outcome);
+    if (progress != nullptr && !outcome.rejected.empty())
+      *progress << "mesh: the cached " << path << " was not used (" << outcome.rejected << "); generated it again\n";
   }
   try {
     TetMesh mesh = read_mesh(path);

@@ -12,7 +12,8 @@ namespace surgsim::mesher {
 /// else ~/.cache/surgsim. Created if missing.
 std::string default_cache_dir();
 
-/// Loads (file) or generates-and-caches (generate) the scene's tetrahedral mesh and validates it.
+/// Loads (file) or generates-and-caches (generate) the scene's tetrahedral mesh and validates it. A cached mesh that
+/// ensure_organ_mesh refused (damaged, or of another generator) is said on `progress` with the reason.
 /// Throws surgsim::core::Error naming the scene file and the mesh at fault.
 mesh::TetMesh load_scene_mesh(const scene::Scene& scene, const std::string& cache_dir,
                               std::ostream* progress = nullptr);

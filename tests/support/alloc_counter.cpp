@@ -11,6 +11,17 @@
 namespace {
 thread_local bool t_counting = false;
 thread_local long t_count = 0;
+thread_local bool t_ceiling_on = false;  // an AllocationCeiling is alive on this thread
+thread_local std::size_t t_ceiling = 0;
+thread_local std::size_t t_largest = 0;
+
+// Counts a request of n bytes; false when an AllocationCeiling refuses it.
+bool admit(std::size_t n) {
+  if (t_counting) ++t_count;
+  if (!t_ceiling_on) return true;
+  if (n > t_largest) t_largest = n;
+  return n <= t_ceiling;
+}
 }  // namespace
 
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
@@ -23,9 +34,7 @@ extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*malloc_hook)(con
                                                          void (*free_hook)(const volatile void*));
 
 namespace {
-void on_malloc(const volatile void*, std::size_t) {
-  if (t_counting) ++t_count;
-}
+void on_malloc(const volatile void*, std::size_t n) { admit(n); }
 void on_free(const volatile void*) {}
 [[maybe_unused]] const int g_hooks_installed = __sanitizer_install_malloc_and_free_hooks(on_malloc, on_free);
 }  // namespace
@@ -41,23 +50,23 @@ void* __interceptor_valloc(std::size_t);
 void* __interceptor_pvalloc(std::size_t);
 }
 extern "C" void* memalign(std::size_t alignment, std::size_t n) {
-  if (t_counting) ++t_count;
+  admit(n);
   return __interceptor_memalign(alignment, n);
 }
 extern "C" void* aligned_alloc(std::size_t alignment, std::size_t n) {
-  if (t_counting) ++t_count;
+  admit(n);
   return __interceptor_aligned_alloc(alignment, n);
 }
 extern "C" int posix_memalign(void** out, std::size_t alignment, std::size_t n) {
-  if (t_counting) ++t_count;
+  admit(n);
   return __interceptor_posix_memalign(out, alignment, n);
 }
 extern "C" void* valloc(std::size_t n) {
-  if (t_counting) ++t_count;
+  admit(n);
   return __interceptor_valloc(n);
 }
 extern "C" void* pvalloc(std::size_t n) {
-  if (t_counting) ++t_count;
+  admit(n);
   return __interceptor_pvalloc(n);
 }
 #endif
@@ -71,18 +80,20 @@ void* __libc_valloc(std::size_t);
 void* __libc_pvalloc(std::size_t);
 }
 
-extern "C" void* malloc(std::size_t n) {
-  if (t_counting) ++t_count;
-  return __libc_malloc(n);
+namespace {
+void* refused() {
+  errno = ENOMEM;
+  return nullptr;
 }
+}  // namespace
+
+extern "C" void* malloc(std::size_t n) { return admit(n) ? __libc_malloc(n) : refused(); }
 extern "C" void* calloc(std::size_t a, std::size_t b) {
-  if (t_counting) ++t_count;
-  return __libc_calloc(a, b);
+  std::size_t n = 0;
+  if (__builtin_mul_overflow(a, b, &n)) n = static_cast<std::size_t>(-1);
+  return admit(n) ? __libc_calloc(a, b) : refused();
 }
-extern "C" void* realloc(void* p, std::size_t n) {
-  if (t_counting) ++t_count;
-  return __libc_realloc(p, n);
-}
+extern "C" void* realloc(void* p, std::size_t n) { return admit(n) ? __libc_realloc(p, n) : refused(); }
 // The aligned entries. glibc exports no __libc_ name for aligned_alloc and posix_memalign: they are memalign behind
 // their own checks of the alignment, as glibc makes them.
 namespace {
@@ -90,11 +101,10 @@ bool power_of_two(std::size_t n) { return n != 0 && (n & (n - 1)) == 0; }
 }  // namespace
 
 extern "C" void* memalign(std::size_t alignment, std::size_t n) {
-  if (t_counting) ++t_count;
-  return __libc_memalign(alignment, n);
+  return admit(n) ? __libc_memalign(alignment, n) : refused();
 }
 extern "C" void* aligned_alloc(std::size_t alignment, std::size_t n) {
-  if (t_counting) ++t_count;
+  if (!admit(n)) return refused();
   if (!power_of_two(alignment)) {
     errno = EINVAL;
     return nullptr;
@@ -102,21 +112,15 @@ extern "C" void* aligned_alloc(std::size_t alignment, std::size_t n) {
   return __libc_memalign(alignment, n);
 }
 extern "C" int posix_memalign(void** out, std::size_t alignment, std::size_t n) {
-  if (t_counting) ++t_count;
+  if (!admit(n)) return ENOMEM;
   if (!power_of_two(alignment) || alignment % sizeof(void*) != 0) return EINVAL;
   void* p = __libc_memalign(alignment, n);
   if (p == nullptr) return ENOMEM;
   *out = p;
   return 0;
 }
-extern "C" void* valloc(std::size_t n) {
-  if (t_counting) ++t_count;
-  return __libc_valloc(n);
-}
-extern "C" void* pvalloc(std::size_t n) {
-  if (t_counting) ++t_count;
-  return __libc_pvalloc(n);
-}
+extern "C" void* valloc(std::size_t n) { return admit(n) ? __libc_valloc(n) : refused(); }
+extern "C" void* pvalloc(std::size_t n) { return admit(n) ? __libc_pvalloc(n) : refused(); }
 #endif
 
 namespace surgsim::test {
@@ -127,5 +131,13 @@ AllocationCounter::AllocationCounter() {
 }
 AllocationCounter::~AllocationCounter() { t_counting = false; }
 long AllocationCounter::count() const { return t_count; }
+
+AllocationCeiling::AllocationCeiling(std::size_t max_bytes) {
+  t_largest = 0;
+  t_ceiling = max_bytes;
+  t_ceiling_on = true;
+}
+AllocationCeiling::~AllocationCeiling() { t_ceiling_on = false; }
+std::size_t AllocationCeiling::largest() const { return t_largest; }
 
 }  // namespace surgsim::test

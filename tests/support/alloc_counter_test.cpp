@@ -48,6 +48,35 @@ TEST(AllocationCounter, CountsNothingOutsideItsScope) {
   EXPECT_EQ(inside, 0);
 }
 
+// The ceiling the cache-reader tests use: a request above it is refused (operator new throws std::bad_alloc, so a
+// reader that sized a vector from a forged count fails without taking the memory), one below it is served, and the
+// largest request is recorded either way.
+TEST(AllocationCeiling, RefusesLargeRequestsAndRecordsTheLargest) {
+  std::size_t largest = 0;
+  {
+    AllocationCeiling ceiling(1 << 20);
+    void* volatile p = std::malloc(1000);  // volatile: the compiler may not elide the call
+    EXPECT_NE(p, nullptr);
+    std::free(p);
+    EXPECT_GE(ceiling.largest(), 1000u);
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
+    EXPECT_THROW(p = ::operator new (std::size_t{64} << 20), std::bad_alloc);
+    p = std::malloc(std::size_t{2} << 20);
+    EXPECT_EQ(p, nullptr);
+    const volatile std::size_t huge = std::size_t{1} << 40;  // volatile: no compile-time size warning
+    p = std::calloc(huge, huge);                             // the product overflows
+    EXPECT_EQ(p, nullptr);
+    EXPECT_EQ(ceiling.largest(), static_cast<std::size_t>(-1));
+#endif
+    largest = ceiling.largest();
+  }
+  EXPECT_GE(largest, 1000u);
+  // Gone with its scope: a large request is served again.
+  void* volatile p = std::malloc(std::size_t{2} << 20);
+  EXPECT_NE(p, nullptr);
+  std::free(p);
+}
+
 // Each allocating entry of the C allocator counts once, the aligned ones too, and aligned operator new (libstdc++ takes
 // its memory from aligned_alloc): a loop that allocated through an entry the counter missed would pass its
 // "allocates nothing" test.

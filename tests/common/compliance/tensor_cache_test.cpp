@@ -11,6 +11,7 @@
 
 #include "liver/liver_setup.h"
 
+#include "support/alloc_counter.h"
 #include "support/liver_test_util.h"
 
 using namespace surgsim::fem;
@@ -21,6 +22,24 @@ namespace surgsim {
 namespace {
 
 namespace fs = std::filesystem;
+
+// Header fields (the layout in tensor_cache.h): the counts of nodes, contact nodes and blocks, and the header checksum
+// over every byte before it.
+constexpr std::size_t kNodesAt = 32, kContactsAt = 40, kBlocksAt = 48, kHeaderChecksumAt = 104;
+static_assert(kHeaderChecksumAt + 8 == kTensorCacheHeaderBytes, "the header ends with its checksum");
+
+// A forged header, as a crafted file would have it: the counts replaced and the header checksum made to match them.
+void forge_counts(std::vector<char>& bytes, std::int64_t nodes, std::int64_t contacts, std::int64_t blocks) {
+  std::memcpy(bytes.data() + kNodesAt, &nodes, 8);
+  std::memcpy(bytes.data() + kContactsAt, &contacts, 8);
+  std::memcpy(bytes.data() + kBlocksAt, &blocks, 8);
+  const std::uint64_t digest = tensor_cache_checksum(bytes.data(), kHeaderChecksumAt);
+  std::memcpy(bytes.data() + kHeaderChecksumAt, &digest, 8);
+}
+
+// No single request above this while a forged file is read: the ceiling refuses it (std::bad_alloc) instead of taking
+// the memory, so a reader that sized a vector from a forged count fails the test at once, on any machine.
+constexpr std::size_t kReadCeiling = std::size_t{16} << 20;
 
 class TensorCacheTest : public ::testing::Test {
  protected:
@@ -37,6 +56,15 @@ class TensorCacheTest : public ::testing::Test {
     path_ = (dir_ / "liver.tensors").string();
   }
   void TearDown() override { fs::remove_all(dir_); }
+
+  // The tensor setup of a scene "box.yaml" fixing the box's bottom, its cache in dir_.
+  LiverTensorSetup scene_setup() const {
+    FixedRegion bottom;
+    bottom.has_plane = true;
+    bottom.plane_point = Eigen::Vector3d(0, 0, 1e-9);
+    bottom.plane_normal = -Eigen::Vector3d::UnitZ();
+    return liver_tensor_setup(organ_->material, bottom, organ_->mesh, dir_.string(), "box.yaml");
+  }
 
   std::vector<char> read_bytes() const {
     std::ifstream f(path_, std::ios::binary);
@@ -223,13 +251,77 @@ TEST_F(TensorCacheTest, OlderFormatVersionIsRefusedAndRebuilt) {
   EXPECT_EQ(load_tensor_cache(path_, key_, back).status, CacheStatus::kOk);
 }
 
+// Counts in a forged header (its checksum made to match) are checked against the payload, with overflow-safe
+// arithmetic, before anything is sized from them: a clear 'corrupt' naming the counts, never std::bad_alloc and never
+// a request larger than the file (the reader sized 4 GiB of node tables from the first two before the check).
+TEST_F(TensorCacheTest, ForgedHeaderCountsAreRefusedBeforeAnyAllocation) {
+  save_tensor_cache(path_, tensors_, key_);
+  const auto good = read_bytes();
+  const std::int64_t nodes = tensors_.node_count, contacts = tensors_.column_count();
+  const std::int64_t file_bytes = static_cast<std::int64_t>(good.size());
+  struct Forged {
+    const char* what;
+    std::int64_t nodes, contacts, blocks;
+  };
+  const Forged forged[] = {
+      {"nodes at the format's limit (4 GiB of node tables)", std::int64_t{1} << 30, contacts, 2},
+      {"nodes and contacts at the limit (a 4 GiB contact list)", std::int64_t{1} << 30, std::int64_t{1} << 30, 2},
+      {"more nodes than the file has bytes", file_bytes, contacts, 2},
+      {"more contacts than the file can hold", nodes + file_bytes / 4, nodes + file_bytes / 4, 2},
+      {"more blocks than the format allows", nodes, contacts, 1025},
+      {"counts whose byte sizes overflow 64 bits", std::int64_t{1} << 62, (std::int64_t{1} << 62) + 1, 2},
+      {"negative counts", -1, contacts, 2},
+  };
+  for (const Forged& f : forged) {
+    auto bad = good;
+    forge_counts(bad, f.nodes, f.contacts, f.blocks);
+    write_bytes(bad);
+    Tensors back;
+    CacheLoad r;
+    std::size_t largest = 0;
+    {
+      test::AllocationCeiling ceiling(kReadCeiling);
+      EXPECT_NO_THROW(r = load_tensor_cache(path_, key_, back)) << f.what;
+      largest = ceiling.largest();
+    }
+    EXPECT_EQ(r.status, CacheStatus::kCorrupt) << f.what << ": " << r.detail;
+    EXPECT_NE(r.detail.find("count"), std::string::npos) << f.what << ": " << r.detail;
+    EXPECT_LE(largest, good.size()) << f.what << ": the largest request, bytes";
+    EXPECT_TRUE(back.blocks.empty()) << f.what;
+  }
+  // The counts it was written with still read.
+  auto same = good;
+  forge_counts(same, nodes, contacts, static_cast<std::int64_t>(tensors_.blocks.size()));
+  EXPECT_EQ(same, good);
+}
+
+// A scene's cache with a forged header: refused without the memory its counts ask for, named in the log and rebuilt.
+TEST_F(TensorCacheTest, ForgedSceneCacheIsNamedAndRebuilt) {
+  const LiverTensorSetup setup = scene_setup();
+  const Tensors first = load_liver_tensors(setup, organ_->mesh, organ_->material, {"haptic"}, nullptr);
+  path_ = setup.cache_path;
+  auto bytes = read_bytes();
+  forge_counts(bytes, std::int64_t{1} << 30, std::int64_t{1} << 30, 2);
+  write_bytes(bytes);
+  std::ostringstream log;
+  CacheOutcome o;
+  Tensors t;
+  {
+    test::AllocationCeiling ceiling(kReadCeiling);
+    EXPECT_NO_THROW(t = load_liver_tensors(setup, organ_->mesh, organ_->material, {"haptic"}, &log, &o, "box.yaml"));
+  }
+  EXPECT_EQ(o.load.status, CacheStatus::kCorrupt) << o.load.detail;
+  EXPECT_TRUE(o.rebuilt);
+  EXPECT_NE(log.str().find(setup.cache_path), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("1073741824 nodes"), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("rebuilding it"), std::string::npos) << log.str();
+  ASSERT_NE(t.find("haptic"), nullptr);
+  EXPECT_EQ(t.find("haptic")->packed, first.find("haptic")->packed);
+}
+
 // A scene's corrupt cache: the log names the file, what is wrong and what happens (rebuilt in place).
 TEST_F(TensorCacheTest, CorruptSceneCacheIsNamedAndRebuilt) {
-  FixedRegion bottom;
-  bottom.has_plane = true;
-  bottom.plane_point = Eigen::Vector3d(0, 0, 1e-9);
-  bottom.plane_normal = -Eigen::Vector3d::UnitZ();
-  const LiverTensorSetup setup = liver_tensor_setup(organ_->material, bottom, organ_->mesh, dir_.string(), "box.yaml");
+  const LiverTensorSetup setup = scene_setup();
   EXPECT_EQ(setup.options.symmetric_blocks, std::vector<std::string>{"haptic"});
   EXPECT_EQ(setup.options.precision, Precision::kDouble);  // a few MiB: double
   Tensors first = load_liver_tensors(setup, organ_->mesh, organ_->material, {"haptic"}, nullptr);

@@ -1,5 +1,5 @@
 // Tests for common/mesher/organ_mesher.cpp: node-count control, validity, closed outward boundary, volumes,
-// determinism, the liver's lobed (non-convex) shape, the on-disk cache and spec errors.
+// determinism, the liver's lobed (non-convex) shape, the on-disk cache (its key and checksum) and spec errors.
 #include "mesher/organ_mesher.h"
 
 #include <gtest/gtest.h>
@@ -8,7 +8,10 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <sstream>
 #include <string>
@@ -264,13 +267,15 @@ TEST(OrganMesher, EnsureOrganMeshGeneratesOnceThenUsesTheCache) {
   fs::remove_all(dir);
   const OrganSpec spec{"cylinder", kTarget};
 
-  bool generated = false;
-  const std::string path = ensure_organ_mesh(spec, dir.string(), nullptr, &generated);
-  EXPECT_TRUE(generated);
-  EXPECT_EQ(path, (dir / "cylinder-500.msh").string());
+  OrganMeshCacheOutcome outcome;
+  const std::string path = ensure_organ_mesh(spec, dir.string(), nullptr, &outcome);
+  EXPECT_TRUE(outcome.generated);
+  EXPECT_EQ(outcome.rejected, "");
+  const std::string name = "cylinder-500-g" + std::to_string(kOrganMeshVersion);
+  EXPECT_EQ(path, (dir / (name + ".msh")).string());
   EXPECT_EQ(path, organ_mesh_path(spec, dir.string()));
   ASSERT_TRUE(fs::is_regular_file(path));
-  EXPECT_TRUE(fs::is_regular_file(dir / "cylinder-500.vtk"));
+  EXPECT_TRUE(fs::is_regular_file(dir / (name + ".vtk")));
   // Only the two published files: no temporary left behind.
   EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 2);
   // The file holds the generated mesh exactly.
@@ -278,10 +283,123 @@ TEST(OrganMesher, EnsureOrganMeshGeneratesOnceThenUsesTheCache) {
   EXPECT_EQ(mesh_hash(read), mesh_hash(organ("cylinder").mesh));
 
   const auto mtime = fs::last_write_time(path);
-  generated = true;
-  EXPECT_EQ(ensure_organ_mesh(spec, dir.string(), nullptr, &generated), path);
-  EXPECT_FALSE(generated);
+  outcome.generated = true;
+  EXPECT_EQ(ensure_organ_mesh(spec, dir.string(), nullptr, &outcome), path);
+  EXPECT_FALSE(outcome.generated);
+  EXPECT_EQ(outcome.rejected, "");
   EXPECT_EQ(fs::last_write_time(path), mtime);
+  fs::remove_all(dir);
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << text;
+}
+
+// Seals a cached mesh whose $SurgsimOrganMesh lines a test changed, as organ_mesher.h documents the section: the
+// checksum line holds the FNV-1a hash of every byte before it (the hash written out here, not taken from the mesher).
+std::string reseal(std::string text) {
+  const std::size_t at = text.rfind("checksum ");
+  std::uint64_t h = 1469598103934665603ull;
+  for (std::size_t i = 0; i < at; ++i) {
+    h ^= static_cast<unsigned char>(text[i]);
+    h *= 1099511628211ull;
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  return text.replace(at + 9, 16, hex);
+}
+
+std::string replaced(std::string text, const std::string& from, const std::string& to) {
+  const std::size_t at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  return at == std::string::npos ? text : text.replace(at, from.size(), to);
+}
+
+// A cached mesh that was altered, cut short or cached before the files carried a checksum is refused, said on the
+// progress stream with its path, and generated again (to the same bytes: the mesher is deterministic); never used.
+TEST(OrganMesher, DamagedCachedMeshIsGeneratedAgain) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("surgsim_organ_damaged_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const OrganSpec spec{"cylinder", kTarget};
+  const std::string path = ensure_organ_mesh(spec, dir.string());
+  const std::string good = read_text(path);
+  EXPECT_EQ(cached_organ_mesh_problem(path, spec), "");
+
+  // One digit of the first node's first coordinate: still a valid mesh file, but not the mesh generated.
+  std::string altered = good;
+  const std::size_t digit = altered.find('.', altered.find("$Nodes")) + 1;
+  altered[digit] = altered[digit] == '1' ? '2' : '1';
+  const TetMesh generated = read_mesh(path);
+  write_msh(path + ".plain.msh", generated);  // as cached before the files carried a checksum
+  const std::string plain = read_text(path + ".plain.msh");
+  fs::remove(path + ".plain.msh");
+  struct Damage {
+    const char* what;
+    std::string text;
+    const char* reason;
+  };
+  const Damage damages[] = {
+      {"a changed digit", altered, "checksum"},
+      {"cut inside the elements", good.substr(0, good.find("$Elements") + 100), "no $SurgsimOrganMesh section"},
+      {"cut inside the checksum line", good.substr(0, good.rfind("checksum ") + 12), "$SurgsimOrganMesh"},
+      {"no checksum (an older cache)", plain, "no $SurgsimOrganMesh section"},
+  };
+  for (const Damage& d : damages) {
+    ASSERT_FALSE(d.text == good) << d.what;  // (== : a failure does not print the files)
+    write_text(path, d.text);
+    EXPECT_NE(cached_organ_mesh_problem(path, spec), "") << d.what;
+    std::ostringstream log;
+    OrganMeshCacheOutcome outcome;
+    EXPECT_EQ(ensure_organ_mesh(spec, dir.string(), &log, &outcome), path);
+    EXPECT_TRUE(outcome.generated) << d.what;
+    EXPECT_NE(outcome.rejected.find(d.reason), std::string::npos) << d.what << ": " << outcome.rejected;
+    EXPECT_NE(log.str().find(path + " not used"), std::string::npos) << d.what << ": " << log.str();
+    EXPECT_NE(log.str().find("generating it again"), std::string::npos) << d.what << ": " << log.str();
+    EXPECT_TRUE(read_text(path) == good) << d.what;
+  }
+  fs::remove_all(dir);
+}
+
+// The generator version is part of the key (another version, another file), and a file recording another generator
+// version, another Gmsh or another spec (its checksum intact) is refused for that reason.
+TEST(OrganMesher, CachedMeshOfAnotherGeneratorOrSpecIsRefused) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("surgsim_organ_foreign_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const OrganSpec spec{"cylinder", kTarget};
+  EXPECT_NE(organ_mesh_path(spec, dir.string(), kOrganMeshVersion + 1), organ_mesh_path(spec, dir.string()));
+  EXPECT_NE(organ_mesh_path(spec, dir.string()).find("-g" + std::to_string(kOrganMeshVersion) + ".msh"),
+            std::string::npos);
+
+  const std::string path = ensure_organ_mesh(spec, dir.string());
+  const std::string good = read_text(path);
+  ASSERT_NE(good.find("\n$SurgsimOrganMesh\n"), std::string::npos);
+  EXPECT_TRUE(reseal(good) == good);  // the test's own checksum agrees with the mesher's
+  const std::string version = "generator " + std::to_string(kOrganMeshVersion) + " ";
+  const std::string next = "generator " + std::to_string(kOrganMeshVersion + 1) + " ";
+  write_text(path, reseal(replaced(good, version, next)));
+  OrganMeshCacheOutcome outcome;
+  ensure_organ_mesh(spec, dir.string(), nullptr, &outcome);
+  EXPECT_TRUE(outcome.generated);
+  EXPECT_NE(outcome.rejected.find("generator version " + std::to_string(kOrganMeshVersion + 1)), std::string::npos)
+      << outcome.rejected;
+  EXPECT_TRUE(read_text(path) == good);
+
+  write_text(path, reseal(replaced(good, " gmsh ", " gmsh 0.0.0-other")));
+  EXPECT_NE(cached_organ_mesh_problem(path, spec).find("Gmsh 0.0.0-other"), std::string::npos)
+      << cached_organ_mesh_problem(path, spec);
+  write_text(path, good);
+  const std::string other_spec = cached_organ_mesh_problem(path, OrganSpec{"plate", kTarget});
+  EXPECT_NE(other_spec.find("made for cylinder"), std::string::npos) << other_spec;
+  EXPECT_NE(cached_organ_mesh_problem(path, OrganSpec{"cylinder", kTarget + 1}), "");
+  EXPECT_EQ(cached_organ_mesh_problem(path, spec), "");
+  EXPECT_NE(cached_organ_mesh_problem((dir / "none.msh").string(), spec), "");
   fs::remove_all(dir);
 }
 
