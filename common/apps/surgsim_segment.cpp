@@ -67,8 +67,9 @@ int main(int argc, char** argv) {
       "surgsim-segment: builds an organ from a segmented volume (Cotin 1998, section 2). Reads a folder of PNG "
       "slices (grey labels; ordered by the number in their names) or an NRRD volume, selects the organ's label, "
       "extracts its boundary (marching cubes), removes the staircase (Taubin smoothing kept within --max-distance of "
-      "the voxel boundary), reduces the triangles adaptively (quadric + curvature edge collapse, same bound), and "
-      "tetrahedralizes inside that surface (Gmsh) at about --nodes nodes. Writes PREFIX.msh, PREFIX.vtk, "
+      "the voxel boundary), reduces the triangles adaptively (quadric + curvature edge collapse, same bound), gives "
+      "back the volume these stages cut off (an offset along the normals to the labelled voxels' volume, same "
+      "bound), and tetrahedralizes inside that surface (Gmsh) at about --nodes nodes. Writes PREFIX.msh, PREFIX.vtk, "
       "PREFIX_surface.vtk and a scene PREFIX.yaml. Coordinates in m (volume spacings are taken in mm)."};
   auto* slices_opt = app.add_option("--slices", slices, "Folder of PNG slices (one per k), e.g. scan/slice_0001.png");
   auto* spacing_opt = app.add_option("--spacing", spacing_text, "Voxel size sx,sy,sz in mm (with --slices)");
@@ -131,11 +132,13 @@ int main(int argc, char** argv) {
     for (const StageTime& st : r.stages) total += st.seconds;
     std::printf("write: %s, %s, %s, %s (%.2f s)\n", files.msh.c_str(), files.vtk.c_str(), files.surface_vtk.c_str(),
                 files.scene.c_str(), write_s);
-    std::printf("summary: marching cubes %d triangles -> surface %d (%.1fx fewer) -> mesh boundary %d; %d nodes, %d "
-                "tets; volume %.2f cm^3 (voxels %.2f, marching cubes %.2f); total %.2f s\n",
-                r.mc_triangles, r.surface.triangles, static_cast<double>(r.mc_triangles) / std::max(1, r.surface.triangles),
-                r.boundary.triangles, r.mesh.nodes, r.mesh.tets, r.mesh_volume * 1e6, r.voxel_volume * 1e6,
-                r.mc_volume * 1e6, total);
+    std::printf(
+        "summary: marching cubes %d triangles -> surface %d (%.1fx fewer) -> mesh boundary %d; %d nodes, %d "
+        "tets; volume %.2f cm^3 (labelled voxels %.2f, after the majority filter %.2f, marching cubes %.2f); total "
+        "%.2f s\n",
+        r.mc_triangles, r.surface.triangles, static_cast<double>(r.mc_triangles) / std::max(1, r.surface.triangles),
+        r.boundary.triangles, r.mesh.nodes, r.mesh.tets, r.mesh_volume * 1e6, r.labelled_volume * 1e6,
+        r.voxel_volume * 1e6, r.mc_volume * 1e6, total);
   } catch (const std::exception& e) {
     std::cerr << "surgsim-segment: " << e.what() << '\n';
     return 1;

@@ -98,7 +98,16 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   // Select: the organ's voxels, cleaned to one solid piece.
   auto t0 = std::chrono::steady_clock::now();
   VoxelMask mask = select_label(volume, options.label);
-  if (options.denoise > 0) report.denoised_voxels = majority_filter(mask, options.denoise);
+  // The organ's labelled volume is counted before the majority filter: besides the noise, the filter takes the
+  // staircase's convex corners (2.7 % of a clean 2 cm^3 ellipsoid at 1 mm voxels, 4 % of a tube 9 mm wide), and
+  // the surfaces are restored to the labelled volume, not to the filter's.
+  std::optional<std::int64_t> unfiltered_voxels;
+  if (options.denoise > 0) {
+    VoxelMask unfiltered = mask;
+    if (options.clean) clean_mask(unfiltered);
+    unfiltered_voxels = unfiltered.count();
+    report.denoised_voxels = majority_filter(mask, options.denoise);
+  }
   if (options.clean) report.cleanup = clean_mask(mask);
   if (mask.count() == 0)
     throw_error(volume.source, ": nothing of label ", mask.label, " is left after the majority filter (the organ is ",
@@ -106,10 +115,14 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   report.label = mask.label;
   report.organ_voxels = mask.count();
   report.voxel_volume = static_cast<double>(report.organ_voxels) * grid.spacing.prod();
+  report.labelled_voxels = unfiltered_voxels.value_or(report.organ_voxels);
+  report.labelled_volume = static_cast<double>(report.labelled_voxels) * grid.spacing.prod();
   {
     std::ostringstream what;
     what << "label " << report.label << ", " << report.organ_voxels << " of " << report.voxels << " voxels";
-    if (options.denoise > 0) what << "; majority filter changed " << report.denoised_voxels << " voxels";
+    if (options.denoise > 0)
+      what << "; majority filter changed " << report.denoised_voxels << " voxels (" << report.labelled_voxels
+           << " labelled before it)";
     if (options.clean)
       what << "; dropped " << report.cleanup.removed_voxels << " voxels in " << report.cleanup.components - 1
            << " stray pieces, filled " << report.cleanup.filled_voxels << " voxels in " << report.cleanup.cavities
@@ -153,6 +166,13 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
   ImprovementOptions improve;
   improve.max_distance = options.max_distance * unit;
   improve_surface(grid_surface, &boundary, improve);
+  // The majority filter, marching cubes, smoothing and the reduction each cut inside the labelled voxels a little:
+  // the volume goes back to theirs (restore_volume, under the same distance bound), here and again after the
+  // reduction to the node budget.
+  VolumeRestoreOptions restore;
+  restore.target_volume = report.labelled_volume;
+  restore.max_distance = options.max_distance * unit;
+  report.surface_restore = restore_volume(grid_surface, boundary, restore);
   check_closed_surface(grid_surface, volume.source + ": reduced surface");
   out.surface = to_world(grid_surface, grid);
   report.surface_volume = tri_surface_volume(grid_surface);
@@ -167,17 +187,22 @@ Segmentation segment_volume(const LabelVolume& volume, const SegmentOptions& opt
     budget.min_quality = 0.4;
     report.boundary = decimate_surface(mesh_surface, &boundary, budget);
     improve_surface(mesh_surface, &boundary, improve);
+    report.boundary_restore = restore_volume(mesh_surface, boundary, restore);
     check_closed_surface(mesh_surface, volume.source + ": mesh boundary");
   } else {
     report.boundary.vertices = static_cast<int>(mesh_surface.vertices.rows());
     report.boundary.triangles = static_cast<int>(mesh_surface.tris.rows());
+    report.boundary_restore = report.surface_restore;
   }
   {
     std::ostringstream what;
     what << "surface " << report.surface.triangles << " triangles (" << report.surface.vertices << " vertices, "
          << report.mc_triangles / std::max(1, report.surface.triangles) << "x fewer than marching cubes); mesh "
          << "boundary " << report.boundary.triangles << " triangles (" << report.boundary.vertices
-         << " vertices, budget " << report.boundary_target << ")";
+         << " vertices, budget " << report.boundary_target
+         << "); volume restored to the labelled voxels' by offsets of " << report.surface_restore.offset / unit
+         << " (surface) and " << report.boundary_restore.offset / unit << " voxels (mesh boundary), "
+         << report.surface_restore.held + report.boundary_restore.held << " vertices held back at the bound";
     stage_done("reduce", t0, what.str());
   }
 

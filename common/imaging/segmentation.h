@@ -6,7 +6,9 @@
 //     (surface_smoothing.h);
 //  4. reduce: quadric + curvature edge collapse under the same bound, error-driven (the smooth, light surface),
 //     then on to the surface vertex count the node budget calls for, each followed by flips and tangential
-//     relaxation for the triangles' shape (surface_decimation.h);
+//     relaxation for the triangles' shape (surface_decimation.h) and by an offset along the normals that gives
+//     back the volume stages 1-4 cut off, so that each encloses the organ's labelled voxels' volume
+//     (restore_volume in surface_smoothing.h, same bound);
 //  5. tetrahedralize: Gmsh's 3D Delaunay inside that surface, kept as the mesh boundary, at the requested node
 //     count (mesh_closed_surface in the mesher).
 // Stages 1-4 are this folder's own code (VTK is not available and CGAL is not installed; surface_decimation.h
@@ -53,6 +55,7 @@ struct SegmentReport {
   std::int32_t label = 0;
   std::int64_t voxels = 0;               // in the volume
   std::int64_t organ_voxels = 0;         // of the selected label, after clean-up
+  std::int64_t labelled_voxels = 0;      // of the selected label, after clean-up but before the majority filter
   std::int64_t denoised_voxels = 0;      // changed by the majority filter
   MaskCleanup cleanup;
   int genus = 0;                         // handles of the marching-cubes surface (0: sphere-like)
@@ -60,9 +63,12 @@ struct SegmentReport {
   SmoothingReport smoothing;
   DecimationReport surface;              // error-driven reduction: the smooth, light surface
   DecimationReport boundary;             // further reduction to the node budget's surface vertex count
+  VolumeRestoreReport surface_restore;   // the surface's volume brought back to labelled_volume
+  VolumeRestoreReport boundary_restore;  // the mesh boundary's (the surface's own when it needed no reduction)
   int boundary_target = 0;               // that vertex count (closed_surface_nodes)
   mesher::OrganMeshReport mesh;          // tetrahedralization
   double voxel_volume = 0.0;             // m^3, organ voxels x voxel volume
+  double labelled_volume = 0.0;          // m^3, labelled voxels x voxel volume: what the surfaces enclose
   double mc_volume = 0.0;                // m^3, enclosed by each surface / the tets
   double surface_volume = 0.0;
   double mesh_volume = 0.0;

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <vector>
 
 #include "mesh/tri_surface.h"
 #include "imaging/marching_cubes.h"
@@ -146,6 +147,94 @@ TEST(SurfaceSmoothing, RemovesTheStaircaseWithinTheBound) {
   const SmoothingReport tight = smooth_surface(t, boundary, o);
   EXPECT_GT(tight.clamped, 0);
   EXPECT_LE(tight.max_distance, o.max_distance);
+}
+
+// A voxelized ellipsoid's surface as the pipeline leaves it before the volume is restored: marching cubes,
+// smoothed, reduced to `vertices` (coarse: its chords cut inside), all within one voxel of the voxel boundary.
+TriSurface reduced_surface(const VoxelMask& m, const VoxelBoundaryDistance& boundary, int vertices) {
+  TriSurface s = marching_cubes(m);
+  SmoothingOptions so;
+  so.max_distance = kVoxel;
+  smooth_surface(s, boundary, so);
+  DecimationOptions o;
+  o.max_distance = kVoxel;
+  o.target_vertices = vertices;
+  decimate_surface(s, &boundary, o);
+  return s;
+}
+
+// Which of a surface's vertices, triangle centroids and edge midpoints are within d of the voxel boundary.
+std::vector<bool> points_within(const TriSurface& s, const VoxelBoundaryDistance& boundary, double d) {
+  std::vector<bool> out;
+  for (Eigen::Index v = 0; v < s.vertices.rows(); ++v) out.push_back(boundary.within(s.vertices.row(v).transpose(), d));
+  for (Eigen::Index f = 0; f < s.tris.rows(); ++f) {
+    const Eigen::Vector3d a = s.vertices.row(s.tris(f, 0)), b = s.vertices.row(s.tris(f, 1)),
+                          c = s.vertices.row(s.tris(f, 2));
+    for (const Eigen::Vector3d& p : {Eigen::Vector3d((a + b + c) / 3.0), Eigen::Vector3d(0.5 * (a + b)),
+                                     Eigen::Vector3d(0.5 * (b + c)), Eigen::Vector3d(0.5 * (c + a))})
+      out.push_back(boundary.within(p, d));
+  }
+  return out;
+}
+
+TEST(SurfaceVolume, RestoresTheVoxelVolumeWithinTheBound) {
+  VoxelMask m = ellipsoid(12, 8, 6);
+  const VoxelBoundaryDistance boundary(m);
+  TriSurface s = reduced_surface(m, boundary, 150);
+  const double voxels = static_cast<double>(m.count()) * kVoxel * kVoxel * kVoxel;
+  const double before = tri_surface_volume(s);
+  EXPECT_LT(before, 0.98 * voxels);  // what there is to restore: the corners and chords cut off
+  const Eigen::MatrixX3i tris = s.tris;
+  VolumeRestoreOptions o;
+  o.target_volume = voxels;
+  o.max_distance = kVoxel;
+  const VolumeRestoreReport rep = restore_volume(s, boundary, o);
+  EXPECT_NEAR(tri_surface_volume(s) / voxels, 1.0, 1e-9);
+  EXPECT_DOUBLE_EQ(rep.volume_before, before);
+  EXPECT_DOUBLE_EQ(rep.volume_after, tri_surface_volume(s));
+  // Outward by a fraction of a voxel, the same for every vertex; the triangles and the bound kept.
+  EXPECT_GT(rep.offset, 0.0);
+  EXPECT_LT(rep.offset, 0.5 * kVoxel);
+  EXPECT_EQ(rep.held, 0);
+  EXPECT_EQ(s.tris, tris);
+  for (bool within : points_within(s, boundary, kVoxel)) EXPECT_TRUE(within);
+
+  // And inward when the surface holds too much.
+  o.target_volume = 0.98 * voxels;
+  const VolumeRestoreReport in = restore_volume(s, boundary, o);
+  EXPECT_LT(in.offset, 0.0);
+  EXPECT_NEAR(tri_surface_volume(s) / o.target_volume, 1.0, 1e-9);
+}
+
+TEST(SurfaceVolume, HoldsBackWhatWouldLeaveTheBound) {
+  VoxelMask m = ellipsoid(12, 8, 6);
+  const VoxelBoundaryDistance boundary(m);
+  TriSurface s = reduced_surface(m, boundary, 150);
+  const double voxels = static_cast<double>(m.count()) * kVoxel * kVoxel * kVoxel;
+  const std::vector<bool> within_before = points_within(s, boundary, kVoxel);
+  // Half as much again as the voxels: a surface within a voxel of them cannot enclose that.
+  VolumeRestoreOptions o;
+  o.target_volume = 1.5 * voxels;
+  o.max_distance = kVoxel;
+  const VolumeRestoreReport rep = restore_volume(s, boundary, o);
+  EXPECT_GT(rep.held, 0);
+  EXPECT_GT(rep.volume_after, voxels);
+  EXPECT_LT(rep.volume_after, o.target_volume);
+  const std::vector<bool> within_after = points_within(s, boundary, kVoxel);
+  for (std::size_t i = 0; i < within_before.size(); ++i) {
+    if (within_before[i]) {
+      EXPECT_TRUE(within_after[i]) << "point " << i;
+    }
+  }
+  EXPECT_TRUE(tri_surface_topology(s).closed_manifold());
+
+  // Bad options are refused.
+  for (const VolumeRestoreOptions& bad :
+       {VolumeRestoreOptions{0.0, kVoxel}, VolumeRestoreOptions{voxels, 0.0},
+        VolumeRestoreOptions{voxels, kVoxel, 90.0}, VolumeRestoreOptions{voxels, kVoxel, 30.0, 0}}) {
+    TriSurface copy = s;
+    EXPECT_THROW(restore_volume(copy, boundary, bad), std::exception);
+  }
 }
 
 TEST(SurfaceDecimation, ReducesAdaptivelyWithinTheBound) {
