@@ -4,6 +4,13 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${SURGSIM_BUILD_DIR:-$root/build}
 jobs=${SURGSIM_JOBS:-$(nproc)}
-cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE="${SURGSIM_BUILD_TYPE:-Release}" "$@" >/dev/null
+# ccache when the machine has it, with paths relative to the checkout: a rebuild, or another clone of the same
+# sources (CI's fresh clone), compiles only what changed.
+launcher=()
+if command -v ccache >/dev/null; then
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  export CCACHE_BASEDIR=$root
+fi
+cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE="${SURGSIM_BUILD_TYPE:-Release}" "${launcher[@]}" "$@" >/dev/null
 cmake --build "$build" -j "$jobs"
 echo "build: programs in $build/bin"

@@ -51,6 +51,7 @@ launcher=()
 if command -v ccache >/dev/null; then
   launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
   export CCACHE_BASEDIR=$root   # paths relative to the checkout: another clone of it hits the same entries
+  export CCACHE_NOHASHDIR=true  # even with -g (the debug info then names the first clone's folder)
 fi
 cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSURGSIM_SANITIZE="$kind" "${launcher[@]}" >/dev/null
 targets=()
