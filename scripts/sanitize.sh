@@ -61,7 +61,12 @@ built=$(date +%s)
 
 supp=$root/scripts/sanitize
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:suppressions=$supp/ubsan.supp"
-export ASAN_OPTIONS="detect_leaks=1:halt_on_error=1:check_initialization_order=1:strict_init_order=1"
+# new_delete_type_mismatch=0: Fast DDS 2.9 (libfastrtps, not instrumented) deletes the reader its statistics module
+# allocates (StatisticsReaderImpl, 64 bytes) through ~RTPSReader with a sized delete of 56 bytes, in every test that
+# destroys a DDS reader. This ASan (GCC 12) has no per-library suppression for that report, so the check is off;
+# our own deletes through a base pointer are -Wall's -Wdelete-non-virtual-dtor, and ASan still checks new/delete[]
+# mismatches (alloc_dealloc_mismatch) and every other misuse.
+export ASAN_OPTIONS="detect_leaks=1:halt_on_error=1:check_initialization_order=1:strict_init_order=1:new_delete_type_mismatch=0"
 export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
 export TSAN_OPTIONS="halt_on_error=0:exitcode=66:second_deadlock_stack=1:suppressions=$supp/tsan.supp:print_suppressions=0"
 # One OpenBLAS / OpenMP thread: their pools are not instrumented (their synchronisation is invisible to TSan) and
