@@ -189,9 +189,9 @@ Participant::~Participant() {
 }
 
 Topic* Participant::topic(const std::string& name, TopicDataType* type) {
+  TypeSupport support(type);  // owns `type` from here on whichever way this returns (it leaked when the topic existed)
   auto it = topics_.find(name);
   if (it != topics_.end()) return it->second;
-  TypeSupport support(type);
   if (participant_->find_type(support.get_type_name()) == nullptr) support.register_type(participant_);
   Topic* t = participant_->create_topic(name, support.get_type_name(), TOPIC_QOS_DEFAULT);
   if (t == nullptr) throw std::runtime_error("cannot create DDS topic " + name);

@@ -63,7 +63,8 @@ class Participant {
   Participant(const Participant&) = delete;
   Participant& operator=(const Participant&) = delete;
 
-  /// Registers the type (once) and creates or returns the topic.
+  /// Registers the type (once) and creates or returns the topic. Takes ownership of `type` (a new instance per call,
+  /// as `new msg::XPubSubType()`): it is freed when it is not needed, also when the topic already exists.
   eprosima::fastdds::dds::Topic* topic(const std::string& name, eprosima::fastdds::dds::TopicDataType* type);
   eprosima::fastdds::dds::DataWriter* writer(eprosima::fastdds::dds::Topic* topic, const std::string& profile,
                                               eprosima::fastdds::dds::DataWriterListener* listener = nullptr);
