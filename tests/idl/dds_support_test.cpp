@@ -31,9 +31,8 @@ TEST(DdsParticipant, TopicFreesEveryTypeItIsGivenAlsoForAnExistingTopic) {
     auto* first = participant.topic("surgsim_test/counted", new CountedType());
     ASSERT_NE(first, nullptr);
     EXPECT_EQ(participant.topic("surgsim_test/counted", new CountedType()), first);  // the same topic
-    EXPECT_EQ(participant.topic("surgsim_test/counted_too", new CountedType()), participant.topic(
-                                                                                    "surgsim_test/counted_too",
-                                                                                    new CountedType()));
+    EXPECT_EQ(participant.topic("surgsim_test/counted_too", new CountedType()),
+              participant.topic("surgsim_test/counted_too", new CountedType()));
     EXPECT_LE(g_alive, 1) << "a type given for an existing topic (or an already registered type) is freed at once";
   }
   EXPECT_EQ(g_alive, 0) << "the registered type is freed with the participant";
