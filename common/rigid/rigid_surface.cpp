@@ -289,6 +289,13 @@ int RigidSurface::touching(const Eigen::Vector3d& p, double max_distance, Touch*
   return n;
 }
 
+namespace {
+// A motion that closes in on a feature the sphere already touches (or on a face's plane) more slowly than this
+// fraction of its length is tangent to it: sliding along a face, across the edges of coplanar triangles, is not a
+// hit (rounding leaves the proxy a few 1e-18 m inside a tilted plane, and the slide then stopped at every edge).
+constexpr double kGrazing = 1e-6;
+}  // namespace
+
 SegmentHit RigidSurface::segment_hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double radius) const noexcept {
   SegmentHit out;
   const Eigen::Vector3d d = b - a;
@@ -301,10 +308,13 @@ SegmentHit RigidSurface::segment_hit(const Eigen::Vector3d& a, const Eigen::Vect
   auto vertex_entry = [&](const Eigen::Vector3d& v) {
     const Eigen::Vector3d m = a - v;
     const double bh = m.dot(d), c = m.squaredNorm() - r2;
-    if (c <= 0) return bh < 0 ? 0.0 : std::numeric_limits<double>::infinity();
+    if (c <= 0) return bh < -kGrazing * m.norm() * std::sqrt(dd) ? 0.0 : std::numeric_limits<double>::infinity();
     const double disc = bh * bh - dd * c;
     if (bh >= 0 || disc < 0) return std::numeric_limits<double>::infinity();
-    return (-bh - std::sqrt(disc)) / dd;
+    const double t = (-bh - std::sqrt(disc)) / dd;
+    // Grazing entry (the motion tangent to the sphere where it enters): not a contact.
+    const Eigen::Vector3d nrm = m + t * d;
+    return -nrm.dot(d) < kGrazing * nrm.norm() * std::sqrt(dd) ? std::numeric_limits<double>::infinity() : t;
   };
   // Entry into the cylinder of radius `radius` about the edge e0-e1 (within its length; the ends are the
   // vertices' spheres). Ericson, Real-Time Collision Detection 5.3.7.
@@ -316,7 +326,8 @@ SegmentHit RigidSurface::segment_hit(const Eigen::Vector3d& a, const Eigen::Vect
     const double qb = ee * m.dot(d) - md * de, qc = ee * (m.squaredNorm() - r2) - md * md;
     double t;
     if (qc <= 0) {  // already within the radius of the edge's line: a hit only when closing in on it
-      if (qb >= 0) return std::numeric_limits<double>::infinity();
+      const double m_perp = std::sqrt(std::max(0.0, m.squaredNorm() - md * md / ee));
+      if (qb >= -kGrazing * ee * m_perp * std::sqrt(dd)) return std::numeric_limits<double>::infinity();
       t = 0;
     } else {
       const double disc = qb * qb - qa * qc;
@@ -324,7 +335,11 @@ SegmentHit RigidSurface::segment_hit(const Eigen::Vector3d& a, const Eigen::Vect
       t = (-qb - std::sqrt(disc)) / qa;
     }
     const double s = (md + t * de) / ee;
-    return s >= 0 && s <= 1 ? t : std::numeric_limits<double>::infinity();
+    if (s < 0 || s > 1) return std::numeric_limits<double>::infinity();
+    // Grazing entry (the motion tangent to the cylinder where it enters, as when sliding on two coplanar triangles
+    // across their shared edge): not a contact.
+    const Eigen::Vector3d nrm = m + t * d - s * e;
+    return t > 0 && -nrm.dot(d) < kGrazing * nrm.norm() * std::sqrt(dd) ? std::numeric_limits<double>::infinity() : t;
   };
   const Eigen::Vector3d lo = (a.cwiseMin(b).array() - radius).matrix(), hi = (a.cwiseMax(b).array() + radius).matrix();
   for_each_in_box(lo, hi, [&](int f) {
@@ -335,7 +350,7 @@ SegmentHit RigidSurface::segment_hit(const Eigen::Vector3d& a, const Eigen::Vect
     // The face, offset by the radius towards the side `a` is on.
     const double s0 = n.dot(a - v0), sd = n.dot(d);
     const double side = s0 >= 0 ? 1.0 : -1.0;
-    if (side * sd < 0) {
+    if (side * sd < -kGrazing * std::sqrt(dd)) {
       const double tf = std::max(0.0, (side * s0 - radius) / (-side * sd));
       if (tf <= 1) {
         const Eigen::Vector3d c = a + tf * d;
