@@ -29,8 +29,9 @@ struct TickRecord;
 
 /// One contact entry of a ContactFrame (what the visual node needs to deform the organ).
 struct ContactEntry {
-  int node = 0;
+  int node = 0;                                       // the organ's node
   int instrument = 0;                                 // whose contact holds the node (the first, when shared)
+  int organ = 0;                                      // the organ's index in the scene (0 in a one-organ scene)
   Eigen::Vector3d lambda = Eigen::Vector3d::Zero();   // N, contact force on the node
   Eigen::Vector3d u_tilde = Eigen::Vector3d::Zero();  // m, corrected constraint displacement (liver multirate:
                                                       // the node's imposed displacement this tick)
@@ -56,10 +57,12 @@ struct RecordVec3 {
 struct ContactRecord {
   int node = 0;
   int instrument = 0;
+  int organ = 0;
   RecordVec3 lambda;   // N
   RecordVec3 u_tilde;  // m
   ContactRecord() = default;
-  ContactRecord(const ContactEntry& e) : node(e.node), instrument(e.instrument), lambda(e.lambda), u_tilde(e.u_tilde) {}
+  ContactRecord(const ContactEntry& e)  // NOLINT: implicit by design
+      : node(e.node), instrument(e.instrument), organ(e.organ), lambda(e.lambda), u_tilde(e.u_tilde) {}
 };
 
 /// What an organ publishes for one tick, copied out on the loop thread (fill_outputs) and written on the publisher

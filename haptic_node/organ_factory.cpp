@@ -1,8 +1,10 @@
 // The one place the haptic node looks at the scene's model: adding an organ is one implementation and one line here.
 #include "core/error.h"
 #include "organ.h"
+#include "organs/composite_organ.h"
 #include "organs/intestine_organ.h"
 #include "organs/liver_organ.h"
+#include "organs/rigid_organ.h"
 
 using namespace surgsim::core;
 using namespace surgsim::scene;
@@ -11,6 +13,32 @@ namespace surgsim {
 
 std::unique_ptr<HapticOrgan> make_haptic_organ(const Scene& scene, const std::string& cache_dir, std::uint64_t ticks,
                                                std::ostream* progress, const OrganBuildOptions& build) {
+  if (scene.organ_list()) {
+    // Every organ of the list, each built as its own one-organ scene in the scene's frame.
+    std::vector<CompositeOrgan::Part> parts;
+    int body_states = 0;  // organs publishing BodyState (the intestine, the multirate liver): one topic until v3
+    for (std::size_t k = 0; k < scene.organs.size(); ++k) {
+      const OrganSpec& o = scene.organs[k];
+      if (progress != nullptr) {
+        *progress << "organ " << k + 1 << "/" << scene.organs.size() << ": '" << o.name << "' (" << o.model << ")\n";
+      }
+      const Scene one = scene.organ_scene(k);
+      std::unique_ptr<HapticOrgan> organ;
+      if (o.model == "rigid") {
+        organ = std::make_unique<RigidOrgan>(one);
+      } else {
+        organ = make_haptic_organ(one, cache_dir, ticks, progress, build);
+      }
+      const bool publishes_body =
+          o.model == "intestine" || (o.model == "liver" && o.liver.deformation == compliance::LiverDeformation::kMultirate);
+      if (publishes_body && ++body_states > 1) {
+        throw_error(scene.file, ":", o.line, ": key '", o.key, "': a second organ with a body of its own to publish "
+                    "(intestine or multirate liver) (keep one such organ per scene: the BodyState topic carries one)");
+      }
+      parts.push_back({o.name, std::move(organ)});
+    }
+    return std::make_unique<CompositeOrgan>(std::move(parts));
+  }
   if (scene.model == "liver") {
     return std::make_unique<LiverOrgan>(scene, cache_dir, progress, true, build.tracker_threads, build.unpaced);
   }

@@ -45,6 +45,12 @@ TetMesh load_scene_mesh(const Scene& scene, const std::string& cache_dir, std::o
   try {
     TetMesh mesh = read_mesh(path);
     validate_mesh(mesh);
+    // A placed organ (an entry of an `organs:` list): its mesh in the scene's frame. A rigid motion keeps the mesh
+    // valid and its tets positively oriented; the tensors are computed on the placed mesh (its hash keys them).
+    if (!scene.placement.identity()) {
+      mesh.nodes = (mesh.nodes * scene.placement.rotation.transpose()).rowwise() +
+                   scene.placement.translation.transpose();
+    }
     return mesh;
   } catch (const Error& e) {
     throw_error(scene.file, ": mesh of scene '", scene.name, "': ", e.what());
