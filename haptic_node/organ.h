@@ -14,6 +14,7 @@
 #include <memory>
 #include <nlohmann/json_fwd.hpp>
 #include <string>
+#include <vector>
 
 #include "scene/scene.h"
 #include "compliance/superposition.h"
@@ -76,6 +77,16 @@ struct OrganOutputs {
   std::array<ContactRecord, kMaxContactEntries> contacts;
 };
 
+/// One organ's identity as SceneInfo carries it (init only).
+struct OrganIdentity {
+  std::string name;     // the scene's organ name ("" for the organ of a single-organ scene: the scene's name then)
+  std::string model;    // "liver", "intestine", "rigid"
+  std::uint64_t mesh_hash = 0;
+  std::uint64_t tensor_hash = 0;
+  std::uint32_t node_count = 0;
+  std::uint32_t surface_node_count = 0;
+};
+
 class HapticOrgan {
  public:
   virtual ~HapticOrgan() = default;
@@ -117,6 +128,11 @@ class HapticOrgan {
   virtual std::uint32_t surface_node_count() const = 0;
   /// True when a quasi non-linear force law bends the linear force (stats nonlinear_law).
   virtual bool nonlinear_law() const { return false; }
+
+  /// Init: every organ this one is made of, in the scene's order (one: itself, unnamed; CompositeOrgan: each part).
+  virtual std::vector<OrganIdentity> identities() const {
+    return {OrganIdentity{"", model_name(), mesh_hash(), tensor_hash(), node_count(), surface_node_count()}};
+  }
 
   /// Positions the organ publishes per tick (sizes OrganOutputs::points once, at init).
   virtual int output_points() const { return 0; }

@@ -114,6 +114,17 @@ bool CompositeOrgan::nonlinear_law() const {
   return std::any_of(parts_.begin(), parts_.end(), [](const Part& p) { return p.organ->nonlinear_law(); });
 }
 
+std::vector<OrganIdentity> CompositeOrgan::identities() const {
+  std::vector<OrganIdentity> out;
+  for (const Part& p : parts_) {
+    for (OrganIdentity id : p.organ->identities()) {
+      id.name = p.name;
+      out.push_back(std::move(id));
+    }
+  }
+  return out;
+}
+
 void CompositeOrgan::fill_outputs(OrganOutputs& out) const noexcept {
   // Contact entries of every organ, tagged with the organ's index.
   const int n = contact_entries();

@@ -42,6 +42,7 @@ class CompositeOrgan final : public HapticOrgan {
   std::uint32_t node_count() const override;
   std::uint32_t surface_node_count() const override;
   bool nonlinear_law() const override;
+  std::vector<OrganIdentity> identities() const override;
   /// Every organ's points, concatenated in the organs' order.
   int output_points() const override { return point_offsets_.back(); }
   void fill_outputs(OrganOutputs& out) const noexcept override;
