@@ -133,6 +133,10 @@ class HapticOrgan {
   virtual std::vector<OrganIdentity> identities() const {
     return {OrganIdentity{"", model_name(), mesh_hash(), tensor_hash(), node_count(), surface_node_count()}};
   }
+  /// Init, before create_writers(): this organ's index in the scene's organs list (CompositeOrgan tells each part;
+  /// 0 for the organ of a one-organ scene). The organ's own topics carry it (BodyState.organ, the key).
+  virtual void set_organ_index(int index) { organ_index_ = index; }
+  int organ_index() const { return organ_index_; }
 
   /// Positions the organ publishes per tick (sizes OrganOutputs::points once, at init).
   virtual int output_points() const { return 0; }
@@ -155,6 +159,9 @@ class HapticOrgan {
   /// Shutdown: the organ's own entries in the stats JSON, and its summary line (nothing when it has none).
   virtual void add_stats(nlohmann::json& stats) const {}
   virtual void print_summary(std::ostream& out) const {}
+
+ protected:
+  int organ_index_ = 0;  // set_organ_index()
 };
 
 /// How the node builds its organ beyond the scene (command-line settings that change no physics).

@@ -17,7 +17,8 @@ std::unique_ptr<OrganView> make_organ_view(const Scene& scene, const OrganViewOp
   // The intestine: a skinned tube and the mesentery from BodyStates; no tetrahedral mesh (hash 0, as in the haptic
   // node), no tensors, no deformer.
   if (scene.model == "intestine") {
-    return std::make_unique<IntestineOrganView>(scene, visual_scene_hash(scene, 0), options.tube_skinning);
+    return std::make_unique<IntestineOrganView>(scene, visual_scene_hash(scene, 0), options.tube_skinning,
+                                                options.organ_index);
   }
   if (scene.model == "liver") return std::make_unique<LiverView>(scene, options);
   // An organ this node cannot draw is refused, as the haptic node refuses one it cannot simulate (it used to be drawn

@@ -16,6 +16,8 @@ CompositeOrgan::CompositeOrgan(std::vector<Part> parts) : parts_(std::move(parts
   if (parts_.empty() || parts_.size() > static_cast<std::size_t>(scene::kMaxOrgans)) {
     core::throw_error("CompositeOrgan: ", parts_.size(), " organs (1..", scene::kMaxOrgans, ")");
   }
+  // Each part learns its index in the scene's organs list (its own topics carry it: BodyState.organ).
+  for (std::size_t k = 0; k < parts_.size(); ++k) parts_[k].organ->set_organ_index(static_cast<int>(k));
   ticks_.resize(parts_.size());
   point_offsets_.assign(1, 0);
   for (const Part& p : parts_) point_offsets_.push_back(point_offsets_.back() + p.organ->output_points());
