@@ -138,10 +138,11 @@ TEST(CompositeOrgan, TheSumIsClampedOnceInTheForceStage) {
       "  - name: side\n"
       "    model: rigid\n"
       "    rigid: {generate: plane, size: [0.1, 0.1, 0], stiffness: 2000, damping: 0}\n"
-      "    placement: {translation: [0, 0, 0], rotation_deg: [0, 90, 0]}\n"  // normal +x: free side x > 0
+      "    placement: {translation: [0, 0, 0.05], rotation_deg: [0, 90, 0]}\n"  // x = 0, z in [0, 0.1], normal +x
       "  - name: floor\n"
       "    model: rigid\n"
-      "    rigid: {generate: plane, size: [0.1, 0.1, 0], stiffness: 2000, damping: 0}\n";  // normal +z
+      "    rigid: {generate: plane, size: [0.1, 0.1, 0], stiffness: 2000, damping: 0}\n"
+      "    placement: {translation: [0.05, 0, 0]}\n";  // z = 0, x in [0, 0.1], normal +z: they meet along an edge
   const Scene s = load_scene(write(dir / "corner.yaml",
                                    "name: corner\ntools:\n  - {name: probe, trocar: [0.02, 0.0, 0.2], axis: [0, 0, -1], "
                                    "shaft_points: 1, tip_radius: 0.005, force_limit: 8}\norgans:\n" +
