@@ -732,7 +732,7 @@ RigidSpec read_rigid(const Reader& r, const Field& f) {
     only_for("arc_deg", {"ribs"});
     only_for("open_z", {"dome"});
     if (m.has("count")) g.count = r.integer(m.at("count"), 1, 24, "rib arcs, 1..24");
-    if (m.has("arc_deg")) g.arc_deg = r.number(m.at("arc_deg"), {0, 360, true, false}, "degrees, (0, 360]");
+    if (m.has("arc_deg")) g.arc_deg = r.number(m.at("arc_deg"), {0, 360, true, true}, "degrees, (0, 360)");
     if (m.has("open_z")) {
       g.dome_open_z = r.number(m.at("open_z"), {-1, 1, false, true},
                                "where the dome is cut, as a fraction of its z radius, [-1, 1): 0 = a half dome");

@@ -67,11 +67,12 @@ struct RigidSpec {
                                                            // length, -]; dome radii; ribs [arc radius, spacing, bar
                                                            // radius]
   int count = 5;               // ribs: the number of rib arcs, 1..24
-  double arc_deg = 150;        // ribs: the angle each arc spans, (0, 360]
+  double arc_deg = 150;        // ribs: the angle each arc spans, (0, 360)
   double dome_open_z = 0;      // dome: the dome is cut at z = dome_open_z * radii.z (open below), [-1, 1)
   bool cavity = false;         // the free side is inside (the abdominal wall seen from the abdomen)
   double stiffness = 2000.0;   // N/m, the virtual coupling's spring (default: the 2 N/mm a desktop device renders)
-  double damping = 5.0;        // N s/m, the coupling's damper on the gap's rate, 0..1000
+  double damping = 15.0;       // N s/m, the coupling's damper on the gap's rate, 0..1000 (rigid/proxy.h: passive
+                               // at 1 kHz for light to heavy devices with k = 2000 N/m)
 };
 
 /// One organ of a scene: its name, its model and that model's keys, and its placement. A one-organ scene written in

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "mesher/scene_mesh.h"
 #include "scene/scene.h"
 
 namespace surgsim {
@@ -89,15 +90,15 @@ ContactEntry CompositeOrgan::contact_entry(int l) const noexcept {
 }
 
 std::uint64_t CompositeOrgan::mesh_hash() const {
-  std::uint64_t h = 0x5eed0f0a9a115ull;
-  for (const Part& p : parts_) h = (h ^ p.organ->mesh_hash()) * 0x100000001B3ull + 0x9E3779B97F4A7C15ull;
-  return h;
+  std::vector<std::uint64_t> hashes;
+  for (const Part& p : parts_) hashes.push_back(p.organ->mesh_hash());
+  return mesher::combine_organ_hashes(hashes);
 }
 
 std::uint64_t CompositeOrgan::tensor_hash() const {
-  std::uint64_t h = 0x7e550a9a115ull;
-  for (const Part& p : parts_) h = (h ^ p.organ->tensor_hash()) * 0x100000001B3ull + 0x9E3779B97F4A7C15ull;
-  return h;
+  std::vector<std::uint64_t> hashes;
+  for (const Part& p : parts_) hashes.push_back(p.organ->tensor_hash());
+  return mesher::combine_organ_hashes(hashes);
 }
 
 std::uint32_t CompositeOrgan::node_count() const {

@@ -6,9 +6,7 @@
 #include <ostream>
 
 #include "core/error.h"
-#include "core/hash.h"
-#include "mesh/mesh.h"
-#include "rigid/rigid_shapes.h"
+#include "mesher/scene_mesh.h"
 
 namespace surgsim {
 
@@ -18,54 +16,12 @@ namespace {
 // the sum of the organs' forces to the device's).
 constexpr double kProxyForceGuard = 1e4;
 
-std::string organ_where(const scene::Scene& scene) {
-  const scene::OrganSpec& o = scene.organs.at(0);
-  return scene.file + ":" + std::to_string(o.line) + ": organ '" + o.name + "' (key '" + o.key + ".rigid')";
-}
-
 }  // namespace
-
-mesh::TriSurface rigid_organ_surface(const scene::Scene& scene) {
-  const scene::RigidSpec& g = scene.rigid;
-  mesh::TriSurface local;
-  try {
-    if (!g.file.empty()) {
-      local = mesh::read_obj(g.file);
-    } else if (g.generate == "plane") {
-      local = rigid::plane_patch(g.size.x(), g.size.y(), 16);
-    } else if (g.generate == "box") {
-      local = rigid::box_surface(g.size / 2, 8);
-    } else if (g.generate == "tube") {
-      local = rigid::tube_surface(g.size.x(), g.size.y(), 32, 16, true);
-    } else if (g.generate == "dome") {
-      local = rigid::ellipsoid_shell(g.size, 96, 48, g.dome_open_z);
-    } else if (g.generate == "ribs") {
-      rigid::RibsSpec ribs;
-      ribs.count = g.count;
-      ribs.arc_radius = g.size.x();
-      ribs.spacing = g.size.y();
-      ribs.tube_radius = g.size.z();
-      ribs.arc_deg = g.arc_deg;
-      local = rigid::ribs(ribs);
-    } else {
-      core::throw_error("no surface: neither a file nor a known generator ('", g.generate, "')");
-    }
-  } catch (const core::Error& e) {
-    core::throw_error(organ_where(scene), ": ", e.what());
-  }
-  return rigid::placed(local, scene.placement);
-}
 
 RigidOrgan::RigidOrgan(const scene::Scene& scene)
     : name_(scene.organs.at(0).name),
-      surface_(rigid_organ_surface(scene), scene.rigid.cavity, organ_where(scene)) {
-  const mesh::TriSurface& s = surface_.surface();
-  core::Hasher h;
-  h.str("rigid-surface");
-  h.value<std::uint8_t>(scene.rigid.cavity);
-  h.bytes(s.vertices.data(), static_cast<std::size_t>(s.vertices.size()) * sizeof(double));
-  h.bytes(s.tris.data(), static_cast<std::size_t>(s.tris.size()) * sizeof(int));
-  surface_hash_ = h.digest();
+      surface_(mesher::load_scene_surface(scene), scene.rigid.cavity, mesher::organ_where(scene)),
+      surface_hash_(mesher::rigid_surface_hash(surface_.surface(), scene.rigid.cavity)) {
   proxies_.reserve(scene.tools.size());
   for (const tool::ToolSpec& t : scene.tools) {
     rigid::ProxyParams p;

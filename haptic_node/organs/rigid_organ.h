@@ -19,13 +19,10 @@
 
 namespace surgsim {
 
-/// The surface a rigid organ's spec describes, in the scene's frame (scene.rigid, scene.placement: an organ_scene()).
-/// Throws surgsim::core::Error naming the scene file and the organ's key.
-mesh::TriSurface rigid_organ_surface(const scene::Scene& scene);
-
 class RigidOrgan final : public HapticOrgan {
  public:
-  /// Init: the surface of scene.rigid placed by scene.placement, one proxy per instrument (radius its tip_radius).
+  /// Init: the surface of scene.rigid placed by scene.placement (mesher::load_scene_surface), one proxy per
+  /// instrument (radius its tip_radius).
   explicit RigidOrgan(const scene::Scene& scene);
 
   const char* model_name() const override { return "rigid"; }

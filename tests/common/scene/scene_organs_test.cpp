@@ -101,7 +101,7 @@ TEST(SceneOrgans, ListGivesEachOrganItsModelKeysAndPlacement) {
   EXPECT_EQ(s.organs[2].rigid.generate, "dome");
   EXPECT_TRUE(s.organs[2].rigid.cavity);
   EXPECT_DOUBLE_EQ(s.organs[2].rigid.stiffness, 1500);
-  EXPECT_DOUBLE_EQ(s.organs[2].rigid.damping, 5.0);  // the default
+  EXPECT_DOUBLE_EQ(s.organs[2].rigid.damping, 15.0);  // the default
   EXPECT_TRUE(s.organs[2].placement.identity());
   ASSERT_EQ(s.tools.size(), 2u);
 }
