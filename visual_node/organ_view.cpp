@@ -29,9 +29,11 @@ std::unique_ptr<OrganView> make_organ_view(const Scene& scene, const OrganViewOp
         *options.log << "organ " << k + 1 << "/" << scene.organs.size() << ": '" << o.name << "' (" << o.model << ")\n";
       }
       const Scene one = scene.organ_scene(k);
+      OrganViewOptions part = options;
+      part.organ_index = static_cast<int>(k);  // the contact entries and BodyStates it draws (wire v3)
       parts[k].name = o.name;
       parts[k].view = o.model == "rigid" ? std::unique_ptr<OrganView>(std::make_unique<RigidView>(one))
-                                         : make_organ_view(one, options);
+                                         : make_organ_view(one, part);
       hashes[k] = parts[k].view->mesh_hash();
     }
     const std::uint64_t whole = visual_scene_hash(scene, mesher::combine_organ_hashes(hashes));
@@ -39,7 +41,8 @@ std::unique_ptr<OrganView> make_organ_view(const Scene& scene, const OrganViewOp
       const OrganSpec& o = scene.organs[k];
       if (o.model != "intestine") continue;
       parts[k].name = o.name;
-      parts[k].view = std::make_unique<IntestineOrganView>(scene.organ_scene(k), whole, options.tube_skinning);
+      parts[k].view =
+          std::make_unique<IntestineOrganView>(scene.organ_scene(k), whole, options.tube_skinning, static_cast<int>(k));
     }
     return std::make_unique<CompositeView>(std::move(parts));
   }

@@ -58,7 +58,8 @@ double CompositeView::update(const msg::ContactFrame* frame, bool fresh) noexcep
     if (frame != nullptr) {
       msg::ContactFrame& f = frames_[k];
       if (fresh) {
-        // The header and instruments as sent, the entries of organ k only (renumbered as a one-organ frame's).
+        // The header and instruments as sent, the entries of organ k only (they keep their organ, k: view k draws
+        // organ k, OrganViewOptions::organ_index).
         f.seq(frame->seq());
         f.stamp_ns(frame->stamp_ns());
         f.scene_hash(frame->scene_hash());
@@ -69,7 +70,6 @@ double CompositeView::update(const msg::ContactFrame* frame, bool fresh) noexcep
         for (const auto& e : frame->contacts()) {
           if (e.organ() != k) continue;
           f.contacts().push_back(e);
-          f.contacts().back().organ(0);
         }
       }
       mine = &f;

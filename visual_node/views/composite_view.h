@@ -1,7 +1,8 @@
 // Several organs in the visual node (a scene with an `organs:` list): one view per organ (views/liver_view.h,
 // views/intestine_view.h, views/rigid_view.h), updated and drawn together in one picture. Each view sees the contact
 // frames as a one-organ scene would: a copy of the frame holding only its own organ's contact entries (ContactEntry
-// organ = its index in the scene), made into storage sized at init, so a frame allocates nothing.
+// organ = its index in the scene, which each view is built with: OrganViewOptions::organ_index, also the BodyState
+// key it reads), made into storage sized at init, so a frame allocates nothing.
 #pragma once
 #include <memory>
 #include <string>
