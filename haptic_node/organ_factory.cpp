@@ -37,6 +37,7 @@ void check_organs_apart(const Scene& scene, const std::vector<CompositeOrgan::Pa
     } else if (const auto* wall = dynamic_cast<const RigidOrgan*>(organ)) {
       shapes.push_back(
           mesher::rest_shape_of_surface(wall->surface().surface(), wall->surface().cavity(), parts[k].name, where));
+      shapes.back().rigid = true;
     }
   }
   mesher::check_organs_apart(shapes, kRestOverlapTolerance);

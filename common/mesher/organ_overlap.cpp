@@ -88,7 +88,7 @@ double deepest_penetration(const RestShape& a, const RestShape& b, Eigen::Vector
 void check_organs_apart(const std::vector<RestShape>& shapes, double tolerance) {
   for (std::size_t i = 0; i < shapes.size(); ++i) {
     for (std::size_t j = 0; j < shapes.size(); ++j) {
-      if (i == j) continue;
+      if (i == j || (shapes[i].rigid && shapes[j].rigid)) continue;
       Eigen::Vector3d at = Eigen::Vector3d::Zero();
       const double depth = deepest_penetration(shapes[i], shapes[j], &at);
       if (depth > tolerance) {

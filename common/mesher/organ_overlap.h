@@ -25,6 +25,8 @@ struct RestShape {
   std::shared_ptr<const rigid::RigidSurface> surface;
   /// A tube: the centre line through the samples in order, radius sample_radius.
   bool tube = false;
+  /// A rigid organ: two rigid organs may overlap (a rib set into the wall pushes nothing: neither moves).
+  bool rigid = false;
 };
 
 /// A closed organ's boundary (a TetMesh's boundary triangles, outward) as a RestShape, and a rigid organ's surface.
@@ -44,7 +46,7 @@ double deepest_penetration(const RestShape& a, const RestShape& b, Eigen::Vector
 
 /// Throws surgsim::core::Error "<where of a>: organ 'A' lies X mm inside organ 'B' (at [x, y, z]) at rest, more than
 /// the T mm allowed (<where of b>) (move them apart: change a placement)" for the first pair that interpenetrates
-/// deeper than `tolerance` (m).
+/// deeper than `tolerance` (m). Pairs of two rigid organs are not checked.
 void check_organs_apart(const std::vector<RestShape>& shapes, double tolerance);
 
 }  // namespace surgsim::mesher
