@@ -73,8 +73,14 @@ bool DataWriter::write(void* data) {
       w.node_count = s->node_count();
       w.surface_node_count = s->surface_node_count();
       for (const surgsim::msg::OrganInfo& o : s->organs()) {
-        w.organs.push_back(
-            {o.name(), o.model(), o.mesh_hash(), o.tensor_hash(), o.node_count(), o.surface_node_count()});
+        surgsim::test::OrganInfoWrite x;
+        x.name = o.name();
+        x.model = o.model();
+        x.mesh_hash = o.mesh_hash();
+        x.tensor_hash = o.tensor_hash();
+        x.node_count = o.node_count();
+        x.surface_node_count = o.surface_node_count();
+        w.organs.push_back(x);
       }
     }
     std::lock_guard<std::mutex> lock(surgsim::test::g_mutex);
