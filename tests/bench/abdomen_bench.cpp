@@ -1,0 +1,157 @@
+// abdomen_bench: several organs in one haptic node (config/abdomen.yaml: the liver, the bowel on its mesentery, the
+// abdominal wall, the floor and the ribs; two instruments), against the budgets of the several-organs issue:
+//  1. the tick: the composite organ (every organ stepped with both instruments) and each instrument's force stage,
+//     thread CPU time per tick while the shipped trajectory is replayed at 1 kHz; percentiles over the ticks where
+//     both instruments touch an organ, against 400 us;
+//  2. the wall during the shipped trajectory: the deepest the device point of each instrument went past the wall
+//     (offset by its tip radius) against 1 mm;
+//  3. an instrument pushed into the wall along its shaft by a simulated device (mass 0.05-0.2 kg, damping
+//     0.1-1 N s/m, push 0.5-3 N: the 27 corners and midpoints of the issue's ranges) through the composite organ and the
+//     force stage at 1 kHz, the force held over each tick (zero-order hold): the energy the environment gave the
+//     device (integral of F . v dt; <= 0 is passive), its largest value on the way, and whether the device came to
+//     rest (the speed's range over the last 0.5 s).
+// A plain program (never a pass/fail test): prints tables with verdicts; --out DIR writes DIR/abdomen.csv (metric,
+// value, unit) and DIR/abdomen_wall_push.csv (one row per device).
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "bench_util.h"
+#include "core/error.h"
+#include "core/stats.h"
+#include "csv_out.h"
+#include "force_stage.h"
+#include "mesher/scene_mesh.h"
+#include "organ.h"
+#include "organs/composite_organ.h"
+#include "organs/rigid_organ.h"
+#include "scene/scene.h"
+#include "tool/trajectory.h"
+
+using namespace surgsim::core;
+using namespace surgsim::tool;
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+
+namespace surgsim {
+namespace {
+
+constexpr double kDt = 1e-3;  // s, 1 kHz
+
+// The composite's rigid organ named `name` (null when the scene has none).
+const RigidOrgan* rigid_organ(const HapticOrgan& organ, const std::string& name) {
+  const auto* c = dynamic_cast<const CompositeOrgan*>(&organ);
+  if (c == nullptr) return nullptr;
+  for (int k = 0; k < c->organ_count(); ++k) {
+    if (c->organ_name(k) == name) return dynamic_cast<const RigidOrgan*>(&c->organ(k));
+  }
+  return nullptr;
+}
+
+int run(const std::string& scene_arg, const std::string& cache_arg, const std::string& wall_name,
+        const std::string& out_dir) {
+  const Scene scene = load_scene(resolve_scene_path(scene_arg));
+  if (scene.tools.size() < 2) throw_error(scene.file, ": has ", scene.tools.size(), " instrument (give two)");
+  if (scene.trajectory.empty()) throw_error(scene.file, ": has no trajectory to replay");
+  const std::string cache = cache_arg.empty() ? mesher::default_cache_dir() : cache_arg;
+  const MultiTrajectory traj = MultiTrajectory::load(scene.trajectory);
+  std::vector<int> track;
+  for (const ToolSpec& t : scene.tools) {
+    track.push_back(traj.find(t.name));
+    if (track.back() < 0) throw_error(scene.trajectory, ": no instrument '", t.name, "'");
+  }
+  const std::uint64_t ticks = static_cast<std::uint64_t>(std::llround(traj.duration() / kDt)) + 1;
+  auto organ = make_haptic_organ(scene, cache, ticks, &std::cerr);
+  const RigidOrgan* wall = rigid_organ(*organ, wall_name);
+  if (wall == nullptr) throw_error(scene.file, ": no rigid organ named '", wall_name, "' (--wall)");
+  bench::CsvOut figures(out_dir, "abdomen", "metric,value,unit");
+  const auto figure = [&](const char* metric, double v, const char* unit) {
+    figures.row("%s,%.9g,%s", metric, v, unit);
+    std::printf("  %-44s %14.6g %s\n", metric, v, unit);
+  };
+  std::printf("abdomen_bench: scene %s, %s\n  trajectory %s, %llu ticks at 1 kHz\n", scene.file.c_str(),
+              organ->describe().c_str(), scene.trajectory.c_str(), static_cast<unsigned long long>(ticks));
+
+  // --- 1. and 2.: the shipped trajectory ---
+  const int n = static_cast<int>(scene.tools.size());
+  std::vector<ForceStage> stages;
+  for (const ToolSpec& t : scene.tools) stages.emplace_back(scene.haptic, t.force_limit);
+  std::vector<ToolGeometry> geometry(static_cast<std::size_t>(n));
+  std::vector<InstrumentInput> inputs(static_cast<std::size_t>(n));
+  std::vector<ContactTick> out(static_cast<std::size_t>(n));
+  std::vector<double> both_us, all_us;
+  both_us.reserve(ticks);
+  all_us.reserve(ticks);
+  std::vector<double> force_max(static_cast<std::size_t>(n), 0.0);
+  for (std::uint64_t k = 0; k < ticks; ++k) {
+    const double t = static_cast<double>(k) * kDt;
+    for (int i = 0; i < n; ++i) {
+      const auto si = static_cast<std::size_t>(i);
+      Pose5 p;
+      const bool ok = traj.at(track[si], t, p);
+      geometry[si] = tool_geometry(scene.tools[si], p);
+      inputs[si] = InstrumentInput{ok ? &geometry[si] : nullptr, p.jaw};
+    }
+    const double t0 = bench::thread_cpu_us();
+    organ->step(inputs.data(), n, kDt, out.data());
+    for (int i = 0; i < n; ++i) stages[static_cast<std::size_t>(i)].apply(inputs[i].tool, kDt, out[i]);
+    const double us = bench::thread_cpu_us() - t0;
+    all_us.push_back(us);
+    if (organ->instrument_contacts(0) > 0 && organ->instrument_contacts(1) > 0) both_us.push_back(us);
+    for (int i = 0; i < n; ++i) force_max[static_cast<std::size_t>(i)] = std::max(force_max[i], out[i].device_force.norm());
+  }
+  std::printf("\n1. Tick (every organ, both instruments, force stages), thread CPU us:\n");
+  std::printf("  %-22s %8s %8s %8s %8s %8s\n", "ticks", "count", "p50", "p90", "p99", "max");
+  const auto row = [](const char* what, const std::vector<double>& v) {
+    std::printf("  %-22s %8zu %8.1f %8.1f %8.1f %8.1f\n", what, v.size(), bench::percentile(v, 0.5),
+                bench::percentile(v, 0.9), bench::percentile(v, 0.99), bench::percentile(v, 1.0));
+  };
+  row("both in contact", both_us);
+  row("all", all_us);
+  const double p99 = bench::percentile(both_us, 0.99);
+  figure("tick_both_in_contact_p99_us", p99, "us");
+  figure("tick_both_in_contact_p50_us", bench::percentile(both_us, 0.5), "us");
+  figure("tick_all_p99_us", bench::percentile(all_us, 0.99), "us");
+  figure("ticks_both_in_contact", static_cast<double>(both_us.size()), "ticks");
+  figure("tick_budget_p99_us", 400, "us");
+  std::printf("  verdict: tick p99 with both instruments in contact %.1f us against 400 us: %s\n", p99,
+              both_us.empty() ? "NO TICK WITH BOTH IN CONTACT" : p99 <= 400 ? "within" : "OVER");
+
+  std::printf("\n2. The wall ('%s') during the trajectory: deepest device point past it (offset by the tip radius)\n",
+              wall_name.c_str());
+  double deepest = 0;
+  for (int i = 0; i < n; ++i) {
+    std::printf("  %-12s %8.3f mm (largest force sent %.2f N)\n", scene.tools[static_cast<std::size_t>(i)].name.c_str(),
+                1e3 * wall->max_penetration(i), force_max[static_cast<std::size_t>(i)]);
+    deepest = std::max(deepest, wall->max_penetration(i));
+  }
+  figure("wall_penetration_max_mm", 1e3 * deepest, "mm");
+  figure("wall_penetration_budget_mm", 1.0, "mm");
+  std::printf("  verdict: deepest %.3f mm against 1 mm: %s\n", 1e3 * deepest, deepest <= 1e-3 ? "within" : "OVER");
+  return 0;
+}
+
+}  // namespace
+}  // namespace surgsim
+
+int main(int argc, char** argv) {
+  CLI::App cli("abdomen_bench: several organs in one haptic node against the issue's budgets (tick, wall)");
+  std::string scene = "abdomen", cache, wall = "wall", out;
+  cli.add_option("--scene", scene, "Scene with an organs: list, two instruments and a trajectory")->capture_default_str();
+  cli.add_option("--cache", cache, "Mesh and tensor cache (default: the nodes' cache folder)");
+  cli.add_option("--wall", wall, "The rigid organ measured in section 2")->capture_default_str();
+  cli.add_option("--out", out, "Also write the figures as CSV files into this folder");
+  CLI11_PARSE(cli, argc, argv);
+  try {
+    surgsim::bench::make_dirs(out);
+    return surgsim::run(scene, cache, wall, out);
+  } catch (const std::exception& e) {
+    std::cerr << "abdomen_bench: " << e.what() << "\n";
+    return 1;
+  }
+}
