@@ -239,10 +239,10 @@ def liver_field_local(x, y, z):
 
 
 def liver_touch(trocar, direction):
-    """Insertion at which the tip sphere's leading point along the shaft reaches the placed liver (0.1 mm steps)."""
+    """Insertion at which the tip (the leading point of the tip sphere) reaches the placed liver (0.1 mm steps)."""
     s = 0.0
     while s < 0.3:
-        p = tuple(trocar[i] + (s + ABD_TIP) * direction[i] - ABD_LIVER_AT[i] for i in range(3))
+        p = tuple(trocar[i] + s * direction[i] - ABD_LIVER_AT[i] for i in range(3))
         if liver_field_local(*p) > 0:
             return s
         s += 1e-4
@@ -250,8 +250,9 @@ def liver_touch(trocar, direction):
 
 
 def wall_insertion(trocar, direction, depth):
-    """Insertion putting the tip sphere `depth` past the inside of the dome along the shaft (its far crossing; the
-    wall's plane at that point)."""
+    """Insertion putting the tip sphere `depth` past the inside of the dome along the wall's normal (its far crossing
+    along the shaft; the wall's plane at that point). The sphere's centre is ABD_TIP behind the tip, its leading
+    point."""
     a, b, c = ABD_DOME
     o = (trocar[0] / a, trocar[1] / b, (trocar[2] - ABD_DOME_Z) / c)
     d = (direction[0] / a, direction[1] / b, direction[2] / c)
@@ -259,7 +260,7 @@ def wall_insertion(trocar, direction, depth):
     s_exit = (-qb + math.sqrt(qb * qb - 4 * qa * qc)) / (2 * qa)
     w = tuple(trocar[i] + s_exit * direction[i] for i in range(3))
     n = _unit((w[0] / a ** 2, w[1] / b ** 2, (w[2] - ABD_DOME_Z) / c ** 2))  # outward
-    return s_exit - (ABD_TIP - depth) / _dot(n, direction)
+    return s_exit + ABD_TIP - (ABD_TIP - depth) / _dot(n, direction)
 
 
 def wall_point(y, z):

@@ -28,6 +28,7 @@ RigidOrgan::RigidOrgan(const scene::Scene& scene)
     p.stiffness = scene.rigid.stiffness;
     p.damping = scene.rigid.damping;
     p.radius = t.tip_radius;
+    tip_radius_.at(proxies_.size()) = t.tip_radius;
     p.max_force = kProxyForceGuard;
     proxies_.emplace_back(surface_, p);
   }
@@ -41,17 +42,20 @@ void RigidOrgan::step(const contact::InstrumentInput* inputs, int count, double 
     contact::ContactTick& o = out[i];
     o = contact::ContactTick{};
     const tool::ToolGeometry* tool = inputs[i].tool;
-    if (tool == nullptr || !tool->tip.allFinite() || !(dt > 0)) {
+    if (tool == nullptr || !tool->tip.allFinite() || !tool->direction.allFinite() || !(dt > 0)) {
       tracking_[si] = false;  // input lost: the proxy starts again from the tip when it comes back
-      o.nonfinite = tool != nullptr && !tool->tip.allFinite();
+      o.nonfinite = tool != nullptr && !(tool->tip.allFinite() && tool->direction.allFinite());
       continue;
     }
     rigid::Proxy& proxy = proxies_[si];
+    // The instrument's end is a hemisphere of its tip radius whose leading point is the tip: as on a deformable
+    // organ, the contact begins when the tip itself reaches the surface.
+    const Eigen::Vector3d centre = tool->tip - tip_radius_[si] * tool->direction;
     if (!tracking_[si]) {
-      proxy.reset(tool->tip);
+      proxy.reset(centre);
       tracking_[si] = true;
     }
-    Eigen::Vector3d f = proxy.step(tool->tip, dt);
+    Eigen::Vector3d f = proxy.step(centre, dt);
     if (!f.allFinite()) {
       f.setZero();
       o.nonfinite = true;

@@ -1,9 +1,9 @@
 // A rigid organ in the haptic node (the abdominal wall, ribs, a spine segment: an entry `model: rigid` of a scene's
 // `organs:` list): a static triangle surface (rigid/rigid_surface.h) in the scene's frame, and for each instrument a
-// god-object proxy of its tip sphere (tool tip_radius) coupled to the device point by the scene's spring and damper
-// (rigid/proxy.h). A rigid organ has no compliance of its own: the coupling is the spring of the contact. It deforms
-// nothing, so it gives no contact entries and no points; its force joins the other organs' in CompositeOrgan, and
-// the force stage clamps the sum once.
+// god-object proxy of its tip sphere (tool tip_radius; the sphere's leading point is the tip) coupled to the device
+// point by the scene's spring and damper (rigid/proxy.h). A rigid organ has no compliance of its own: the coupling is
+// the spring of the contact. It deforms nothing, so it gives no contact entries and no points; its force joins the
+// other organs' in CompositeOrgan, and the force stage clamps the sum once.
 //
 // Phases as organ.h: the constructor allocates (the surface, its grid, the proxies); step() allocates nothing.
 #pragma once
@@ -52,6 +52,8 @@ class RigidOrgan final : public HapticOrgan {
   std::vector<rigid::Proxy> proxies_;  // one per instrument
   std::array<bool, tool::kMaxInstruments> tracking_{};  // the proxy follows a tip (false: reset at the next input)
   std::array<double, tool::kMaxInstruments> max_penetration_{};
+  std::array<double, tool::kMaxInstruments>
+      tip_radius_{};  // m, the proxy sphere's; its centre is this far behind the tip
   std::array<std::uint64_t, tool::kMaxInstruments> contact_ticks_{};
 };
 

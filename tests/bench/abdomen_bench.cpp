@@ -54,7 +54,7 @@ const RigidOrgan* rigid_organ(const HapticOrgan& organ, const std::string& name)
 }
 
 int run(const std::string& scene_arg, const std::string& cache_arg, const std::string& wall_name,
-        const std::string& out_dir) {
+        const Eigen::Vector3d& push_target, const std::string& out_dir) {
   const Scene scene = load_scene(resolve_scene_path(scene_arg));
   if (scene.tools.size() < 2) throw_error(scene.file, ": has ", scene.tools.size(), " instrument (give two)");
   if (scene.trajectory.empty()) throw_error(scene.file, ": has no trajectory to replay");
@@ -133,6 +133,104 @@ int run(const std::string& scene_arg, const std::string& cache_arg, const std::s
   figure("wall_penetration_max_mm", 1e3 * deepest, "mm");
   figure("wall_penetration_budget_mm", 1.0, "mm");
   std::printf("  verdict: deepest %.3f mm against 1 mm: %s\n", 1e3 * deepest, deepest <= 1e-3 ? "within" : "OVER");
+
+  // --- 3. the wall push ---
+  // The first instrument turned from its port towards `push_target` (a point of the wall clear of every other
+  // organ), its device a mass along the shaft pushed by a constant hand force; 1 cm short of the wall at rest.
+  std::printf("\n3. '%s' pushed along its shaft into '%s' by a simulated device at 1 kHz (zero-order hold%s)\n",
+              scene.tools[0].name.c_str(), wall_name.c_str(), ", without and with one tick of delay");
+  tool::ToolSpec pusher = scene.tools[0];
+  pusher.axis = (push_target - pusher.trocar).normalized();
+  // Where the shaft meets the wall: the first insertion at which the wall's proxy touches, found by stepping the
+  // wall alone (1 mm steps, the other instruments absent).
+  double reach = -1;
+  {
+    std::vector<InstrumentInput> none(static_cast<std::size_t>(n));
+    std::vector<ContactTick> o(static_cast<std::size_t>(n));
+    for (double s = 0.02; s < pusher.shaft_length && reach < 0; s += 1e-3) {
+      Pose5 p;
+      p.insertion = s;
+      const ToolGeometry g = tool_geometry(pusher, p);
+      none[0] = InstrumentInput{&g, 0.0};
+      organ->step(none.data(), n, kDt, o.data());
+      if (wall->instrument_contacts(0) > 0) reach = s;
+    }
+    none[0] = InstrumentInput{nullptr, 0.0};
+    for (int k = 0; k < 5; ++k) organ->step(none.data(), n, kDt, o.data());
+  }
+  if (reach < 0)
+    throw_error("--push-target: the shaft from '", scene.tools[0].name, "' towards it never meets '", wall_name, "'");
+  std::printf(
+      "  shaft [%s] from the port; meets the wall at insertion %.4f m; start 1 cm short, 3 s per run\n",
+      [&] {
+        char b[64];
+        std::snprintf(b, sizeof b, "%.3f %.3f %.3f", pusher.axis.x(), pusher.axis.y(), pusher.axis.z());
+        return std::string(b);
+      }()
+          .c_str(),
+      reach);
+  bench::CsvOut push_csv(out_dir, "abdomen_wall_push",
+                         "mass_kg,damping_ns_per_m,hand_n,delay_ticks,energy_final_j,energy_max_j,speed_range_last_s,"
+                         "force_final_over_hand,penetration_max_mm,settled");
+  std::printf("  %6s %6s %5s %5s %12s %12s %12s %8s %9s %s\n", "m kg", "b Ns/m", "F N", "delay", "E_end J", "E_max J",
+              "|v| range", "F/hand", "pen. mm", "rest");
+  int passive = 0, settled_count = 0, runs = 0;
+  double worst_energy = -1e300;
+  const int run_ticks = 3000, window_ticks = 500;
+  for (const double mass : {0.05, 0.125, 0.2}) {
+    for (const double damping : {0.1, 0.55, 1.0}) {
+      for (const double hand : {0.5, 1.75, 3.0}) {
+        for (const int delay : {0, 1}) {
+          ForceStage stage(scene.haptic, scene.tools[0].force_limit);
+          std::vector<InstrumentInput> in(static_cast<std::size_t>(n));
+          std::vector<ContactTick> o(static_cast<std::size_t>(n));
+          double x = reach - 0.01, v = 0, energy = 0, energy_max = 0, f_prev = 0, f_final = 0;
+          double v_lo = 1e300, v_hi = -1e300, pen_max = 0;
+          ToolGeometry g;
+          for (int k = 0; k < run_ticks; ++k) {
+            Pose5 p;
+            p.insertion = x;
+            g = tool_geometry(pusher, p);
+            in[0] = InstrumentInput{&g, 0.0};
+            organ->step(in.data(), n, kDt, o.data());
+            stage.apply(&g, kDt, o[0]);
+            const double f_now = o[0].device_force.dot(pusher.axis);
+            const double f = delay == 0 ? f_now : f_prev;  // the force the device holds over this tick
+            f_prev = f_now;
+            v += (hand - damping * v + f) / mass * kDt;  // semi-implicit Euler, as surgsim-device-sim --physical
+            x += v * kDt;
+            energy += f * v * kDt;
+            energy_max = std::max(energy_max, energy);
+            pen_max = std::max(pen_max, wall->proxy(0).in_contact() ? wall->proxy(0).penetration() : 0.0);
+            if (k >= run_ticks - window_ticks) {
+              v_lo = std::min(v_lo, v);
+              v_hi = std::max(v_hi, v);
+              f_final = f;
+            }
+          }
+          in[0] = InstrumentInput{nullptr, 0.0};
+          for (int k = 0; k < 5; ++k) organ->step(in.data(), n, kDt, o.data());  // away: the proxy resets
+          const bool rest = v_hi - v_lo < 1e-4;
+          ++runs;
+          passive += energy <= 1e-12 ? 1 : 0;
+          settled_count += rest ? 1 : 0;
+          worst_energy = std::max(worst_energy, energy);
+          std::printf("  %6.3f %6.2f %5.2f %5d %12.4g %12.4g %12.3g %8.3f %9.3f %s\n", mass, damping, hand, delay,
+                      energy, energy_max, v_hi - v_lo, -f_final / hand, 1e3 * pen_max, rest ? "yes" : "NO");
+          push_csv.row("%g,%g,%g,%d,%.9g,%.9g,%.9g,%.6g,%.6g,%d", mass, damping, hand, delay, energy, energy_max,
+                       v_hi - v_lo, -f_final / hand, 1e3 * pen_max, rest ? 1 : 0);
+        }
+      }
+    }
+  }
+  figure("wall_push_runs", runs, "runs");
+  figure("wall_push_passive_runs", passive, "runs");
+  figure("wall_push_settled_runs", settled_count, "runs");
+  figure("wall_push_energy_worst_j", worst_energy, "J");
+  std::printf(
+      "  verdict: %d of %d runs passive (environment's energy <= 0, worst %.3g J), %d of %d at rest over the "
+      "last 0.5 s: %s\n",
+      passive, runs, worst_energy, settled_count, runs, passive == runs && settled_count == runs ? "within" : "OVER");
   return 0;
 }
 
@@ -145,11 +243,17 @@ int main(int argc, char** argv) {
   cli.add_option("--scene", scene, "Scene with an organs: list, two instruments and a trajectory")->capture_default_str();
   cli.add_option("--cache", cache, "Mesh and tensor cache (default: the nodes' cache folder)");
   cli.add_option("--wall", wall, "The rigid organ measured in section 2")->capture_default_str();
+  std::vector<double> target = {0.19, -0.03, -0.05};
+  cli.add_option("--push-target", target,
+                 "Section 3: the wall point the first instrument is turned towards from its port (x y z, m; clear of "
+                 "the other organs)")
+      ->expected(3)
+      ->capture_default_str();
   cli.add_option("--out", out, "Also write the figures as CSV files into this folder");
   CLI11_PARSE(cli, argc, argv);
   try {
     surgsim::bench::make_dirs(out);
-    return surgsim::run(scene, cache, wall, out);
+    return surgsim::run(scene, cache, wall, Eigen::Vector3d(target[0], target[1], target[2]), out);
   } catch (const std::exception& e) {
     std::cerr << "abdomen_bench: " << e.what() << "\n";
     return 1;

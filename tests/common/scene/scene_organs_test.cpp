@@ -196,7 +196,9 @@ TEST_P(SceneOrganError, NamesFileLineAndKey) {
   ASSERT_FALSE(msg.empty()) << "no error for:\n" << c.yaml;
   EXPECT_NE(msg.find("bad_scene.yaml:" + std::to_string(c.line) + ":"), std::string::npos) << msg;
   EXPECT_NE(msg.find(c.must_contain), std::string::npos) << msg;
-  if (!c.also.empty()) EXPECT_NE(msg.find(c.also), std::string::npos) << msg;
+  if (!c.also.empty()) {
+    EXPECT_NE(msg.find(c.also), std::string::npos) << msg;
+  }
 }
 
 const std::string kList = "name: t\norgans:\n";  // 2 lines
@@ -207,15 +209,17 @@ INSTANTIATE_TEST_SUITE_P(
         OrganErrorCase{"NotAList", "name: t\norgans: {name: liver}\n", 2, "key 'organs': expected a list"},
         OrganErrorCase{"EmptyList", "name: t\norgans: []\n", 2, "key 'organs': lists 0 organs"},
         OrganErrorCase{"TooMany",
-                       kList + [] {
-                         std::string s;
-                         for (int i = 0; i <= kMaxOrgans; ++i) {
-                           s += "  - {name: w" + std::to_string(i) + ", model: rigid, rigid: {generate: plane}}\n";
-                         }
-                         return s;
-                       }(),
+                       kList +
+                           [] {
+                             std::string s;
+                             for (int i = 0; i <= kMaxOrgans; ++i) {
+                               s += "  - {name: w" + std::to_string(i) + ", model: rigid, rigid: {generate: plane}}\n";
+                             }
+                             return s;
+                           }(),
                        2, "lists 9 organs"},
-        OrganErrorCase{"NoName", kList + "  - {model: liver, mesh: {generate: liver}}\n", 3, "key 'organs[0].name': missing"},
+        OrganErrorCase{"NoName", kList + "  - {model: liver, mesh: {generate: liver}}\n", 3,
+                       "key 'organs[0].name': missing"},
         OrganErrorCase{"NoModel", kList + "  - {name: liver, mesh: {generate: liver}}\n", 3,
                        "key 'organs[0].model': missing", "liver | intestine | rigid"},
         OrganErrorCase{"UnknownModel", kList + "  - {name: kidney, model: kidney}\n", 3, "key 'organs[0].model'",
@@ -228,20 +232,26 @@ INSTANTIATE_TEST_SUITE_P(
                        4, "key 'organs[1].name'", "also the name of the organ on line 3"},
         OrganErrorCase{"BadName", kList + "  - {name: 'my liver', model: liver, mesh: {generate: liver}}\n", 3,
                        "key 'organs[0].name'", "character ' '"},
-        OrganErrorCase{"ModelKeyAtTopLevel", "name: t\nmaterial: {young_modulus: 3000}\norgans:\n  - {name: w, model: "
-                                             "rigid, rigid: {generate: plane}}\n",
+        OrganErrorCase{"ModelKeyAtTopLevel",
+                       "name: t\nmaterial: {young_modulus: 3000}\norgans:\n  - {name: w, model: "
+                       "rigid, rigid: {generate: plane}}\n",
                        2, "key 'material'", "move it into the organ"},
-        OrganErrorCase{"UnknownOrganKey", kList + "  - {name: w, model: rigid, rigid: {generate: plane}, colour: red}\n", 3,
+        OrganErrorCase{"UnknownOrganKey",
+                       kList + "  - {name: w, model: rigid, rigid: {generate: plane}, colour: red}\n", 3,
                        "key 'organs[0].colour': unknown key"},
-        OrganErrorCase{"RigidWithoutSurface", kList + "  - {name: w, model: rigid}\n", 3, "key 'organs[0].rigid': missing"},
-        OrganErrorCase{"RigidWithMesh", kList + "  - {name: w, model: rigid, mesh: {generate: liver}, rigid: {generate: "
-                                                "plane}}\n",
+        OrganErrorCase{"RigidWithoutSurface", kList + "  - {name: w, model: rigid}\n", 3,
+                       "key 'organs[0].rigid': missing"},
+        OrganErrorCase{"RigidWithMesh",
+                       kList + "  - {name: w, model: rigid, mesh: {generate: liver}, rigid: {generate: "
+                               "plane}}\n",
                        3, "key 'organs[0].mesh': is not read for model rigid"},
-        OrganErrorCase{"RigidOnLiver", kList + "  - {name: l, model: liver, mesh: {generate: liver}, rigid: {generate: "
-                                               "plane}}\n",
+        OrganErrorCase{"RigidOnLiver",
+                       kList + "  - {name: l, model: liver, mesh: {generate: liver}, rigid: {generate: "
+                               "plane}}\n",
                        3, "key 'organs[0].rigid': is only read for 'model: rigid'"},
-        OrganErrorCase{"RigidFileAndGenerate", kList + "  - {name: w, model: rigid, rigid: {file: square.obj, generate: "
-                                                       "plane}}\n",
+        OrganErrorCase{"RigidFileAndGenerate",
+                       kList + "  - {name: w, model: rigid, rigid: {file: square.obj, generate: "
+                               "plane}}\n",
                        3, "has both 'generate' and 'file'"},
         OrganErrorCase{"RigidUnknownGenerator", kList + "  - {name: w, model: rigid, rigid: {generate: sphere}}\n", 3,
                        "key 'organs[0].rigid.generate'", "unknown value 'sphere'"},
@@ -254,20 +264,23 @@ INSTANTIATE_TEST_SUITE_P(
                        "key 'organs[0].rigid.file'", "no consistent orientation"},
         OrganErrorCase{"RigidNoTriangles", kList + "  - {name: w, model: rigid, rigid: {file: empty.obj}}\n", 3,
                        "key 'organs[0].rigid.file'"},
-        OrganErrorCase{"RigidZeroSize", kList + "  - {name: w, model: rigid, rigid: {generate: box, size: [0.1, 0, 0.1]}}\n",
-                       3, "key 'organs[0].rigid.size'", "component 1 is 0"},
+        OrganErrorCase{"RigidZeroSize",
+                       kList + "  - {name: w, model: rigid, rigid: {generate: box, size: [0.1, 0, 0.1]}}\n", 3,
+                       "key 'organs[0].rigid.size'", "component 1 is 0"},
         OrganErrorCase{"RigidCountNotForDome",
                        kList + "  - {name: w, model: rigid, rigid: {generate: dome, count: 3}}\n", 3,
                        "key 'organs[0].rigid.count'", "only read for generate: ribs"},
-        OrganErrorCase{"RigidStiffness", kList + "  - {name: w, model: rigid, rigid: {generate: plane, stiffness: 0}}\n",
-                       3, "key 'organs[0].rigid.stiffness'", "out of range"},
+        OrganErrorCase{"RigidStiffness",
+                       kList + "  - {name: w, model: rigid, rigid: {generate: plane, stiffness: 0}}\n", 3,
+                       "key 'organs[0].rigid.stiffness'", "out of range"},
         OrganErrorCase{"PlacementAngle",
                        kList + "  - {name: w, model: rigid, rigid: {generate: plane}, placement: {rotation_deg: [0, 0, "
                                "400]}}\n",
                        3, "key 'organs[0].placement.rotation_deg'", "[-360, 360]"},
-        OrganErrorCase{"PlacementKey",
-                       kList + "  - {name: w, model: rigid, rigid: {generate: plane}, placement: {rotate: [0, 0, 1]}}\n",
-                       3, "key 'organs[0].placement.rotate'", "did you mean 'rotation_deg'"},
+        OrganErrorCase{
+            "PlacementKey",
+            kList + "  - {name: w, model: rigid, rigid: {generate: plane}, placement: {rotaton_deg: [0, 0, 1]}}\n", 3,
+            "key 'organs[0].placement.rotaton_deg'", "did you mean 'rotation_deg'"},
         OrganErrorCase{"RigidInSingleForm", "name: t\nmodel: rigid\n", 2, "key 'model'", "unknown value 'rigid'"}),
     [](const ::testing::TestParamInfo<OrganErrorCase>& info) { return std::string(info.param.name); });
 
