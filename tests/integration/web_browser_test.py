@@ -30,6 +30,19 @@ def image_checksum(driver):
         return h;''')
 
 
+def pictures_until_contact(driver, trajectory, timeout):
+    """Waits until the page has shown 4 different pictures and a contact; returns the pictures' checksums."""
+    seen = set()
+
+    def changed():
+        seen.add(image_checksum(driver))
+        return len(seen) >= 4 and page_state(driver)['contactsMax'] > 0
+
+    wait_for(f'the view to change (4 different pictures) and a contact while {trajectory} plays', changed, timeout,
+             poll=0.1)
+    return seen
+
+
 def watch(bin_dir, config_dir, cache_dir, out):
     trajectory = os.path.join(config_dir, 'trajectories', 'liver_poke.csv')
     with Run(bin_dir, out, config_dir, cache_dir, trajectory=trajectory, salt=31, start_haptic=False) as run:
@@ -42,14 +55,7 @@ def watch(bin_dir, config_dir, cache_dir, out):
             first = image_checksum(d)
             run.start_haptic()
             # While the trajectory plays the tool moves: the picture changes, frame numbers grow, contacts show.
-            seen = set()
-
-            def changed():
-                seen.add(image_checksum(d))
-                return len(seen) >= 4 and page_state(d)['contactsMax'] > 0
-
-            wait_for('the view to change (4 different pictures) and a contact while liver_poke plays', changed, 40,
-                     poll=0.1)
+            seen = pictures_until_contact(d, 'liver_poke', 40)
             s = page_state(d)
             assert s['frames'] >= 4, s
             assert first in seen or len(seen) >= 4
@@ -79,14 +85,7 @@ def field(bin_dir, config_dir, cache_dir, out):
             wait_for('the page to connect', lambda: (page_state(d) or {}).get('connected'), 20)
             wait_for('a first frame on the page', lambda: page_state(d)['lastFrame'] > 0, 30)
             run.start_haptic()  # the probe presses the liver 0.3-2.4 s in: the page watches from the start
-            seen = set()
-
-            def changed():
-                seen.add(image_checksum(d))
-                return len(seen) >= 4 and page_state(d)['contactsMax'] > 0
-
-            wait_for('the view to change (4 different pictures) and a contact while abdomen.csv plays', changed, 60,
-                     poll=0.1)
+            seen = pictures_until_contact(d, 'abdomen.csv', 60)
             wait_for('the organs in the scene table', lambda: 'rigid' in d.find_element('id', 'scene').text, 20)
             scene = d.find_element('id', 'scene').text
             for organ in ('liver (liver)', 'bowel (intestine)', 'wall (rigid)', 'floor (rigid)', 'ribs (rigid)'):
