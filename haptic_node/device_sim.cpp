@@ -175,7 +175,12 @@ nlohmann::json physical_summary(const PhysicalDevice& dev, const std::vector<Phy
   int exits_after = 0;
   double x_peak = -1e300, f_peak = 0;
   std::uint64_t lost = 0;
+  // The energy the environment (the haptic node's force) gave the device, the integral of F . v dt over the run
+  // (the force held over each step, the step's velocity); <= 0 throughout for a passive environment.
+  double energy = 0, energy_max = 0;
   for (const auto& p : s) {
+    energy += p.f_axis * p.v * dt;
+    energy_max = std::max(energy_max, energy);
     x_peak = std::max(x_peak, p.x);
     f_peak = std::max(f_peak, -p.f_axis);
     if ((p.flags & msg::kFlagInputLost) != 0) ++lost;
@@ -213,6 +218,8 @@ nlohmann::json physical_summary(const PhysicalDevice& dev, const std::vector<Phy
   j["force_peak_n"] = f_peak;
   j["force_final_over_hand"] = ratio;
   j["force_final_error"] = std::abs(ratio - 1.0);
+  j["environment_energy_j"] = energy;
+  j["environment_energy_max_j"] = energy_max;
   return j;
 }
 
@@ -225,8 +232,9 @@ nlohmann::json physical_worst(const std::vector<nlohmann::json>& each) {
   bool settled = true;
   for (const auto& d : each) settled = settled && d["settled"].get<bool>();
   j["settled"] = settled;
-  for (const char* k : {"settling_time_s", "last_band_exit_s", "overshoot_m", "position_p2p_window_m",
-                        "force_p2p_window_n", "velocity_sign_changes_window", "force_final_error"}) {
+  for (const char* k :
+       {"settling_time_s", "last_band_exit_s", "overshoot_m", "position_p2p_window_m", "force_p2p_window_n",
+        "velocity_sign_changes_window", "force_final_error", "environment_energy_j", "environment_energy_max_j"}) {
     nlohmann::json worst = each.front()[k];
     for (const auto& d : each) worst = d[k] > worst ? d[k] : worst;
     j[k] = worst;

@@ -192,6 +192,7 @@ HapticApp::HapticApp(const HapticOptions& options)
   info.haptic_rate_hz(rate_hz_);
   info.visual_rate_hz(scene_.visual.rate_hz);
   info.start_stamp_ns(monotonic_ns());
+  fill_scene_organs(organ_->identities(), scene_.name, info);  // one OrganInfo per organ (the whole scene above)
   dds_->publish_scene_info(info);
 
   if (!options_.quiet) {

@@ -168,6 +168,27 @@ HapticDds::~HapticDds() = default;
 
 dds::Participant& HapticDds::participant() { return impl_->participant; }
 
+namespace {
+// A string cut to the IDL's bound (a longer one would not serialize; names are for people, the hashes identify).
+std::string bounded(const std::string& s, std::size_t bound) { return s.size() <= bound ? s : s.substr(0, bound); }
+}  // namespace
+
+void fill_scene_organs(const std::vector<OrganIdentity>& organs, const std::string& scene_name, msg::SceneInfo& info) {
+  auto& out = info.organs();
+  out.clear();
+  for (const OrganIdentity& id : organs) {
+    if (out.size() >= msg::kMaxOrgans) break;  // the scene refuses more (scene::kMaxOrgans, asserted equal above)
+    msg::OrganInfo o;
+    o.name(bounded(id.name.empty() ? scene_name : id.name, 64));
+    o.model(bounded(id.model, 16));
+    o.mesh_hash(id.mesh_hash);
+    o.tensor_hash(id.tensor_hash);
+    o.node_count(id.node_count);
+    o.surface_node_count(id.surface_node_count);
+    out.push_back(std::move(o));
+  }
+}
+
 void HapticDds::publish_scene_info(const msg::SceneInfo& info) {
   msg::SceneInfo sample = info;
   impl_->scene_writer->write(&sample);
@@ -191,6 +212,7 @@ void HapticDds::latest_command(int instrument, Pose5& pose, std::uint64_t& recei
 std::uint64_t HapticDds::stray_commands() const { return impl_->tool_commands.stray(); }
 
 static_assert(kMaxContactEntries == static_cast<int>(msg::kMaxContacts), "organ.h and the IDL disagree");
+static_assert(scene::kMaxOrgans == static_cast<int>(msg::kMaxOrgans), "scene/scene.h and the IDL disagree");
 static_assert(kMaxInstruments == static_cast<int>(msg::kMaxInstruments), "tool/trajectory.h and the IDL disagree");
 
 void fill_instruments(const TickRecord& r, std::vector<msg::InstrumentState>& states) noexcept {
@@ -234,6 +256,7 @@ void HapticDds::write_frame(const TickRecord& r, std::uint64_t stamp_ns) noexcep
     auto& e = entries[static_cast<std::size_t>(l)];
     e.node(static_cast<std::uint32_t>(c.node));
     e.instrument(static_cast<std::uint32_t>(c.instrument));
+    e.organ(static_cast<std::uint32_t>(c.organ));
     e.lambda(to_msg(c.lambda));
     e.u_tilde(to_msg(c.u_tilde));
   }

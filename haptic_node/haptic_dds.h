@@ -19,16 +19,20 @@
 namespace surgsim {
 
 namespace msg {
-namespace v2 {
+namespace v3 {
 class SceneInfo;
 class InstrumentState;
-}  // namespace v2
-using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
+}  // namespace v3
+using namespace v3;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 
 /// Publisher thread, no allocation: a tick's instruments into a ContactFrame's or BodyState's `instruments` (sized to
 /// the scene's instruments once, at init; only min(size, record.instrument_count) entries are written).
 void fill_instruments(const TickRecord& record, std::vector<msg::InstrumentState>& states) noexcept;
+
+/// Init: SceneInfo.organs from the organ's identities (HapticOrgan::identities(), the scene's order): one OrganInfo
+/// each, an empty name standing for `scene_name` (the organ of a one-organ scene); names cut to the IDL's bounds.
+void fill_scene_organs(const std::vector<OrganIdentity>& organs, const std::string& scene_name, msg::SceneInfo& info);
 
 class HapticDds final : public TickSink {
  public:

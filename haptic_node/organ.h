@@ -14,6 +14,7 @@
 #include <memory>
 #include <nlohmann/json_fwd.hpp>
 #include <string>
+#include <vector>
 
 #include "scene/scene.h"
 #include "compliance/superposition.h"
@@ -29,8 +30,9 @@ struct TickRecord;
 
 /// One contact entry of a ContactFrame (what the visual node needs to deform the organ).
 struct ContactEntry {
-  int node = 0;
+  int node = 0;                                       // the organ's node
   int instrument = 0;                                 // whose contact holds the node (the first, when shared)
+  int organ = 0;                                      // the organ's index in the scene (0 in a one-organ scene)
   Eigen::Vector3d lambda = Eigen::Vector3d::Zero();   // N, contact force on the node
   Eigen::Vector3d u_tilde = Eigen::Vector3d::Zero();  // m, corrected constraint displacement (liver multirate:
                                                       // the node's imposed displacement this tick)
@@ -56,10 +58,12 @@ struct RecordVec3 {
 struct ContactRecord {
   int node = 0;
   int instrument = 0;
+  int organ = 0;
   RecordVec3 lambda;   // N
   RecordVec3 u_tilde;  // m
   ContactRecord() = default;
-  ContactRecord(const ContactEntry& e) : node(e.node), instrument(e.instrument), lambda(e.lambda), u_tilde(e.u_tilde) {}
+  ContactRecord(const ContactEntry& e)  // NOLINT: implicit by design
+      : node(e.node), instrument(e.instrument), organ(e.organ), lambda(e.lambda), u_tilde(e.u_tilde) {}
 };
 
 /// What an organ publishes for one tick, copied out on the loop thread (fill_outputs) and written on the publisher
@@ -71,6 +75,16 @@ struct OrganOutputs {
   int point_capacity = 0;  // output_points() of the organ
   double* points = nullptr;
   std::array<ContactRecord, kMaxContactEntries> contacts;
+};
+
+/// One organ's identity as SceneInfo carries it (init only).
+struct OrganIdentity {
+  std::string name;     // the scene's organ name ("" for the organ of a single-organ scene: the scene's name then)
+  std::string model;    // "liver", "intestine", "rigid"
+  std::uint64_t mesh_hash = 0;
+  std::uint64_t tensor_hash = 0;
+  std::uint32_t node_count = 0;
+  std::uint32_t surface_node_count = 0;
 };
 
 class HapticOrgan {
@@ -115,6 +129,15 @@ class HapticOrgan {
   /// True when a quasi non-linear force law bends the linear force (stats nonlinear_law).
   virtual bool nonlinear_law() const { return false; }
 
+  /// Init: every organ this one is made of, in the scene's order (one: itself, unnamed; CompositeOrgan: each part).
+  virtual std::vector<OrganIdentity> identities() const {
+    return {OrganIdentity{"", model_name(), mesh_hash(), tensor_hash(), node_count(), surface_node_count()}};
+  }
+  /// Init, before create_writers(): this organ's index in the scene's organs list (CompositeOrgan tells each part;
+  /// 0 for the organ of a one-organ scene). The organ's own topics carry it (BodyState.organ, the key).
+  virtual void set_organ_index(int index) { organ_index_ = index; }
+  int organ_index() const { return organ_index_; }
+
   /// Positions the organ publishes per tick (sizes OrganOutputs::points once, at init).
   virtual int output_points() const { return 0; }
   /// Loop thread, noexcept, no allocation: copies this tick's publishable state into `out` (the contact entries;
@@ -136,6 +159,9 @@ class HapticOrgan {
   /// Shutdown: the organ's own entries in the stats JSON, and its summary line (nothing when it has none).
   virtual void add_stats(nlohmann::json& stats) const {}
   virtual void print_summary(std::ostream& out) const {}
+
+ protected:
+  int organ_index_ = 0;  // set_organ_index()
 };
 
 /// How the node builds its organ beyond the scene (command-line settings that change no physics).

@@ -11,7 +11,7 @@ y in [-0.15, 0.15], z in [-0.12, 0.15] m (with the tapered mesentery), then the 
 gravity; intestine radius 2 cm. (The motions were designed on the untapered shape and still reach the folds.) Trocar
 at (0, 0.40, -0.12), shaft along -y at pitch = yaw = 0 (tip at y = 0.40 - insertion); positive pitch raises the tip,
 yaw swings it along x. Units: s, rad, m.
-Run: /usr/bin/python3 scripts/make_trajectories.py [liver|intestine]   (stdlib only; no argument: all)
+Run: /usr/bin/python3 scripts/make_trajectories.py [liver|intestine|abdomen]   (stdlib only; no argument: all)
 """
 import math
 import os
@@ -159,9 +159,161 @@ def two_hands(t):
     return [(0.0, 0.0, g_ins, 0.0, g_jaw), (0.0, 0.0, p_ins, 0.0, 0.5)]
 
 
+# --- config/abdomen.yaml: the probe presses the liver, the grasper pushes into the bowel, the probe slides on the wall ---
+ABD_DOME = (0.21, 0.28, 0.16)        # the wall: ellipsoid radii, centre (0, 0, -0.08), cavity inside
+ABD_DOME_Z = -0.08
+ABD_TIP = 0.005                      # m, both instruments' tip radius
+ABD_PROBE_TROCAR = (0.05, 0.0, 0.078)
+ABD_PROBE_AXIS = (-0.04, 0.07, -0.0778)
+ABD_GRASPER_TROCAR = (-0.08, -0.06, 0.066)
+ABD_GRASPER_AXIS = (0.07, -0.07, -0.106)
+ABD_LIVER_AT = (-0.03, 0.07, -0.043)  # the liver's placement (translation)
+
+
+def _v(a, b, op):
+    return tuple(op(x, y) for x, y in zip(a, b))
+
+
+def _dot(a, b):
+    return sum(x * y for x, y in zip(a, b))
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _unit(a):
+    n = math.sqrt(_dot(a, a))
+    return tuple(x / n for x in a)
+
+
+def _rotate(v, axis, angle):
+    """Rodrigues: v turned by angle about the unit axis."""
+    c, s = math.cos(angle), math.sin(angle)
+    k = _cross(axis, v)
+    d = _dot(axis, v) * (1 - c)
+    return tuple(v[i] * c + k[i] * s + axis[i] * d for i in range(3))
+
+
+def tool_direction(axis, pitch, yaw):
+    """common/tool/tool.cpp: pitch about e1, then yaw about e2, of the base axis."""
+    a = _unit(axis)
+    helper = (0.0, 0.0, 1.0) if abs(a[2]) < 0.9 else (1.0, 0.0, 0.0)
+    e1 = _unit(_cross(a, helper))
+    e2 = _unit(_cross(a, e1))
+    return _rotate(_rotate(a, e1, pitch), e2, yaw)
+
+
+def aim(axis, direction):
+    """(pitch, yaw) that turn the base axis onto `direction` (Newton on the two angles, numeric Jacobian)."""
+    want = _unit(direction)
+    p, y = 0.0, 0.0
+    for _ in range(50):
+        d = tool_direction(axis, p, y)
+        r = _v(d, want, lambda a, b: a - b)
+        if _dot(r, r) < 1e-24:
+            break
+        h = 1e-7
+        jp = _v(tool_direction(axis, p + h, y), d, lambda a, b: (a - b) / h)
+        jy = _v(tool_direction(axis, p, y + h), d, lambda a, b: (a - b) / h)
+        # least squares 2x2: [jp jy]^T [jp jy] [dp dy] = -[jp jy]^T r
+        a11, a12, a22 = _dot(jp, jp), _dot(jp, jy), _dot(jy, jy)
+        b1, b2 = -_dot(jp, r), -_dot(jy, r)
+        det = a11 * a22 - a12 * a12
+        p += (a22 * b1 - a12 * b2) / det
+        y += (a11 * b2 - a12 * b1) / det
+    return p, y
+
+
+def liver_field_local(x, y, z):
+    """common/mesher/organ_mesher.cpp liver_field (the generated liver's implicit solid, > 0 inside)."""
+    blobs = [((0.045, -0.006, -0.008), (0.082, 0.080, 0.050), 1.0), ((0.055, 0.025, -0.010), (0.060, 0.050, 0.042), 0.6),
+             ((-0.045, 0.004, 0.000), (0.060, 0.060, 0.030), 0.9), ((-0.095, 0.012, 0.000), (0.040, 0.035, 0.016), 0.8),
+             ((0.000, -0.094, 0.000), (0.020, 0.040, 0.080), -1.5)]
+    f = 0.0
+    for c, r, w in blobs:
+        u, v, q = (x - c[0]) / r[0], (y - c[1]) / r[1], (z - c[2]) / r[2]
+        f += w * math.exp(-(u * u + v * v + q * q))
+    f /= 1.0 + math.exp(-(z + 0.035) / 0.003)
+    return f - 0.45
+
+
+def liver_touch(trocar, direction):
+    """Insertion at which the tip (the leading point of the tip sphere) reaches the placed liver (0.1 mm steps)."""
+    s = 0.0
+    while s < 0.3:
+        p = tuple(trocar[i] + s * direction[i] - ABD_LIVER_AT[i] for i in range(3))
+        if liver_field_local(*p) > 0:
+            return s
+        s += 1e-4
+    raise RuntimeError("the probe's shaft misses the liver")
+
+
+def wall_insertion(trocar, direction, depth):
+    """Insertion putting the tip sphere `depth` past the inside of the dome along the wall's normal (its far crossing
+    along the shaft; the wall's plane at that point). The sphere's centre is ABD_TIP behind the tip, its leading
+    point."""
+    a, b, c = ABD_DOME
+    o = (trocar[0] / a, trocar[1] / b, (trocar[2] - ABD_DOME_Z) / c)
+    d = (direction[0] / a, direction[1] / b, direction[2] / c)
+    qa, qb, qc = _dot(d, d), 2 * _dot(o, d), _dot(o, o) - 1
+    s_exit = (-qb + math.sqrt(qb * qb - 4 * qa * qc)) / (2 * qa)
+    w = tuple(trocar[i] + s_exit * direction[i] for i in range(3))
+    n = _unit((w[0] / a ** 2, w[1] / b ** 2, (w[2] - ABD_DOME_Z) / c ** 2))  # outward
+    return s_exit + ABD_TIP - (ABD_TIP - depth) / _dot(n, direction)
+
+
+def wall_point(y, z):
+    """The dome's point on its +x side at (y, z)."""
+    a, b, c = ABD_DOME
+    x = a * math.sqrt(1 - (y / b) ** 2 - ((z - ABD_DOME_Z) / c) ** 2)
+    return (x, y, z)
+
+
+def abdomen(t):
+    # Probe: onto the liver along its base axis (pitch = yaw = 0), 8 mm along the shaft past touching, hold, out.
+    probe_dir = _unit(ABD_PROBE_AXIS)
+    touch = liver_touch(ABD_PROBE_TROCAR, probe_dir)
+    p_far, p_press = touch - 0.02, touch + 0.008
+    if t < 3.0:
+        probe = (0.0, 0.0, ramp(t, 0.3, 1.3, p_far, p_press) if t < 2.4 else ramp(t, 2.4, 3.0, p_press, p_far), 0.0, 0.5)
+    else:
+        # Then to the side wall: out to 4 cm, turn towards the wall point at y = -0.05, in to 0.5 mm past the wall,
+        # slide to y = +0.05 along it (the depth kept along the shaft), out.
+        def at(y):
+            w = wall_point(y, -0.03)
+            d = _unit(_v(w, ABD_PROBE_TROCAR, lambda a, b: a - b))
+            pitch, yaw = aim(ABD_PROBE_AXIS, d)
+            return pitch, yaw, wall_insertion(ABD_PROBE_TROCAR, d, 0.0005)
+        out = 0.04
+        if t < 3.6:
+            probe = (0.0, 0.0, ramp(t, 3.0, 3.6, p_far, out), 0.0, 0.5)
+        else:
+            p0, y0, i0 = at(-0.05)
+            if t < 4.2:
+                k = ramp(t, 3.6, 4.2, 0.0, 1.0)
+                probe = (k * p0, k * y0, out, 0.0, 0.5)
+            elif t < 5.2:
+                probe = (p0, y0, ramp(t, 4.2, 5.2, out, i0), 0.0, 0.5)
+            elif t < 7.2:
+                pw, yw, iw = at(ramp(t, 5.2, 7.2, -0.05, 0.05))
+                probe = (pw, yw, iw, 0.0, 0.5)
+            else:
+                p1, y1, i1 = at(0.05)
+                probe = (p1, y1, ramp(t, 7.2, 7.8, i1, out), 0.0, 0.5)
+    # Grasper, jaw open: along its base axis into the hanging folds under the vessel and back out.
+    g = ramp(t, 1.0, 2.2, 0.03, 0.15) if t < 2.6 else ramp(t, 2.6, 3.6, 0.15, 0.03)
+    grasper = (0.0, 0.0, g, 0.0, 0.5)
+    return [probe, grasper]
+
+
 if __name__ == "__main__":
     import sys
     which = sys.argv[1] if len(sys.argv) > 1 else "all"
+    if which in ("all", "abdomen"):
+        write("abdomen.csv", 8.0, abdomen,
+              "abdomen: the probe presses the liver 8 mm while the grasper pushes into the bowel's folds, then the "
+              "probe slides 10 cm along the side wall 0.5 mm deep", instruments=("probe", "grasper"))
     if which in ("all", "intestine"):
         write("intestine_push.csv", 6.0, intestine_push,
               "intestine: push the folds 22 cm in from the side, swing along the vessel, withdraw")

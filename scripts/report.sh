@@ -46,7 +46,7 @@ fi
 for p in bin/haptic_node bin/visual_node bench/liver_bench bench/node_bench bench/intestine_bench \
          bench/liver_error_bench bench/intestine_error_bench bench/tube_skinning_bench bench/stability_report \
          bench/rt_bench bench/two_hands_bench bench/large_deformation_bench bench/multirate_node_bench bench/frame_bench \
-         bench/haptic_signal_bench bench/tool_size_bench bin/surgsim-web bin/surgsim-device-sim; do
+         bench/haptic_signal_bench bench/tool_size_bench bench/abdomen_bench bin/surgsim-web bin/surgsim-device-sim; do
   [ -x "$build/$p" ] || { echo "report: $build/$p not found: run scripts/build.sh first" >&2; exit 1; }
 done
 build_s=$(( $(date +%s) - start_all ))
@@ -111,6 +111,8 @@ live_s=60                               # 60 000 ticks at 1 kHz: enough to tell 
 intestine_s=20
 device_points="0.05,0.1,3 0.05,1,0.5 0.2,0.1,3 0.2,1,0.5 0.1,0.5,2"
 two_hands_s=5.5                         # the two-instrument trajectory (5 s), held 0.5 s
+abdomen_s=8.5                           # the abdomen trajectory (8 s), held 0.5 s
+abdomen_args=()
 intestine_live_max_s=                   # empty: each intestine trajectory's length + 0.5 s
 intestine_load_step=${SURGSIM_REPORT_INTESTINE_LOAD_STEP:-2:2:1.5}
 tool_size_args=()                       # tool_size_bench: livers at 1500, 5000, 20000 target nodes (the last the reference)
@@ -144,6 +146,8 @@ if [ $smoke = 1 ]; then
   intestine_s=2
   device_points="0.1,0.5,2"
   two_hands_s=2
+  abdomen_s=2
+  abdomen_args=(--quick)
   intestine_live_max_s=3
   intestine_load_step=${SURGSIM_REPORT_INTESTINE_LOAD_STEP:-1:1:1.5}
   tool_size_args=(--meshes 500,1500)
@@ -232,6 +236,15 @@ live_two_hands() {
     "$root/scripts/run_local.sh" liver_two_tools "$root/config/trajectories/liver_two_hands.csv"
 }
 step live_two_hands live_two_hands
+# Several organs: the shipped abdomen in abdomen_bench (the tick with both instruments in contact, the wall during the
+# trajectory, a simulated device pushed into the floor), the machine's floor just before, both nodes live at 1 kHz.
+step abdomen "$bench/abdomen_bench" "${abdomen_args[@]}" --out "$csv"
+step rt_floor_abdomen "$bench/rt_bench" --seconds "$abdomen_s" --label before_live_abdomen --out "$csv"
+live_abdomen() {
+  SURGSIM_OUT=$out/raw/live_abdomen HAPTIC_ARGS="--rate 1000 --duration $abdomen_s" VISUAL_ARGS="--png-every 50" \
+    "$root/scripts/run_local.sh" abdomen
+}
+step live_abdomen live_abdomen
 # The intestine live at 1 kHz with the visual node on one host, for both shipped trajectories, each just
 # after the machine's floor for as long as it runs (rt_bench, a row of its own in rt_floor.csv), so the missed
 # deadlines are set beside the floor of the same minute. The visual node's frame trace (frames/frame_trace.csv: time,

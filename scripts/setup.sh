@@ -6,6 +6,7 @@ packages=(
   build-essential cmake pkg-config
   libeigen3-dev                       # linear algebra
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools   # Fast DDS 2.9 + IDL code generator + discovery server
+  cyclonedds-tools cyclonedds-dev     # Cyclone DDS's idlc and headers: the ctest idl_cyclone_idlc (another vendor reads the IDL)
   libsuitesparse-dev libopenblas0-pthread                   # CHOLMOD (OpenBLAS makes it ~2x faster than reference BLAS)
   libosmesa6-dev libpng-dev           # off-screen rendering, PNG frames
   libgmsh-dev                         # tetrahedral mesher (C++ API) for the generated organs

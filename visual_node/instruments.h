@@ -15,10 +15,10 @@
 namespace surgsim {
 
 namespace msg {
-namespace v2 {
+namespace v3 {
 class InstrumentState;
-}  // namespace v2
-using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
+}  // namespace v3
+using namespace v3;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }  // namespace msg
 class Renderer;
 

@@ -1,8 +1,11 @@
 #include "organ_view.h"
 
+#include "core/error.h"
+#include "mesher/scene_mesh.h"
+#include "views/composite_view.h"
 #include "views/intestine_view.h"
 #include "views/liver_view.h"
-#include "core/error.h"
+#include "views/rigid_view.h"
 
 using namespace surgsim::mesh;
 using namespace surgsim::scene;
@@ -14,10 +17,40 @@ std::uint64_t visual_scene_hash(const Scene& scene, std::uint64_t mesh_hash) {
 }
 
 std::unique_ptr<OrganView> make_organ_view(const Scene& scene, const OrganViewOptions& options) {
+  if (scene.organ_list()) {
+    // Every organ of the list, each as its own one-organ scene in the scene's frame. The intestine checks its
+    // BodyStates against the whole scene's identity, which needs every other organ's mesh hash first: built last.
+    std::vector<CompositeView::Part> parts(scene.organs.size());
+    std::vector<std::uint64_t> hashes(scene.organs.size(), 0);
+    for (std::size_t k = 0; k < scene.organs.size(); ++k) {
+      const OrganSpec& o = scene.organs[k];
+      if (o.model == "intestine") continue;
+      if (options.log != nullptr) {
+        *options.log << "organ " << k + 1 << "/" << scene.organs.size() << ": '" << o.name << "' (" << o.model << ")\n";
+      }
+      const Scene one = scene.organ_scene(k);
+      OrganViewOptions part = options;
+      part.organ_index = static_cast<int>(k);  // the contact entries and BodyStates it draws (wire v3)
+      parts[k].name = o.name;
+      parts[k].view = o.model == "rigid" ? std::unique_ptr<OrganView>(std::make_unique<RigidView>(one))
+                                         : make_organ_view(one, part);
+      hashes[k] = parts[k].view->mesh_hash();
+    }
+    const std::uint64_t whole = visual_scene_hash(scene, mesher::combine_organ_hashes(hashes));
+    for (std::size_t k = 0; k < scene.organs.size(); ++k) {
+      const OrganSpec& o = scene.organs[k];
+      if (o.model != "intestine") continue;
+      parts[k].name = o.name;
+      parts[k].view =
+          std::make_unique<IntestineOrganView>(scene.organ_scene(k), whole, options.tube_skinning, static_cast<int>(k));
+    }
+    return std::make_unique<CompositeView>(std::move(parts));
+  }
   // The intestine: a skinned tube and the mesentery from BodyStates; no tetrahedral mesh (hash 0, as in the haptic
   // node), no tensors, no deformer.
   if (scene.model == "intestine") {
-    return std::make_unique<IntestineOrganView>(scene, visual_scene_hash(scene, 0), options.tube_skinning);
+    return std::make_unique<IntestineOrganView>(scene, visual_scene_hash(scene, 0), options.tube_skinning,
+                                                options.organ_index);
   }
   if (scene.model == "liver") return std::make_unique<LiverView>(scene, options);
   // An organ this node cannot draw is refused, as the haptic node refuses one it cannot simulate (it used to be drawn

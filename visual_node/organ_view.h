@@ -26,10 +26,10 @@ namespace dds {
 class Participant;
 }
 namespace msg {
-namespace v2 {
+namespace v3 {
 class ContactFrame;
-}  // namespace v2
-using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
+}  // namespace v3
+using namespace v3;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 class Renderer;
 struct InstrumentPoses;
@@ -88,6 +88,8 @@ struct OrganViewOptions {
   std::string cache_dir;   // meshes and tensors
   intestine::TubeSkinning tube_skinning = intestine::TubeSkinning::kGpu;
   std::ostream* log = nullptr;  // progress of mesh and tensor loading; null: quiet
+  int organ_index = 0;          // the organ drawn: its index in the scene's organs list (wire v3: ContactEntry.organ,
+                                // BodyState.organ); 0 in a one-organ scene
 };
 
 /// The scene identity both nodes compare: the scene's hash mixed with its mesh's (0 without a tetrahedral mesh).

@@ -33,10 +33,10 @@
 namespace surgsim {
 
 namespace msg {
-namespace v2 {
+namespace v3 {
 class ContactFrame;
-}  // namespace v2
-using namespace v2;  // NOLINT: the wire version in use (idl/surgsim_types.h)
+}  // namespace v3
+using namespace v3;  // NOLINT: the wire version in use (idl/surgsim_types.h)
 }
 class FrameOutput;
 class FrameStream;

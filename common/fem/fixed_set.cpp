@@ -71,7 +71,7 @@ std::vector<int> nodes_in_region(const TetMesh& mesh, const FixedRegion& region)
     const auto& boxes = region.boxes;
     const Eigen::Vector3d normal = region.plane_normal.normalized();
     for (int i = 0; i < n; ++i) {
-      const Eigen::Vector3d x = mesh.nodes.row(i).transpose();
+      const Eigen::Vector3d x = region.frame.to_organ(mesh.nodes.row(i).transpose());
       for (const auto& b : boxes)
         if ((x.array() >= b.first.array() - tol).all() && (x.array() <= b.second.array() + tol).all())
           hit[static_cast<std::size_t>(i)] = 1;

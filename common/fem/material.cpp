@@ -10,8 +10,9 @@ bool in_box(const Eigen::Vector3d& x, const Eigen::Vector3d& lo, const Eigen::Ve
 }
 }  // namespace
 
-bool FixedRegion::fixes(int index, const Eigen::Vector3d& x) const {
+bool FixedRegion::fixes(int index, const Eigen::Vector3d& x_scene) const {
   if (std::find(nodes.begin(), nodes.end(), index) != nodes.end()) return true;
+  const Eigen::Vector3d x = frame.to_organ(x_scene);
   for (const auto& b : boxes) {
     if (in_box(x, b.first, b.second)) return true;
   }

@@ -5,6 +5,8 @@
 #include <utility>
 #include <vector>
 
+#include "mesh/placement.h"
+
 namespace surgsim::fem {
 
 struct Material {
@@ -21,8 +23,11 @@ struct FixedRegion {
   bool has_plane = false;
   Eigen::Vector3d plane_point = Eigen::Vector3d::Zero();    // m
   Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitZ();  // unit; nodes with (x - point) . normal >= 0 are fixed
+  /// The frame the boxes and the plane are written in: the organ's own (a placed organ's mesh is in the scene's
+  /// frame; its nodes are tested at frame.to_organ(x)). Identity for an organ at the origin.
+  mesh::Placement frame;
 
-  /// True if node `index` at rest position `x` (m) is fixed: listed, inside a box (bounds inclusive) or on
+  /// True if node `index` at rest position `x` (m, the scene's frame) is fixed: listed, inside a box (bounds inclusive) or on
   /// the fixed side of the plane.
   bool fixes(int index, const Eigen::Vector3d& x) const;
   /// True if nothing at all is fixed by this region.

@@ -45,6 +45,7 @@ void Proxy::reset(const Eigen::Vector3d& device_point) noexcept {
   proxy_ = x;
   gap_ = 0;
   was_in_contact_ = false;
+  resumed_ = true;
   active_ = 0;
 }
 
@@ -131,7 +132,10 @@ Eigen::Vector3d Proxy::step(const Eigen::Vector3d& device_point, double dt) noex
   if (active_ > 0 && g > 0 && std::isfinite(g)) {
     const Eigen::Vector3d u = gap / g;
     // Rate of the gap (m/s): from 0 at the first tick of a contact (the impact is damped too).
-    const double rate = dt > 0 ? (g - (was_in_contact_ ? gap_ : 0.0)) / dt : 0.0;
+    // After a reset (an instrument back from a lost input, perhaps already pressing) the gap found is not an
+    // impact: its rate starts at 0, or the damper would kick the device with B g / dt.
+    const double previous = was_in_contact_ ? gap_ : resumed_ ? g : 0.0;
+    const double rate = dt > 0 ? (g - previous) / dt : 0.0;
     force = params_.stiffness * gap + params_.damping * rate * u;
     const double normal = force.dot(u);
     if (normal < 0) force -= normal * u;  // the damper may cancel the spring, never pull the device in
@@ -141,6 +145,7 @@ Eigen::Vector3d Proxy::step(const Eigen::Vector3d& device_point, double dt) noex
     gap_ = 0;
     was_in_contact_ = false;
   }
+  resumed_ = false;
   const double magnitude = force.norm();
   if (magnitude > params_.max_force) force *= params_.max_force / magnitude;
   return force;

@@ -60,6 +60,7 @@ class Proxy {
   Eigen::Vector3d proxy_ = Eigen::Vector3d::Zero();
   double gap_ = 0;  // m, |proxy - device| while in contact
   bool was_in_contact_ = false;
+  bool resumed_ = false;  // reset() just ran: the next contact is not an impact (its gap rate starts at 0)
   int active_ = 0;
   int plane_count_ = 0;
   std::array<Touch, kMaxPlanes> planes_;

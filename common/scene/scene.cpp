@@ -648,6 +648,180 @@ IntestineSpec read_intestine(const Reader& r, const Field& f) {
   return spec;
 }
 
+mesh::Placement read_placement(const Reader& r, const Field& f) {
+  const Map m(r, f, {"translation", "rotation_deg"});
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  Eigen::Vector3d deg = Eigen::Vector3d::Zero();
+  if (m.has("translation")) t = r.vec3(m.at("translation"), "the organ's origin in the scene, m");
+  if (m.has("rotation_deg")) {
+    deg = r.vec3(m.at("rotation_deg"), "angles in degrees about the organ's x, then y, then z axis");
+    for (int i = 0; i < 3; ++i) {
+      if (std::abs(deg[i]) > 360) {
+        r.fail(m.at("rotation_deg").line, m.key("rotation_deg"), fmt(deg[i]) + " is out of range [-360, 360]",
+               "angles in degrees about the organ's x, then y, then z axis");
+      }
+    }
+  }
+  return mesh::Placement::from_euler_deg(t, deg);
+}
+
+// Whether a .obj surface gives a side to push out to: every edge used by at most two triangles, in opposite
+// directions (a consistent orientation), with finite vertices. Open surfaces (a patch of wall) are allowed.
+void check_rigid_surface_file(const Reader& r, const Field& f, const std::string& path) {
+  TriSurface surface;
+  try {
+    surface = read_obj(path);
+  } catch (const Error& e) {
+    r.fail(f.line, f.key, std::string("cannot be read: ") + e.what(), "give a Wavefront .obj triangle surface");
+  }
+  if (surface.tris.rows() == 0) r.fail(f.line, f.key, "'" + path + "' has no triangles", "give a triangle surface");
+  if (!surface.vertices.allFinite()) {
+    r.fail(f.line, f.key, "'" + path + "' has a non-finite vertex coordinate", "fix the file's 'v' lines");
+  }
+  const TriSurfaceTopology topo = tri_surface_topology(surface);
+  if (topo.nonmanifold_edges > 0) {
+    r.fail(f.line, f.key,
+           "'" + path + "' has no consistent orientation: " + std::to_string(topo.nonmanifold_edges) +
+               " edges are used twice in the same direction or by more than two triangles (no side to push out to)",
+           "orient every triangle counter-clockwise seen from the free side (e.g. MeshLab: Re-Orient all faces "
+           "coherently) and split non-manifold edges");
+  }
+}
+
+RigidSpec read_rigid(const Reader& r, const Field& f) {
+  const Map m(r, f, {"file", "generate", "size", "count", "arc_deg", "open_z", "cavity", "stiffness", "damping"});
+  RigidSpec g;
+  if (m.has("file") == m.has("generate")) {
+    r.fail(m.has("file") ? m.at("file").line : f.line, f.key,
+           m.has("file") ? "has both 'generate' and 'file'" : "names no surface",
+           "keep exactly one: 'file: wall.obj' (a triangle surface) or 'generate: plane | box | tube | dome | ribs'");
+  }
+  const auto only_for = [&](const char* key, std::initializer_list<const char*> generators) {
+    if (!m.has(key)) return;
+    for (const char* g2 : generators) {
+      if (g.generate == g2) return;
+    }
+    std::vector<std::string> names(generators.begin(), generators.end());
+    r.fail(m.at(key).line, m.key(key), "is only read for generate: " + join(names, " | "), "remove it");
+  };
+  if (m.has("file")) {
+    g.file = r.file(m.at("file"), "a Wavefront .obj triangle surface, counter-clockwise seen from the free side");
+    const std::string ext = fs::path(g.file).extension().string();
+    if (ext != ".obj") {
+      r.fail(m.at("file").line, m.key("file"), "unsupported surface format '" + ext + "'", "use a Wavefront .obj file");
+    }
+    check_rigid_surface_file(r, m.at("file"), g.file);
+    for (const char* key : {"size", "count", "arc_deg", "open_z"}) {
+      if (m.has(key)) r.fail(m.at(key).line, m.key(key), "only applies to generated surfaces", "remove it");
+    }
+  } else {
+    g.generate = r.one_of(m.at("generate"), {"plane", "box", "tube", "dome", "ribs"});
+    if (m.has("size")) {
+      g.size = r.vec3(m.at("size"),
+                      "m: plane [x, y, 0]; box [x, y, z]; tube [radius, length, 0]; dome [rx, ry, rz]; ribs [arc "
+                      "radius, spacing, bar radius]");
+      const bool third_unused = g.generate == "plane" || g.generate == "tube";
+      for (int i = 0; i < (third_unused ? 2 : 3); ++i) {
+        if (!(g.size[i] > 0)) {
+          r.fail(m.at("size").line, m.key("size"), "component " + std::to_string(i) + " is " + fmt(g.size[i]),
+                 "every dimension the generator reads must be > 0 (m)");
+        }
+      }
+    }
+    only_for("count", {"ribs"});
+    only_for("arc_deg", {"ribs"});
+    only_for("open_z", {"dome"});
+    if (m.has("count")) g.count = r.integer(m.at("count"), 1, 24, "rib arcs, 1..24");
+    if (m.has("arc_deg")) g.arc_deg = r.number(m.at("arc_deg"), {0, 360, true, true}, "degrees, (0, 360)");
+    if (m.has("open_z")) {
+      g.dome_open_z = r.number(m.at("open_z"), {-1, 1, false, true},
+                               "where the dome is cut, as a fraction of its z radius, [-1, 1): 0 = a half dome");
+    }
+  }
+  if (m.has("cavity")) g.cavity = r.boolean(m.at("cavity"));
+  if (m.has("stiffness")) {
+    g.stiffness = r.number(m.at("stiffness"), {0, 1e5, true, false},
+                           "the coupling's spring in N/m, (0, 100000]; a desktop device renders about 2000");
+  }
+  if (m.has("damping")) g.damping = r.number(m.at("damping"), closed(0, 1000), "the coupling's damper in N s/m, 0..1000");
+  return g;
+}
+
+// The organ keys of a map: the scene's top level (the single-organ form, in_list false) or an entry of `organs:`.
+OrganSpec read_organ(const Reader& r, const Map& m, const std::vector<ToolSpec>& tools, bool in_list) {
+  OrganSpec o;
+  o.key = m.self().key;
+  o.line = m.self().line;
+  if (m.has("model")) {
+    o.model = in_list ? r.one_of(m.at("model"), {"liver", "intestine", "rigid"})
+                      : r.one_of(m.at("model"), {"liver", "intestine"});
+  }
+  const auto not_for_model = [&](const char* key, const std::string& fix) {
+    if (m.has(key)) {
+      r.fail(m.at(key).line, m.key(key), "is not read for model " + o.model, fix);
+    }
+  };
+  if (o.model == "rigid") {
+    for (const char* key : {"mesh", "material", "fixed", "nonlinear"}) {
+      not_for_model(key, "remove it: a rigid organ is a surface, given by 'rigid: {file: ... | generate: ...}'");
+    }
+    if (!m.has("rigid")) {
+      r.fail(o.line, m.key("rigid"), "missing",
+             "a rigid organ needs its surface: 'rigid: {generate: dome, size: [0.2, 0.15, 0.15], cavity: true}' or "
+             "'rigid: {file: wall.obj}'");
+    }
+  }
+  if (m.has("mesh")) {
+    o.mesh = read_mesh_source(r, m.at("mesh"));
+  } else if (o.model == "liver") {
+    r.fail(o.line, m.key("mesh"), "missing",
+           "add 'mesh: {generate: liver}' (liver | plate | cylinder) or 'mesh: {file: x.msh}'");
+  }
+  if (m.has("material")) o.material = read_material(r, m.at("material"));
+  if (m.has("fixed")) o.fixed = read_fixed(r, m.at("fixed"));
+  if (m.has("nonlinear")) o.nonlinear = read_nonlinear(r, m.at("nonlinear"));
+  if (m.has("liver")) {
+    const Field& lf = m.at("liver");
+    if (o.model != "liver") {
+      r.fail(lf.line, lf.key, "is only read for 'model: liver'", "set 'model: liver' or remove the section");
+    }
+    o.liver = read_liver(r, lf);
+    if (o.liver.deformation == LiverDeformation::kCorotational && tools[0].contact_model != ContactModel::kPatch) {
+      r.fail(lf.line, lf.key + ".deformation", "corotational needs the patch contact model",
+             "set tool.contact_model: patch, or liver.deformation: linear");
+    }
+    if (o.liver.deformation == LiverDeformation::kMultirate && (o.liver.organ_curves || o.nonlinear.enabled())) {
+      r.fail(lf.line, lf.key + ".deformation",
+             "multirate is given together with a quasi non-linear law (liver.curves: organ or a nonlinear section)",
+             "remove liver.curves / the nonlinear section: the multirate tracker is the non-linear model itself");
+    }
+    if (o.liver.organ_curves && o.nonlinear.enabled()) {
+      r.fail(lf.line, lf.key + ".curves", "organ is given together with nonlinear: curve files",
+             "remove the 'nonlinear' section (organ curves are computed from the organ itself) or set curves: cylinder");
+    }
+  }
+  if (m.has("intestine")) {
+    const Field& inf = m.at("intestine");
+    if (o.model != "intestine") {
+      r.fail(inf.line, inf.key, "is only read for 'model: intestine'", "set 'model: intestine' or remove the section");
+    }
+    o.intestine = read_intestine(r, inf);
+  }
+  o.intestine.params.probe_force_limit = tools[0].force_limit;  // the device clamp is the tool's (each probe its own)
+  if (in_list) {
+    if (m.has("rigid")) {
+      if (o.model != "rigid") {
+        r.fail(m.at("rigid").line, m.key("rigid"), "is only read for 'model: rigid'",
+               "set 'model: rigid' or remove the section");
+      }
+      o.rigid = read_rigid(r, m.at("rigid"));
+    }
+    if (m.has("placement")) o.placement = read_placement(r, m.at("placement"));
+    o.fixed.frame = o.placement;
+  }
+  return o;
+}
+
 // Hash helpers: -0.0 and 0.0 hash alike.
 void hash_double(Hasher& h, double v) { h.value<double>(v == 0.0 ? 0.0 : v); }
 void hash_vec(Hasher& h, const Eigen::Vector3d& v) {
@@ -663,11 +837,11 @@ std::string file_name(const std::string& path) {
 // -----------------------------------------------------------------------------------------------------------------
 
 
-std::uint64_t Scene::hash() const {
-  Hasher h;
-  h.str("surgsim-scene-v1");
-  h.str(model);
+namespace {
 
+// The organ's keys as the single-organ hash has always read them: mesh source, material, fixed set, law, options.
+void hash_organ_keys(Hasher& h, const MeshSource& mesh, const Material& material, const FixedRegion& fixed,
+                     const NonlinearSpec& nonlinear, const LiverOptions& liver) {
   // Mesh source: the file's name (not its folder, so two hosts agree), or the generator and its size.
   h.str(file_name(mesh.file));
   h.str(mesh.generate);
@@ -704,7 +878,9 @@ std::uint64_t Scene::hash() const {
     h.value<std::uint8_t>(static_cast<std::uint8_t>(liver.deformation));
     h.value<std::uint8_t>(liver.organ_curves);
   }
+}
 
+void hash_tools_and_haptic(Hasher& h, const std::vector<ToolSpec>& tools, const HapticSpec& haptic) {
   // Every instrument, in order (a second instrument changes the hash; one instrument hashes as the single
   // `tool:` key does, its name excepted, so scenes written for one instrument keep their hash).
   for (std::size_t i = 0; i < tools.size(); ++i) {
@@ -729,30 +905,90 @@ std::uint64_t Scene::hash() const {
   h.value<std::uint8_t>(haptic.passivity);
   hash_double(h, haptic.coupling_damping);
   hash_double(h, haptic.passivity_max_damping);
+}
 
-  // The intestine's parameters (other models hash as before).
-  if (model == "intestine") {
-    const intestine::IntestineParams& p = intestine.params;
-    for (double v : {p.length, p.cylinder_radius, p.angular_span, p.fold_shape, p.mesentery_taper, p.intestine_radius,
-                     p.mesentery_thickness, p.intestine_node_mass, p.mesentery_node_mass, p.structural_stiffness,
-                     p.shear_stiffness, p.bending_stiffness, p.spring_damping, p.drag, p.probe_stiffness,
-                     p.probe_force_limit, p.detection.drop_factor, intestine.probe_radius}) {
-      hash_double(h, v);
-    }
-    for (int v : {p.folds, p.columns, p.rows, p.probe_capacity, p.segment_exclusion, p.cell_exclusion,
-                  p.detection.random_pairs, p.detection.random_mesentery_pairs, p.detection.max_moves,
-                  p.detection.new_pair_moves, p.detection.zone_budget, p.detection.capacity, p.response.iterations,
-                  p.contact_capacity, static_cast<int>(p.integrator), static_cast<int>(p.self_collisions),
-                  static_cast<int>(p.detector),
-                  static_cast<int>(p.response.correct_velocity), static_cast<int>(p.response.correct_position)}) {
-      h.value<std::int32_t>(v);
-    }
-    hash_vec(h, p.axis_origin);
-    hash_vec(h, p.axis_direction);
-    hash_vec(h, p.gravity);
-    h.value<std::uint64_t>(p.detection.seed);
+void hash_intestine(Hasher& h, const IntestineSpec& intestine) {
+  const intestine::IntestineParams& p = intestine.params;
+  for (double v : {p.length, p.cylinder_radius, p.angular_span, p.fold_shape, p.mesentery_taper, p.intestine_radius,
+                   p.mesentery_thickness, p.intestine_node_mass, p.mesentery_node_mass, p.structural_stiffness,
+                   p.shear_stiffness, p.bending_stiffness, p.spring_damping, p.drag, p.probe_stiffness,
+                   p.probe_force_limit, p.detection.drop_factor, intestine.probe_radius}) {
+    hash_double(h, v);
   }
+  for (int v : {p.folds, p.columns, p.rows, p.probe_capacity, p.segment_exclusion, p.cell_exclusion,
+                p.detection.random_pairs, p.detection.random_mesentery_pairs, p.detection.max_moves,
+                p.detection.new_pair_moves, p.detection.zone_budget, p.detection.capacity, p.response.iterations,
+                p.contact_capacity, static_cast<int>(p.integrator), static_cast<int>(p.self_collisions),
+                static_cast<int>(p.detector), static_cast<int>(p.response.correct_velocity),
+                static_cast<int>(p.response.correct_position)}) {
+    h.value<std::int32_t>(v);
+  }
+  hash_vec(h, p.axis_origin);
+  hash_vec(h, p.axis_direction);
+  hash_vec(h, p.gravity);
+  h.value<std::uint64_t>(p.detection.seed);
+}
+
+void hash_rigid(Hasher& h, const RigidSpec& g) {
+  h.str(file_name(g.file));
+  h.str(g.generate);
+  hash_vec(h, g.size);
+  h.value<std::int32_t>(g.count);
+  hash_double(h, g.arc_deg);
+  hash_double(h, g.dome_open_z);
+  h.value<std::uint8_t>(g.cavity);
+  hash_double(h, g.stiffness);
+  hash_double(h, g.damping);
+}
+
+}  // namespace
+
+std::uint64_t Scene::hash() const {
+  Hasher h;
+  if (!organ_list()) {
+    // The single-organ form hashes exactly as before organ lists existed (caches and recordings keep matching).
+    h.str("surgsim-scene-v1");
+    h.str(model);
+    hash_organ_keys(h, mesh, material, fixed, nonlinear, liver);
+    hash_tools_and_haptic(h, tools, haptic);
+    if (model == "intestine") hash_intestine(h, intestine);
+    return h.digest();
+  }
+  h.str("surgsim-scene-v2");
+  h.value<std::uint64_t>(organs.size());
+  for (const OrganSpec& o : organs) {
+    h.str(o.name);
+    h.str(o.model);
+    for (int i = 0; i < 9; ++i) hash_double(h, o.placement.rotation(i / 3, i % 3));
+    hash_vec(h, o.placement.translation);
+    if (o.model == "liver") hash_organ_keys(h, o.mesh, o.material, o.fixed, o.nonlinear, o.liver);
+    if (o.model == "intestine") hash_intestine(h, o.intestine);
+    if (o.model == "rigid") hash_rigid(h, o.rigid);
+  }
+  hash_tools_and_haptic(h, tools, haptic);
   return h.digest();
+}
+
+Scene Scene::organ_scene(std::size_t i) const {
+  if (i >= organs.size()) {
+    throw_error(file, ": organ ", i, " asked for, the scene has ", organs.size());
+  }
+  const OrganSpec& o = organs[i];
+  Scene s = *this;
+  s.model = o.model;
+  s.mesh = o.mesh;
+  s.material = o.material;
+  s.fixed = o.fixed;
+  s.nonlinear = o.nonlinear;
+  s.liver = o.liver;
+  s.intestine = o.intestine;
+  s.rigid = o.rigid;
+  s.placement = o.placement;
+  // The intestine's axis is written in the organ's frame: put it in the scene's.
+  s.intestine.params.axis_origin = o.placement.to_world(o.intestine.params.axis_origin);
+  s.intestine.params.axis_direction = o.placement.direction_to_world(o.intestine.params.axis_direction);
+  s.organs = {o};
+  return s;
 }
 
 Scene load_scene(const std::string& path) {
@@ -785,23 +1021,14 @@ Scene load_scene(const std::string& path) {
 
   const Map top(r, {root, "", 1},
                 {"name", "model", "mesh", "material", "fixed", "nonlinear", "liver", "tool", "tools", "haptic",
-                 "visual", "intestine", "trajectory"});
+                 "visual", "intestine", "trajectory", "organs"});
   Scene s;
   s.file = abs.string();
   s.dir = abs.parent_path().string();
 
   if (!top.has("name")) r.fail(1, "name", "missing", "every scene needs a name, e.g. 'name: liver'");
   s.name = r.text(top.at("name"), "the scene's name, e.g. liver");
-  if (top.has("model")) s.model = r.one_of(top.at("model"), {"liver", "intestine"});
 
-  if (top.has("mesh")) {
-    s.mesh = read_mesh_source(r, top.at("mesh"));
-  } else if (s.model != "intestine") {  // the intestine builds its own bodies
-    r.fail(1, "mesh", "missing", "add 'mesh: {generate: liver}' (liver | plate | cylinder) or 'mesh: {file: x.msh}'");
-  }
-  if (top.has("material")) s.material = read_material(r, top.at("material"));
-  if (top.has("fixed")) s.fixed = read_fixed(r, top.at("fixed"));
-  if (top.has("nonlinear")) s.nonlinear = read_nonlinear(r, top.at("nonlinear"));
   if (top.has("tool") && top.has("tools")) {
     r.fail(top.at("tools").line, "tools", "given together with 'tool' (line " + std::to_string(top.at("tool").line) + ")",
            "keep one: 'tool:' for one instrument, or 'tools:' listing each instrument with its name");
@@ -837,35 +1064,69 @@ Scene load_scene(const std::string& path) {
       }
     }
   }
-  if (top.has("liver")) {
-    if (s.model != "liver") {
-      r.fail(top.at("liver").line, "liver", "is only read for 'model: liver'", "set 'model: liver' or remove the section");
+
+  if (top.has("organs")) {
+    // The list form: every organ's keys live in its entry, none at the top level.
+    for (const char* key : {"model", "mesh", "material", "fixed", "nonlinear", "liver", "intestine"}) {
+      if (top.has(key)) {
+        r.fail(top.at(key).line, key, "is given at the top level of a scene with 'organs:' (line " +
+                                          std::to_string(top.at("organs").line) + ")",
+               "move it into the organ it belongs to: each entry of 'organs:' has its own model, mesh, material, "
+               "fixed, nonlinear, liver and intestine keys");
+      }
     }
-    s.liver = read_liver(r, top.at("liver"));
-    if (s.liver.deformation == LiverDeformation::kCorotational && s.tools[0].contact_model != ContactModel::kPatch) {
-      r.fail(top.at("liver").line, "liver.deformation", "corotational needs the patch contact model",
-             "set tool.contact_model: patch, or liver.deformation: linear");
+    const Field& of = top.at("organs");
+    const std::string fix = "a list of 1.." + std::to_string(kMaxOrgans) +
+                            " organs, each a map with its own name and model, e.g. - {name: liver, model: liver, mesh: "
+                            "{generate: liver}}";
+    if (!of.node.IsSequence()) r.fail(of.line, of.key, "expected a list, got " + Reader::kind(of.node), fix);
+    if (of.node.size() < 1 || of.node.size() > static_cast<std::size_t>(kMaxOrgans)) {
+      r.fail(of.line, of.key, "lists " + std::to_string(of.node.size()) + " organs", fix);
     }
-    if (s.liver.deformation == LiverDeformation::kMultirate && (s.liver.organ_curves || s.nonlinear.enabled())) {
-      r.fail(top.at("liver").line, "liver.deformation",
-             "multirate is given together with a quasi non-linear law (liver.curves: organ or a nonlinear section)",
-             "remove liver.curves / the nonlinear section: the multirate tracker is the non-linear model itself");
+    s.model = "organs";
+    for (std::size_t i = 0; i < of.node.size(); ++i) {
+      const YAML::Node e = of.node[i];
+      const Field ef{e, of.key + "[" + std::to_string(i) + "]", line_of(e, of.line)};
+      const Map em(r, ef, {"name", "model", "mesh", "material", "fixed", "nonlinear", "liver", "intestine", "rigid",
+                           "placement"});
+      if (!em.has("name")) {
+        r.fail(ef.line, ef.key + ".name", "missing", "every organ of 'organs:' needs a name, e.g. name: liver");
+      }
+      if (!em.has("model")) {
+        r.fail(ef.line, ef.key + ".model", "missing", "say what the organ is: model: liver | intestine | rigid");
+      }
+      OrganSpec o = read_organ(r, em, s.tools, true);
+      o.name = r.text(em.at("name"), "the organ's name, e.g. liver (letters, digits, '_' or '-')");
+      for (const char ch : o.name) {
+        if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '-')) {
+          r.fail(em.at("name").line, em.key("name"), "'" + o.name + "' has the character '" + std::string(1, ch) + "'",
+                 "use letters, digits, '_' or '-' (the name heads stats keys and topics)");
+        }
+      }
+      for (const OrganSpec& other : s.organs) {
+        if (other.name == o.name) {
+          r.fail(em.at("name").line, em.key("name"),
+                 "'" + o.name + "' is also the name of the organ on line " + std::to_string(other.line),
+                 "give each organ its own name");
+        }
+      }
+      s.organs.push_back(std::move(o));
     }
-    if (s.liver.organ_curves && s.nonlinear.enabled()) {
-      r.fail(top.at("liver").line, "liver.curves", "organ is given together with nonlinear: curve files",
-             "remove the 'nonlinear' section (organ curves are computed from the organ itself) or set curves: cylinder");
-    }
+  } else {
+    // The single-organ form: the organ's keys at the top level, the organ named after the scene.
+    OrganSpec o = read_organ(r, top, s.tools, false);
+    o.name = s.name;
+    s.model = o.model;
+    s.mesh = o.mesh;
+    s.material = o.material;
+    s.fixed = o.fixed;
+    s.nonlinear = o.nonlinear;
+    s.liver = o.liver;
+    s.intestine = o.intestine;
+    s.organs = {std::move(o)};
   }
   if (top.has("haptic")) s.haptic = read_haptic(r, top.at("haptic"));
   if (top.has("visual")) s.visual = read_visual(r, top.at("visual"));
-  if (top.has("intestine")) {
-    if (s.model != "intestine") {
-      r.fail(top.at("intestine").line, "intestine", "is only read for 'model: intestine'",
-             "set 'model: intestine' or remove the section");
-    }
-    s.intestine = read_intestine(r, top.at("intestine"));
-  }
-  s.intestine.params.probe_force_limit = s.tools[0].force_limit;  // the device clamp is the tool's (each probe its own)
   if (top.has("trajectory"))
     s.trajectory = r.file(top.at("trajectory"), "a tool trajectory CSV (surgsim-trajectory v1, or v2 with one column group per instrument)");
   return s;

@@ -12,6 +12,7 @@
 #include "fem/material.h"
 #include "nonlinear/nonlinear_law.h"
 #include "mesh/mesh_source.h"
+#include "mesh/placement.h"
 #include "tool/tool.h"
 
 namespace surgsim::scene {
@@ -56,11 +57,48 @@ struct LiverOptions {
   bool defaults() const { return deformation == compliance::LiverDeformation::kLinear && !organ_curves; }
 };
 
+/// A rigid organ (abdominal wall, ribs, spine): a static triangle surface an instrument's tip is held on by a proxy
+/// (god-object) and a virtual coupling. YAML `rigid: {file: wall.obj | generate: plane | box | tube | dome | ribs, ...}`.
+/// The generators' dimensions are in the organ's own frame (its placement puts them in the scene).
+struct RigidSpec {
+  std::string file;      // absolute path of a Wavefront .obj surface; empty when generated
+  std::string generate;  // plane | box | tube | dome | ribs; empty when `file` is set
+  Eigen::Vector3d size = Eigen::Vector3d(0.1, 0.1, 0.1);  // m: plane [x, y, -]; box full extents; tube [radius,
+                                                           // length, -]; dome radii; ribs [arc radius, spacing, bar
+                                                           // radius]
+  int count = 5;               // ribs: the number of rib arcs, 1..24
+  double arc_deg = 150;        // ribs: the angle each arc spans, (0, 360)
+  double dome_open_z = 0;      // dome: the dome is cut at z = dome_open_z * radii.z (open below), [-1, 1)
+  bool cavity = false;         // the free side is inside (the abdominal wall seen from the abdomen)
+  double stiffness = 2000.0;   // N/m, the virtual coupling's spring (default: the 2 N/mm a desktop device renders)
+  double damping = 15.0;       // N s/m, the coupling's damper on the gap's rate, 0..1000 (rigid/proxy.h: passive
+                               // at 1 kHz for light to heavy devices with k = 2000 N/m)
+};
+
+/// One organ of a scene: its name, its model and that model's keys, and its placement. A one-organ scene written in
+/// the single-organ form (top-level `model:`, `mesh:` ...) is one OrganSpec named after the scene, placed at the
+/// origin.
+struct OrganSpec {
+  std::string name;             // unique in the scene; names the organ in stats, logs and errors
+  std::string model = "liver";  // "liver" (precomputed FEM) | "intestine" (mass-spring) | "rigid" (static surface)
+  int line = 1;                 // the scene file's line the organ starts on (for errors found after loading)
+  std::string key;              // its key path in the scene ("" for the single-organ form, "organs[i]" in a list)
+  mesh::Placement placement;    // the organ's frame in the scene's
+  mesh::MeshSource mesh;        // model liver
+  fem::Material material;
+  fem::FixedRegion fixed;       // in the organ's own frame
+  nonlinear::NonlinearSpec nonlinear;
+  LiverOptions liver;                  // model liver
+  intestine::IntestineSpec intestine;  // model intestine (its axis in the organ's frame)
+  RigidSpec rigid;                     // model rigid
+};
+
 struct Scene {
   std::string name;        // e.g. "liver"
   std::string file;        // absolute path of the YAML it came from
   std::string dir;         // folder of `file`, for resolving relative paths
-  std::string model = "liver";  // "liver" (precomputed FEM) | "intestine" (mass-spring)
+  std::string model = "liver";  // "liver" (precomputed FEM) | "intestine" (mass-spring) | "organs" (an `organs:`
+                                // list: see organs)
   mesh::MeshSource mesh;
   fem::Material material;
   fem::FixedRegion fixed;
@@ -73,13 +111,31 @@ struct Scene {
   VisualSpec visual;
   intestine::IntestineSpec intestine;  // read for model "intestine" only
   std::string trajectory;  // absolute path of the default trajectory, may be empty
+  mesh::Placement placement;  // organ_scene(i) of a list: organ i's placement (identity in the single-organ form)
+  RigidSpec rigid;            // organ_scene(i) of a rigid organ: its surface and coupling
+  /// Every organ, in the order given (never empty). A single-organ scene has one, mirroring the top-level keys
+  /// above (model, mesh, material, fixed, nonlinear, liver, intestine), named after the scene. A scene with an
+  /// `organs:` list has model "organs" and leaves those top-level keys at their defaults: read organs[i], or
+  /// organ_scene(i).
+  std::vector<OrganSpec> organs;
+
+  /// True for a scene written with an `organs:` list (any count), false for the single-organ form.
+  bool organ_list() const { return model == "organs"; }
+  /// A single-organ view of organ i: this scene with the top-level model keys set to organ i's (what the code that
+  /// builds one organ reads). The name stays the scene's; the tools, haptic and visual settings are shared.
+  Scene organ_scene(std::size_t i) const;
 
   /// Hash of everything both nodes must agree on: model, mesh source (file NAME, not path or content; or
   /// generator + target_nodes), material, fixed set, non-linear law (curve file names + degree), tool spec and
-  /// haptic rate, and for model "intestine" every intestine parameter. Name, visual settings and trajectory do not
-  /// enter it. Stable across hosts and runs.
+  /// haptic rate, and for model "intestine" every intestine parameter; for an `organs:` list, each organ's name,
+  /// model, placement and keys (a rigid organ's surface file name or generator, and its coupling). Name, visual
+  /// settings and trajectory do not enter it. Stable across hosts and runs; a single-organ scene keeps the hash it
+  /// had before organ lists existed.
   std::uint64_t hash() const;
 };
+
+/// Organs a scene lists at most.
+inline constexpr int kMaxOrgans = 8;
 
 /// Loads and validates a scene. Throws surgsim::core::Error "FILE:LINE: key 'a.b': <what is wrong> (<fix>)".
 /// Every key is optional except `name` and `mesh` (`mesh` is optional for model "intestine"); unknown keys, wrong

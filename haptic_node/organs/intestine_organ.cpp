@@ -40,6 +40,7 @@ IntestineOrgan::IntestineOrgan(const Scene& scene, std::uint64_t ticks)
 void IntestineOrgan::create_writers(dds::Participant& participant, std::uint64_t scene_hash) {
   writer_ = participant.writer(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()),
                                dds::kStreamWriter);
+  sample_.organ(static_cast<std::uint32_t>(organ_index_));  // the key: this organ's instance
   sample_.scene_hash(scene_hash);
   // The only allocations of the sample: write() changes values only.
   sample_.positions().resize(static_cast<std::size_t>(state_.point_count()));

@@ -98,6 +98,7 @@ void LiverOrgan::create_writers(dds::Participant& participant, std::uint64_t sce
   if (multirate_ == nullptr) return;
   writer_ = participant.writer(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()),
                                dds::kStreamWriter);
+  sample_.organ(static_cast<std::uint32_t>(organ_index_));  // the key: this organ's instance
   sample_.scene_hash(scene_hash);
   // The only allocations of the sample: write() changes values only.
   sample_.positions().resize(surface().nodes.size());

@@ -4,7 +4,7 @@ move a section here, and the numbers of the headings follow; no title carries a 
 A section is a module with TITLE (the heading's text) and write(rep), which writes the section's body into the
 report (report.document.Report) under the heading build.py puts above it."""
 from report import (benchmarks, haptic_signal, intestine_error, intestine_live, large_deformation, liver_error, scale,
-                    stability, steps, tool_size, two_hands, web)
+                    stability, steps, tool_size, two_hands, web, abdomen)
 
 SECTIONS = [
     liver_error,
@@ -14,6 +14,7 @@ SECTIONS = [
     haptic_signal,
     tool_size,
     two_hands,
+    abdomen,
     intestine_live,
     large_deformation,
     scale,

@@ -57,8 +57,31 @@ bool DataWriter::write(void* data) {
       const auto* c = static_cast<const surgsim::msg::ContactFrame*>(data);
       w.seq = c->seq();
       w.flags = c->flags();
+      for (const surgsim::msg::ContactEntry& e : c->contacts()) {
+        w.contact_organs.push_back(static_cast<int>(e.organ()));
+        w.contact_nodes.push_back(static_cast<int>(e.node()));
+      }
     } else if (w.topic == surgsim::dds::kBodyStateTopic) {
-      w.seq = static_cast<const surgsim::msg::BodyState*>(data)->seq();
+      const auto* b = static_cast<const surgsim::msg::BodyState*>(data);
+      w.seq = b->seq();
+      w.organ = static_cast<int>(b->organ());
+    } else if (w.topic == surgsim::dds::kSceneInfoTopic) {
+      const auto* s = static_cast<const surgsim::msg::SceneInfo*>(data);
+      w.scene_name = s->scene_name();
+      w.mesh_hash = s->mesh_hash();
+      w.tensor_hash = s->tensor_hash();
+      w.node_count = s->node_count();
+      w.surface_node_count = s->surface_node_count();
+      for (const surgsim::msg::OrganInfo& o : s->organs()) {
+        surgsim::test::OrganInfoWrite x;
+        x.name = o.name();
+        x.model = o.model();
+        x.mesh_hash = o.mesh_hash();
+        x.tensor_hash = o.tensor_hash();
+        x.node_count = o.node_count();
+        x.surface_node_count = o.surface_node_count();
+        w.organs.push_back(x);
+      }
     }
     std::lock_guard<std::mutex> lock(surgsim::test::g_mutex);
     surgsim::test::g_writes.push_back(w);

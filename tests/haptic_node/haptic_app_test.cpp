@@ -11,6 +11,8 @@
 #include <vector>
 
 #include "dds_support.h"
+#include "haptic_dds.h"
+#include "publisher.h"
 
 #include "haptic_node/dds_write_spy.h"
 #include "support/alloc_counter.h"
@@ -96,9 +98,12 @@ void expect_no_dds_write_on_the_loop_thread(const std::string& scene, double dur
     EXPECT_EQ(f.seq, k);
     EXPECT_EQ(w[per_tick * k + 1].topic, dds::kContactFrameTopic) << "tick " << k;
     EXPECT_EQ(w[per_tick * k + 1].seq, k);
+    // A one-organ scene: every contact entry is organ 0's.
+    for (int organ : w[per_tick * k + 1].contact_organs) EXPECT_EQ(organ, 0) << "tick " << k;
     if (per_tick == 3) {
       EXPECT_EQ(w[per_tick * k + 2].topic, dds::kBodyStateTopic) << "tick " << k;
       EXPECT_EQ(w[per_tick * k + 2].seq, k);
+      EXPECT_EQ(w[per_tick * k + 2].organ, 0) << "tick " << k << ": BodyState's key, the one organ's index";
     }
     if (::testing::Test::HasFailure()) break;
   }
@@ -112,6 +117,89 @@ void expect_no_dds_write_on_the_loop_thread(const std::string& scene, double dur
 
 TEST(HapticApp, NoDdsWriteOnTheLoopThreadLiver) { expect_no_dds_write_on_the_loop_thread("liver", 2.0, 2); }
 TEST(HapticApp, NoDdsWriteOnTheLoopThreadIntestine) { expect_no_dds_write_on_the_loop_thread("intestine", 0.5, 3); }
+
+// SceneInfo (wire v3) of a one-organ scene: one OrganInfo, named after the scene, of the scene's model, whose hashes
+// and counts are the whole scene's (the scalar fields).
+// Returns the organ's entry (empty on failure).
+test::OrganInfoWrite expect_one_organ_scene_info(const std::string& scene, const std::string& model) {
+  HapticOptions o = test_options();
+  o.scene = scene;
+  o.duration = 0.1;
+  test::dds_spy_start();
+  HapticApp app(o);  // publishes SceneInfo at init
+  const std::vector<test::DdsWrite> w = test::dds_spy_stop();
+  std::vector<test::DdsWrite> infos;
+  for (const auto& x : w) {
+    if (x.topic == dds::kSceneInfoTopic) infos.push_back(x);
+  }
+  EXPECT_EQ(infos.size(), 1u) << "one SceneInfo at init";
+  if (infos.size() != 1) return {};
+  const test::DdsWrite& info = infos[0];
+  EXPECT_EQ(info.organs.size(), 1u) << scene << ": one organ";
+  if (info.organs.size() != 1) return {};
+  const test::OrganInfoWrite& organ = info.organs[0];
+  EXPECT_FALSE(info.scene_name.empty());
+  EXPECT_EQ(organ.name, info.scene_name) << "the organ of a one-organ scene is named after the scene";
+  EXPECT_EQ(organ.model, model);
+  EXPECT_EQ(organ.mesh_hash, info.mesh_hash);
+  EXPECT_EQ(organ.tensor_hash, info.tensor_hash);
+  EXPECT_EQ(organ.node_count, info.node_count);
+  EXPECT_EQ(organ.surface_node_count, info.surface_node_count);
+  EXPECT_GT(organ.node_count, 0u);
+  return organ;
+}
+
+TEST(HapticApp, SceneInfoListsTheOrganOfALiverScene) {
+  const test::OrganInfoWrite organ = expect_one_organ_scene_info("liver", "liver");
+  // The liver has a tetrahedral mesh and tensors: their hashes are not 0.
+  EXPECT_NE(organ.mesh_hash, 0u);
+  EXPECT_NE(organ.tensor_hash, 0u);
+}
+TEST(HapticApp, SceneInfoListsTheOrganOfAnIntestineScene) { expect_one_organ_scene_info("intestine", "intestine"); }
+
+// ContactEntry.organ through the publisher thread and HapticDds::write_frame: each entry of each ContactFrame keeps
+// the organ (and node) the loop's record gave it, in order (a scene with several organs tags entries 0..7).
+TEST(HapticDds, ContactEntryOrganSurvivesThePublisher) {
+  setenv("SURGSIM_CONFIG_DIR", SURGSIM_TEST_CONFIG_DIR, 1);
+  dds::DdsOptions options;
+  options.domain = 1 + static_cast<int>((getpid() * 19) % 200);
+  options.profiles_file = std::string(SURGSIM_TEST_CONFIG_DIR) + "/dds/profiles.xml";
+  options.name = "surgsim_haptic_dds_organ_test";
+  HapticDds dds(options, false, 0x77, 1);
+  PublisherOptions popt;
+  popt.lossless = true;  // every record written
+  test::dds_spy_start();
+  {
+    Publisher publisher(dds, popt);
+    for (std::uint64_t k = 0; k < 3; ++k) {
+      TickRecord& r = publisher.begin();
+      r.seq = k;
+      r.instrument_count = 1;
+      r.organ.contact_count = 5;
+      for (int l = 0; l < 5; ++l) {
+        ContactRecord& c = r.organ.contacts[static_cast<std::size_t>(l)];
+        c.node = 100 * static_cast<int>(k) + l;
+        c.organ = (static_cast<int>(k) + 2 * l) % static_cast<int>(scene::kMaxOrgans);
+      }
+      publisher.commit();
+    }
+    publisher.finish();
+  }
+  const std::vector<test::DdsWrite> w = test::dds_spy_stop();
+  std::uint64_t frames = 0;
+  for (const auto& x : w) {
+    if (x.topic != dds::kContactFrameTopic) continue;
+    const std::uint64_t k = x.seq;
+    ASSERT_EQ(x.contact_organs.size(), 5u) << "frame " << k;
+    for (int l = 0; l < 5; ++l) {
+      EXPECT_EQ(x.contact_nodes[static_cast<std::size_t>(l)], 100 * static_cast<int>(k) + l) << "frame " << k;
+      EXPECT_EQ(x.contact_organs[static_cast<std::size_t>(l)], (static_cast<int>(k) + 2 * l) % scene::kMaxOrgans)
+          << "frame " << k << " entry " << l;
+    }
+    ++frames;
+  }
+  EXPECT_EQ(frames, 3u);
+}
 
 }  // namespace
 }  // namespace surgsim

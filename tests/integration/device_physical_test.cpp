@@ -17,6 +17,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "device_sim_scene.h"
@@ -28,26 +29,33 @@ namespace {
 
 using testing::Process;
 
-// The shipped liver scene with the force stage's keys set (haptic: passivity, coupling_damping), written to `file`
-// with its curves and trajectory by absolute path (so it reads the shipped files from the test's folder and its
-// cached tensors serve). Returns `file`.
-std::string write_liver(const std::string& file, bool passivity, double coupling_damping) {
-  std::string text = testing::read_file(std::string(SURGSIM_TEST_CONFIG_DIR) + "/liver.yaml");
+// The shipped scene config/NAME.yaml with each (from, to) of `edits` replaced once, written to `file` with its curves
+// and trajectory by absolute path (so it reads the shipped files from the test's folder and its cached tensors
+// serve). Returns `file`.
+std::string write_shipped(const std::string& name, const std::string& file,
+                          const std::vector<std::pair<std::string, std::string>>& edits) {
+  std::string text = testing::read_file(std::string(SURGSIM_TEST_CONFIG_DIR) + "/" + name + ".yaml");
   const auto replace = [&](const std::string& from, const std::string& to) {
     const std::size_t at = text.find(from);
-    if (at == std::string::npos) throw std::runtime_error("liver.yaml has no '" + from + "' any more");
+    if (at == std::string::npos) throw std::runtime_error(name + ".yaml has no '" + from + "' any more");
     text.replace(at, from.size(), to);
   };
   const std::string config = SURGSIM_TEST_CONFIG_DIR;
   replace("displacement_curve: curves/", "displacement_curve: " + config + "/curves/");
   replace("force_curve: curves/", "force_curve: " + config + "/curves/");
   replace("trajectory: trajectories/", "trajectory: " + config + "/trajectories/");
-  replace("\nhaptic:\n", "\nhaptic:\n  passivity: " + std::string(passivity ? "true" : "false") +
-                             "\n  coupling_damping: " + std::to_string(coupling_damping) + "\n");
+  for (const auto& [from, to] : edits) replace(from, to);
   std::ofstream out(file);
   out << text;
   if (!out) throw std::runtime_error("cannot write " + file);
   return file;
+}
+
+// The shipped liver scene with the force stage's keys set (haptic: passivity, coupling_damping).
+std::string write_liver(const std::string& file, bool passivity, double coupling_damping) {
+  return write_shipped("liver", file,
+                       {{"\nhaptic:\n", "\nhaptic:\n  passivity: " + std::string(passivity ? "true" : "false") +
+                                            "\n  coupling_damping: " + std::to_string(coupling_damping) + "\n"}});
 }
 
 // The insertion's peak-to-peak over each whole second of a one-instrument device CSV (surgsim-device-sim --out).
@@ -263,6 +271,59 @@ TEST_F(DevicePhysical, TwoInstrumentsEachRestWithTheirOwnHandForce) {
   EXPECT_EQ(csv.substr(0, csv.find('\n')),
             "t,left.insertion_m,left.velocity_m_s,left.force_axis_n,left.fx,left.fy,left.fz,left.flags,"
             "right.insertion_m,right.velocity_m_s,right.force_axis_n,right.fx,right.fy,right.fz,right.flags");
+}
+
+// The several-organs field (config/abdomen.yaml) with its probe turned from its port towards the posterior abdominal
+// wall (the floor, at a point clear of the liver and the bowel, as abdomen_bench's section 3). The grasper keeps its
+// port and axis.
+std::string write_abdomen_wall_push(const std::string& file) {
+  // towards (0.17, -0.05, -0.08) on the floor, as abdomen_bench
+  return write_shipped("abdomen", file, {{"axis: [-0.04, 0.07, -0.0778]", "axis: [0.12, -0.05, -0.158]"}});
+}
+
+// A rigid organ through the real nodes: the probe pushed along its shaft into the posterior abdominal wall by the
+// device simulator (the grasper held still in the cavity, no hand force). The wall has no compliance: the proxy's
+// coupling is the spring. At both corners of the range most prone to trouble (light and barely damped, pushed
+// hard; heavy and damped, pushed gently) the probe comes to rest on the wall pressing with the hand's force, and the
+// environment (the node's force as the device felt it, held over each step) gave the device no energy.
+TEST_F(DevicePhysical, ProbePushedIntoTheAbdominalWallComesToRestPassively) {
+  const std::string scene = write_abdomen_wall_push(path("abdomen_wall.yaml"));
+  struct Corner {
+    double mass, damping, hand;
+    const char* tag;
+  };
+  for (const Corner c : {Corner{0.05, 0.1, 3.0, "wall_light"}, Corner{0.2, 1.0, 0.5, "wall_heavy"}}) {
+    SCOPED_TRACE(c.tag);
+    nlohmann::json node;
+    const nlohmann::json d =
+        run(scene,
+            {"--mass", std::to_string(c.mass), "--damping", std::to_string(c.damping), "--hand-force",
+             std::to_string(c.hand) + ",0", "--insertion", "0.17,0.03"},  // the probe 3.5 cm short
+            c.tag, node);
+    ASSERT_FALSE(d.is_null());
+    SCOPED_TRACE(d.dump(2));
+    ASSERT_EQ(d["instruments"].size(), 2u);
+    EXPECT_EQ(d["nonfinite"].get<int>(), 0);
+    const nlohmann::json& probe = d["instruments"][0];
+    EXPECT_EQ(probe["name"], "probe");
+    // The probe met the wall, not a deformable organ: the wall's proxy held it.
+    ASSERT_TRUE(node.contains("organs")) << node.dump(2);
+    bool wall_touched = false;
+    for (const auto& o : node["organs"]) {
+      if (o["name"] == "floor") wall_touched = o["rigid"]["instruments"][0]["contact_ticks"].get<double>() > 1000;
+    }
+    EXPECT_TRUE(wall_touched) << node["organs"].dump(2);
+    const double misses = d["deadline_misses"].get<double>() + node["deadline_misses"].get<double>();
+    expect_at_rest(probe, c.hand, misses);
+    EXPECT_LE(probe["environment_energy_j"].get<double>(), 0.0);
+    RecordProperty(std::string(c.tag) + "_environment_energy_j",
+                   std::to_string(probe["environment_energy_j"].get<double>()));
+    RecordProperty(std::string(c.tag) + "_environment_energy_max_j",
+                   std::to_string(probe["environment_energy_max_j"].get<double>()));
+    for (const char* k : {"settling_time_s", "overshoot_m", "position_p2p_window_m", "force_final_n"})
+      RecordProperty(std::string(c.tag) + "_" + k, std::to_string(probe[k].get<double>()));
+    RecordProperty(std::string(c.tag) + "_deadline_misses", std::to_string(misses));
+  }
 }
 
 }  // namespace

@@ -9,7 +9,9 @@ processes (haptic node, visual node streaming JPEG frames, surgsim-web).
          it (screenshot saved); closing the driving page stops the commands and the haptic node's input timeout zeroes
          the force.
 
-Usage: web_browser_test.py watch|drive BIN_DIR CONFIG_DIR CACHE_DIR OUT_DIR [SCREENSHOT]"""
+  field: the several-organs scene (abdomen) plays in the page, its organs listed.
+
+Usage: web_browser_test.py watch|drive|field BIN_DIR CONFIG_DIR CACHE_DIR OUT_DIR [SCREENSHOT]"""
 import os
 import sys
 import time
@@ -28,6 +30,19 @@ def image_checksum(driver):
         return h;''')
 
 
+def pictures_until_contact(driver, trajectory, timeout):
+    """Waits until the page has shown 4 different pictures and a contact; returns the pictures' checksums."""
+    seen = set()
+
+    def changed():
+        seen.add(image_checksum(driver))
+        return len(seen) >= 4 and page_state(driver)['contactsMax'] > 0
+
+    wait_for(f'the view to change (4 different pictures) and a contact while {trajectory} plays', changed, timeout,
+             poll=0.1)
+    return seen
+
+
 def watch(bin_dir, config_dir, cache_dir, out):
     trajectory = os.path.join(config_dir, 'trajectories', 'liver_poke.csv')
     with Run(bin_dir, out, config_dir, cache_dir, trajectory=trajectory, salt=31, start_haptic=False) as run:
@@ -40,14 +55,7 @@ def watch(bin_dir, config_dir, cache_dir, out):
             first = image_checksum(d)
             run.start_haptic()
             # While the trajectory plays the tool moves: the picture changes, frame numbers grow, contacts show.
-            seen = set()
-
-            def changed():
-                seen.add(image_checksum(d))
-                return len(seen) >= 4 and page_state(d)['contactsMax'] > 0
-
-            wait_for('the view to change (4 different pictures) and a contact while liver_poke plays', changed, 40,
-                     poll=0.1)
+            seen = pictures_until_contact(d, 'liver_poke', 40)
             s = page_state(d)
             assert s['frames'] >= 4, s
             assert first in seen or len(seen) >= 4
@@ -63,6 +71,33 @@ def watch(bin_dir, config_dir, cache_dir, out):
             d.quit()
         assert run.procs['haptic'].wait(30) == 0
     check_visual(run)
+
+
+def field(bin_dir, config_dir, cache_dir, out):
+    """Several organs (config/abdomen.yaml): the page shows the field while abdomen.csv plays (the probe on the liver,
+    the grasper in the bowel's folds, then the probe along the wall), its organs listed with their models."""
+    trajectory = os.path.join(config_dir, 'trajectories', 'abdomen.csv')
+    with Run(bin_dir, out, config_dir, cache_dir, trajectory=trajectory, salt=41, scene='abdomen',
+             start_haptic=False) as run:
+        d = browser(out, 'field')
+        try:
+            d.get(run.url)
+            wait_for('the page to connect', lambda: (page_state(d) or {}).get('connected'), 20)
+            wait_for('a first frame on the page', lambda: page_state(d)['lastFrame'] > 0, 30)
+            run.start_haptic()  # the probe presses the liver 0.3-2.4 s in: the page watches from the start
+            seen = pictures_until_contact(d, 'abdomen.csv', 60)
+            wait_for('the organs in the scene table', lambda: 'rigid' in d.find_element('id', 'scene').text, 20)
+            scene = d.find_element('id', 'scene').text
+            for organ in ('liver (liver)', 'bowel (intestine)', 'wall (rigid)', 'floor (rigid)', 'ribs (rigid)'):
+                assert organ in scene, scene
+            s = page_state(d)
+            print(f'field: {s["frames"]} frames shown, {len(seen)} distinct pictures, contacts max {s["contactsMax"]}')
+        finally:
+            d.quit()
+        assert run.procs['haptic'].wait(60) == 0
+    v = run.json('visual.json')
+    assert v['scene_confirmed'] and v['frames_shown'] > 0, {k: v.get(k) for k in ('scene_confirmed', 'frames_shown')}
+    assert [o['name'] for o in v['organs']] == ['liver', 'bowel', 'wall', 'floor', 'ribs'], v['organs']
 
 
 def check_visual(run):
@@ -154,8 +189,10 @@ def main():
         watch(bin_dir, config_dir, cache_dir, out)
     elif case == 'drive':
         drive(bin_dir, config_dir, cache_dir, out, screenshot)
+    elif case == 'field':
+        field(bin_dir, config_dir, cache_dir, out)
     else:
-        sys.exit(f'unknown case {case}: watch or drive')
+        sys.exit(f'unknown case {case}: watch, drive or field')
     print(f'web_browser_test {case}: ok')
 
 

@@ -35,7 +35,7 @@ class Run:
     frames, and surgsim-web, on a private domain. Logs and stats in out_dir."""
 
     def __init__(self, bin_dir, out_dir, config_dir, cache_dir, trajectory=None, haptic_duration=60,
-                 stream_fps=20, salt=0, start_haptic=True):
+                 stream_fps=20, salt=0, start_haptic=True, scene='liver'):
         self.bin = bin_dir
         self.out = out_dir
         shutil.rmtree(out_dir, ignore_errors=True)
@@ -43,6 +43,7 @@ class Run:
         self.env = dict(os.environ, SURGSIM_DOMAIN=str(private_domain(salt)), SURGSIM_CONFIG_DIR=config_dir,
                         SURGSIM_CACHE_DIR=cache_dir)
         self.trajectory = trajectory
+        self.scene = scene
         self.haptic_duration = haptic_duration
         self.stream_fps = stream_fps
         self.start_haptic_now = start_haptic
@@ -58,10 +59,10 @@ class Run:
         return self.procs[name]
 
     def __enter__(self):
-        self._start('visual', [f'{self.bin}/visual_node', '--scene', 'liver', '--out', f'{self.out}/frames',
+        self._start('visual', [f'{self.bin}/visual_node', '--scene', self.scene, '--out', f'{self.out}/frames',
                                '--png-every', '0', '--stream-fps', str(self.stream_fps), '--stats',
                                f'{self.out}/visual.json'])
-        web = self._start('web', [f'{self.bin}/surgsim-web', '--scene', 'liver', '--port', '0', '--token', TOKEN,
+        web = self._start('web', [f'{self.bin}/surgsim-web', '--scene', self.scene, '--port', '0', '--token', TOKEN,
                                   '--stats', f'{self.out}/web.json'])
         line = web.stdout.readline()
         m = re.search(r'(http://\S+)', line)
@@ -73,7 +74,7 @@ class Run:
         return self
 
     def start_haptic(self):
-        args = [f'{self.bin}/haptic_node', '--scene', 'liver', '--stats', f'{self.out}/haptic.json',
+        args = [f'{self.bin}/haptic_node', '--scene', self.scene, '--stats', f'{self.out}/haptic.json',
                 '--wait-for-visual', '20']
         if self.trajectory:
             args += ['--replay', self.trajectory]

@@ -193,6 +193,56 @@ TEST(OrganView, LiverViewTakesTheContactsOfEveryInstrument) {
   EXPECT_LT(organ->max_displacement(), both);
 }
 
+// Wire v3: a frame carries every organ's contact entries; a liver view draws only those of its organ (its index in the
+// scene's organs list, OrganViewOptions::organ_index) and skips the others, whose nodes are another mesh's.
+TEST(OrganView, LiverViewSkipsTheContactsOfOtherOrgans) {
+  const Scene scene = shipped("plate.yaml");
+  const auto entry = [](std::uint32_t node, std::uint32_t organ) {
+    msg::ContactEntry e;
+    e.node(node);
+    e.instrument(0);
+    e.organ(organ);
+    e.lambda().z(-0.2);
+    return e;
+  };
+  msg::InstrumentState tool;
+  tool.instrument(0);
+  tool.direction().z(-1.0);
+  for (const int index : {0, 1}) {
+    OrganViewOptions options = test_options();
+    options.organ_index = index;
+    std::unique_ptr<OrganView> organ = make_organ_view(scene, options);
+    const auto& liver = dynamic_cast<LiverView&>(*organ);
+    const auto& visible = liver.deformer().visible_nodes();
+    const auto node = [&](std::size_t k) { return static_cast<std::uint32_t>(visible[k * visible.size() / 4]); };
+    // This organ's contact alone.
+    msg::ContactFrame own;
+    own.instruments().push_back(tool);
+    own.contacts().push_back(entry(node(1), static_cast<std::uint32_t>(index)));
+    EXPECT_GE(organ->update(&own, true), 0.0);
+    ASSERT_EQ(organ->contacts_shown(), 1);
+    const double alone = organ->max_displacement();
+    EXPECT_GT(alone, 0.0);
+    // The same contact among two of another organ (one of them on a node this mesh also has): the same shape.
+    msg::ContactFrame mixed;
+    mixed.instruments().push_back(tool);
+    mixed.contacts().push_back(entry(node(2), static_cast<std::uint32_t>(1 - index)));
+    mixed.contacts().push_back(entry(node(1), static_cast<std::uint32_t>(index)));
+    mixed.contacts().push_back(entry(999999, 7));  // not even a node of this mesh
+    EXPECT_GE(organ->update(&mixed, true), 0.0);
+    EXPECT_EQ(organ->contacts_shown(), 1) << "organ " << index;
+    EXPECT_EQ(organ->deform_errors(), 0u) << "another organ's node was applied to this mesh";
+    EXPECT_DOUBLE_EQ(organ->max_displacement(), alone) << "organ " << index;
+    EXPECT_EQ(liver.other_organ_contacts(), 2u);
+    // A later frame (not fresh) still shows this organ's contact only.
+    EXPECT_LT(organ->update(&mixed, false), 0.0);
+    EXPECT_EQ(organ->contacts_shown(), 1);
+    auto renderer = make_renderer("null", 64, 48);
+    organ->draw_markers(*renderer);
+    EXPECT_EQ(renderer->counts().points, 1u) << "one marker: this organ's contact";
+  }
+}
+
 msg::InstrumentState instrument_state(std::uint32_t index, double insertion, double pitch = 0) {
   msg::InstrumentState s;
   s.instrument(index);

@@ -6,7 +6,7 @@ using eprosima::fastdds::dds::DataReader;
 using eprosima::fastdds::dds::SampleInfo;
 using eprosima::fastrtps::types::ReturnCode_t;
 
-BodyStateListener::BodyStateListener() {
+BodyStateListener::BodyStateListener(int organ) : organ_(static_cast<std::uint32_t>(organ)) {
   incoming_.positions().reserve(msg::kMaxBodyPoints);
   newest_.positions().reserve(msg::kMaxBodyPoints);
 }
@@ -16,6 +16,10 @@ void BodyStateListener::on_data_available(DataReader* reader) {
   while (reader->take_next_sample(&incoming_, &info) == ReturnCode_t::RETCODE_OK) {
     if (!info.valid_data) continue;
     std::lock_guard<std::mutex> lock(mutex_);
+    if (incoming_.organ() != organ_) {  // another organ's body (a scene with several organs)
+      ++other_organs_;
+      continue;
+    }
     newest_ = incoming_;  // within the reserved capacity
     ++received_;
   }
@@ -41,8 +45,13 @@ int BodyStateListener::take(double* xyz, int tools, InstrumentPoses& instruments
   return static_cast<int>(p.size());
 }
 
-std::unique_ptr<BodyStateListener> subscribe_body_states(dds::Participant& participant) {
-  auto listener = std::make_unique<BodyStateListener>();
+std::uint64_t BodyStateListener::other_organs() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return other_organs_;
+}
+
+std::unique_ptr<BodyStateListener> subscribe_body_states(dds::Participant& participant, int organ) {
+  auto listener = std::make_unique<BodyStateListener>(organ);
   participant.reader(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()), dds::kStreamReader,
                      listener.get());
   return listener;

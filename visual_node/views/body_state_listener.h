@@ -2,6 +2,8 @@
 // the views that draw one: the intestine's points (views/intestine_view.h) and the multirate liver's boundary surface
 // (views/liver_view.h). The DDS listener thread copies each sample under a lock into storage reserved at
 // init (kMaxBodyPoints positions); the frame loop copies the newest one out with take(). Nothing allocates after init.
+// BodyState is keyed by organ (wire v3): a listener keeps the states of the one organ its view draws (its index in the
+// scene's organs list, 0 in a one-organ scene) and counts the others'.
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -23,23 +25,28 @@ struct BodyStateHeader {
 
 class BodyStateListener : public eprosima::fastdds::dds::DataReaderListener {
  public:
-  BodyStateListener();
-  /// DDS listener thread: keeps the newest valid sample.
+  /// `organ`: the organ whose states are kept (BodyState.organ).
+  explicit BodyStateListener(int organ = 0);
+  /// DDS listener thread: keeps the newest valid sample of its organ.
   void on_data_available(eprosima::fastdds::dds::DataReader* reader) override;
   /// Frame loop, no allocation: when a state newer than the last one taken has arrived, copies its positions into
   /// `xyz` (x, y, z per point; room for kMaxBodyPoints points), its instruments (for a scene of `tools` instruments)
   /// and its header, and returns its point count; else -1. `received`: the states received so far.
   int take(double* xyz, int tools, InstrumentPoses& instruments, BodyStateHeader& header, std::uint64_t& received);
+  /// States of other organs received (ignored).
+  std::uint64_t other_organs();
 
  private:
+  std::uint32_t organ_ = 0;
   std::mutex mutex_;
   msg::BodyState incoming_;
   msg::BodyState newest_;
   std::uint64_t received_ = 0;
   std::uint64_t taken_ = 0;
+  std::uint64_t other_organs_ = 0;
 };
 
-/// Init: a listener and its reader on `participant`'s BodyState topic (stream profile).
-std::unique_ptr<BodyStateListener> subscribe_body_states(dds::Participant& participant);
+/// Init: a listener of organ `organ`'s states and its reader on `participant`'s BodyState topic (stream profile).
+std::unique_ptr<BodyStateListener> subscribe_body_states(dds::Participant& participant, int organ = 0);
 
 }  // namespace surgsim

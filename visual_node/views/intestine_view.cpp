@@ -57,8 +57,8 @@ void IntestineView::set_skinning(intestine::TubeSkinning skinning) noexcept {
   built_lod_ = -1;  // rebuild on the next update()
 }
 
-void IntestineView::subscribe(dds::Participant& participant) {
-  listener_ = subscribe_body_states(participant);
+void IntestineView::subscribe(dds::Participant& participant, int organ) {
+  listener_ = subscribe_body_states(participant, organ);
 }
 
 bool IntestineView::accept(const double* xyz, int count, const InstrumentPoses* instruments) noexcept {
@@ -191,8 +191,9 @@ nlohmann::json IntestineView::stats() const {
   return j;
 }
 
-IntestineOrganView::IntestineOrganView(const Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning)
-    : view_(scene, scene_hash, skinning) {}
+IntestineOrganView::IntestineOrganView(const Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning,
+                                       int organ)
+    : view_(scene, scene_hash, skinning), organ_(organ) {}
 
 void IntestineOrganView::attach(const Renderer& renderer) {
   if (view_.skinning() == intestine::TubeSkinning::kGpu && !renderer.gpu_skinning()) {

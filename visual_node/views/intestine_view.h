@@ -79,8 +79,9 @@ class IntestineView {
   void set_skinning(intestine::TubeSkinning skinning) noexcept;
   intestine::TubeSkinning skinning() const { return skinning_; }
 
-  /// Init: the BodyState reader (stream profile: best effort, keep last 1; the listener keeps the newest).
-  void subscribe(dds::Participant& participant);
+  /// Init: the BodyState reader (stream profile: best effort, keep last 1; the listener keeps the newest of organ
+  /// `organ`, BodyState's key: the intestine's index in the scene's organs list, 0 in a one-organ scene).
+  void subscribe(dds::Participant& participant, int organ = 0);
 
   /// Per frame, no allocation: takes the newest BodyState when there is a newer one (its positions and its
   /// instruments, the probes at the body's tick), and rebuilds the tube and the mesentery when the body or the
@@ -158,12 +159,14 @@ class IntestineView {
 /// frame-rate controller gets each frame's work time.
 class IntestineOrganView : public OrganView {
  public:
-  /// Init: see IntestineView (no mesh, no tensors).
-  IntestineOrganView(const scene::Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning);
+  /// Init: see IntestineView (no mesh, no tensors); `organ` is the intestine's index in the scene's organs list (the
+  /// BodyStates drawn are that organ's).
+  IntestineOrganView(const scene::Scene& scene, std::uint64_t scene_hash, intestine::TubeSkinning skinning,
+                     int organ = 0);
 
   /// Skins the tube on the CPU when the renderer cannot on the GPU (says so on stderr).
   void attach(const Renderer& renderer) override;
-  void subscribe(dds::Participant& participant) override { view_.subscribe(participant); }
+  void subscribe(dds::Participant& participant) override { view_.subscribe(participant, organ_); }
   void print_init(std::ostream& out) const override;
 
   /// The newest BodyState as tube and mesentery, at the LOD the frame-rate controller chose; the time of a frame that
@@ -185,6 +188,7 @@ class IntestineOrganView : public OrganView {
 
  private:
   IntestineView view_;
+  int organ_ = 0;
 };
 
 }  // namespace surgsim

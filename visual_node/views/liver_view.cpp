@@ -30,7 +30,7 @@ Eigen::Vector3d from_msg(const msg::Vec3& v) { return {v.x(), v.y(), v.z()}; }
 }  // namespace
 
 LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
-    : tools_(static_cast<int>(scene.tools.size())) {
+    : tools_(static_cast<int>(scene.tools.size())), organ_(options.organ_index) {
   // The visible mesh.
   mesh_ = load_scene_mesh(scene, options.cache_dir, options.log);
   surface_ = boundary_surface(mesh_);
@@ -72,7 +72,7 @@ LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
 LiverView::~LiverView() = default;
 
 void LiverView::subscribe(dds::Participant& participant) {
-  if (multirate_) listener_ = subscribe_body_states(participant);
+  if (multirate_) listener_ = subscribe_body_states(participant, organ_);
 }
 
 void LiverView::say_rejection(BodyRejection why, std::uint64_t seq, int count, std::uint64_t scene_hash) noexcept {
@@ -128,7 +128,12 @@ bool LiverView::take_body_state(const double* xyz, int count, std::uint64_t scen
 double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
   // Deformation of the visible mesh from the newest contacts: u_n = sum_k G_nk lambda_k over the visible rows; with
   // multirate, once a BodyState was drawn, the tracker's shape carried to the frame's contacts instead.
-  contacts_ = frame != nullptr ? std::min<int>(static_cast<int>(frame->contacts().size()), kMaxContacts) : 0;
+  // Only this organ's contact entries (a scene with several organs sends every organ's in one frame).
+  contacts_ = 0;
+  if (frame != nullptr) {
+    for (const auto& e : frame->contacts()) contacts_ += e.organ() == static_cast<std::uint32_t>(organ_) ? 1 : 0;
+    contacts_ = std::min<int>(contacts_, kMaxContacts);
+  }
   double deform_us = -1;
   // Multirate: the newest BodyState, when one arrived since the last frame.
   if (listener_ != nullptr) {
@@ -143,8 +148,13 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
   }
   if (fresh && frame != nullptr) {
     const std::uint64_t d0 = monotonic_ns();
-    for (int l = 0; l < contacts_; ++l) {
-      const auto& e = frame->contacts()[static_cast<std::size_t>(l)];
+    int l = 0;
+    for (const auto& e : frame->contacts()) {
+      if (e.organ() != static_cast<std::uint32_t>(organ_)) {
+        ++other_organ_contacts_;  // another organ's node: not this mesh's
+        continue;
+      }
+      if (l >= contacts_) break;
       contact_nodes_[static_cast<std::size_t>(l)] = static_cast<int>(e.node());
       contact_lambda_[static_cast<std::size_t>(l)] = from_msg(e.lambda());
       // Multirate: u_tilde is the node's imposed displacement this tick (the tracker's target).
@@ -154,6 +164,7 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
       const std::uint32_t i = e.instrument();
       contact_instrument_[static_cast<std::size_t>(l)] =
           i < static_cast<std::uint32_t>(kMaxInstruments) ? static_cast<int>(i) : -1;
+      ++l;
     }
     take_instruments(frame->instruments(), tools_, instruments_);  // absent instruments get a zero direction
     // Once the tracker's shape is drawn (multirate) the contacts carry it (below) and place the markers.

@@ -86,6 +86,10 @@ class LiverView : public OrganView {
   }
   /// The scene identity BodyStates must carry (visual_scene_hash of the scene and this mesh).
   std::uint64_t scene_hash() const { return scene_hash_; }
+  /// The organ drawn (OrganViewOptions::organ_index): contact entries of other organs are skipped.
+  int organ_index() const { return organ_; }
+  /// Contact entries of other organs skipped so far (fresh frames only).
+  std::uint64_t other_organ_contacts() const { return other_organ_contacts_; }
 
  private:
   mesh::TetMesh mesh_;
@@ -96,6 +100,8 @@ class LiverView : public OrganView {
   std::unique_ptr<nonlinear::NonlinearLaw> law_;
   std::unique_ptr<SurfaceDeformer> deformer_;
   int tools_ = 1;  // the scene's instruments
+  int organ_ = 0;  // the organ drawn: its index in the scene's organs list (ContactEntry.organ, BodyState.organ)
+  std::uint64_t other_organ_contacts_ = 0;
   // The shown frame's contacts (the last fresh frame's nodes, forces and instruments; fixed storage) and its
   // instruments' directions (the non-linear law's axis of each instrument's share).
   std::array<int, compliance::kMaxContacts> contact_nodes_{};

@@ -103,6 +103,10 @@ struct WebDds::State : DataReaderListener {
         t.tensor_hash = s.tensor_hash();
         t.instrument_count = s.instrument_count();
         t.haptic_rate_hz = s.haptic_rate_hz();
+        t.organs.clear();
+        for (const msg::OrganInfo& o : s.organs()) {
+          t.organs += std::string(t.organs.empty() ? "" : ", ") + o.name().to_string() + " (" + o.model().to_string() + ")";
+        }
       }
     }
   }

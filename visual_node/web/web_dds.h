@@ -44,6 +44,7 @@ struct Telemetry {
   std::uint64_t scene_hash = 0, mesh_hash = 0, material_hash = 0, tensor_hash = 0;
   std::uint32_t instrument_count = 0;
   double haptic_rate_hz = 0;
+  std::string organs;                    // "name (model), ..." in the scene's order (SceneInfo.organs)
   // Frames.
   std::uint64_t frames_received = 0;
   std::uint64_t frame_number = 0;

@@ -542,7 +542,8 @@ void WebServer::Impl::add_live(nlohmann::json& j) {
   if (t.have_scene) {
     j["scene"] = {{"name", t.scene_name}, {"scene_hash", hex64(t.scene_hash)}, {"mesh_hash", hex64(t.mesh_hash)},
                   {"material_hash", hex64(t.material_hash)}, {"tensor_hash", hex64(t.tensor_hash)},
-                  {"instruments", t.instrument_count}, {"haptic_rate_hz", t.haptic_rate_hz}};
+                  {"instruments", t.instrument_count}, {"haptic_rate_hz", t.haptic_rate_hz},
+                  {"organs", t.organs}};
   }
   std::lock_guard<std::mutex> lock(drive_mutex);
   j["driver"] = arbiter.driver();

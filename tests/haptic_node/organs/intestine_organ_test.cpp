@@ -206,7 +206,7 @@ class BodyReader : public DataReaderListener {
 };
 
 // write(): the BodyState of a tick carries every instrument (index, pose, tip, direction, force, contact points,
-// flags) and the body's positions.
+// flags) and the body's positions, keyed by the organ index the factory gave the organ (here organ 3 of a scene).
 TEST(IntestineOrganTest, BodyStateCarriesEveryInstrument) {
   const Scene scene = two_tool_scene(8.0, 8.0);
   IntestineOrgan organ(scene, 100);
@@ -218,6 +218,7 @@ TEST(IntestineOrganTest, BodyStateCarriesEveryInstrument) {
   BodyReader seen;
   DataReader* reader = participant.reader(participant.topic(dds::kBodyStateTopic, new msg::BodyStatePubSubType()),
                                           dds::kStreamReader, &seen);
+  organ.set_organ_index(3);  // as CompositeOrgan does for each part, before the writers
   organ.create_writers(participant, 0x1234);
 
   Eigen::Vector3d out;
@@ -260,6 +261,7 @@ TEST(IntestineOrganTest, BodyStateCarriesEveryInstrument) {
   ASSERT_TRUE(got) << "no BodyState received";
   std::lock_guard<std::mutex> lock(seen.mutex);
   const msg::BodyState& b = seen.received.front();
+  EXPECT_EQ(b.organ(), 3u) << "BodyState's key is the organ's index";
   EXPECT_EQ(b.seq(), 42u);
   EXPECT_EQ(b.scene_hash(), 0x1234u);
   ASSERT_EQ(b.instruments().size(), 2u);

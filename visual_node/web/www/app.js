@@ -152,7 +152,7 @@ function onText(m) {
       const s = m.scene;
       $('scene').innerHTML = [['name', s.name], ['scene', s.scene_hash], ['mesh', s.mesh_hash],
         ['material', s.material_hash], ['tensors', s.tensor_hash], ['instruments', s.instruments],
-        ['haptic', `${s.haptic_rate_hz} Hz`]].map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join('');
+        ['organs', s.organs || ''], ['haptic', `${s.haptic_rate_hz} Hz`]].map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join('');
     }
     const p = m.tool_pose;
     $('pose').textContent = `pitch ${p[0].toFixed(3)} yaw ${p[1].toFixed(3)} ins ${p[2].toFixed(4)} m jaw ` +

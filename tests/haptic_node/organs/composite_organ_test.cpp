@@ -1,0 +1,238 @@
+// Several organs in the haptic node (organs/composite_organ.h, organs/rigid_organ.h, the factory): an instrument
+// touching two organs in one tick gets the sum of what each gives it alone, bit for bit; the sum is left unclamped
+// and the force stage clamps it once (clamping each organ's force first turns the sum); the organs' rest overlap and
+// the second published body are refused naming the scene file, line and key; the loop allocates nothing.
+#include "organs/composite_organ.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "core/error.h"
+#include "force_stage.h"
+#include "organs/rigid_organ.h"
+#include "support/alloc_counter.h"
+#include "support/error_test_util.h"
+
+using namespace surgsim::contact;
+using namespace surgsim::scene;
+using namespace surgsim::tool;
+
+namespace surgsim {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path test_dir() {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  const fs::path dir = fs::path(::testing::TempDir()) / (std::string("composite_organ_test_") + info->name());
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::string write(const fs::path& path, const std::string& text) {
+  std::ofstream(path, std::ios::binary) << text;
+  return path.string();
+}
+
+// The plate (0.2 x 0.2 x 0.01 m, top at z = 0.005, corners fixed) and a vertical wall standing on it at x = 0.09,
+// facing -x, its bottom edge 0.5 mm above the plate's top; a 10 mm instrument pressing down at x = 0.087, whose tip
+// sphere (its leading point the tip) overlaps the wall by 2 mm; the tip ends 4 mm into the plate (the sphere's centre
+// 5 mm above it, above the wall's bottom edge).
+const std::string kTool =
+    "tools:\n"
+    "  - {name: probe, trocar: [0.087, 0.0, 0.15], axis: [0, 0, -1], shaft_points: 1, tip_radius: 0.005, "
+    "force_limit: 8}\n";
+const std::string kPlate =
+    "  - name: plate\n"
+    "    model: liver\n"
+    "    mesh: {generate: plate, target_nodes: 300}\n"
+    "    fixed:\n"
+    "      boxes:\n"
+    "        - {min: [-0.101, -0.101, -0.006], max: [-0.080, -0.080, 0.006]}\n"
+    "        - {min: [ 0.080, -0.101, -0.006], max: [ 0.101, -0.080, 0.006]}\n"
+    "        - {min: [-0.101,  0.080, -0.006], max: [-0.080,  0.101, 0.006]}\n"
+    "        - {min: [ 0.080,  0.080, -0.006], max: [ 0.101,  0.101, 0.006]}\n";
+const std::string kWall =
+    "  - name: wall\n"
+    "    model: rigid\n"
+    "    rigid: {generate: plane, size: [0.1, 0.2, 0]}\n"
+    "    placement: {translation: [0.09, 0, 0.0555], rotation_deg: [0, -90, 0]}\n";
+
+Scene scene_of(const fs::path& dir, const char* file, const std::string& organs) {
+  return load_scene(write(dir / file, "name: t\n" + kTool + "organs:\n" + organs));
+}
+
+// The instrument's tip straight down at 0.05 m/s from 1 cm above the plate to 4 mm into it, at 1 kHz.
+std::vector<ToolGeometry> press(const ToolSpec& spec) {
+  std::vector<ToolGeometry> path;
+  Pose5 p;
+  for (int k = 0; k <= 280; ++k) {
+    p.insertion = 0.15 - 0.005 - 0.01 + 5e-5 * k;  // the tip 1 cm above the top at k = 0
+    path.push_back(tool_geometry(spec, p));
+  }
+  return path;
+}
+
+std::vector<ContactTick> run(HapticOrgan& organ, const std::vector<ToolGeometry>& path) {
+  std::vector<ContactTick> out;
+  for (const ToolGeometry& g : path) {
+    ContactTick t;
+    organ.step(&g, 0.0, 1e-3, t);
+    out.push_back(t);
+  }
+  return out;
+}
+
+TEST(CompositeOrgan, TwoOrgansInOneTickGiveTheSumOfEachAloneBitForBit) {
+  const fs::path dir = test_dir();
+  const Scene both = scene_of(dir, "both.yaml", kPlate + kWall);
+  const Scene plate = scene_of(dir, "plate.yaml", kPlate);
+  const Scene wall = scene_of(dir, "wall.yaml", kWall);
+  const auto organ = make_haptic_organ(both, SURGSIM_TEST_CACHE_DIR, 10, nullptr);
+  const auto plate_alone = make_haptic_organ(plate, SURGSIM_TEST_CACHE_DIR, 10, nullptr);
+  const auto wall_alone = make_haptic_organ(wall, SURGSIM_TEST_CACHE_DIR, 10, nullptr);
+  ASSERT_STREQ(organ->model_name(), "organs");
+  const auto path = press(both.tools[0]);
+  const auto sum = run(*organ, path);
+  const auto a = run(*plate_alone, path);
+  const auto b = run(*wall_alone, path);
+  int both_in_contact = 0;
+  double largest = 0;
+  for (std::size_t k = 0; k < path.size(); ++k) {
+    const Eigen::Vector3d expected = a[k].force + b[k].force;
+    ASSERT_EQ(sum[k].force, expected) << "tick " << k;
+    ASSERT_EQ(sum[k].device_force, expected) << "tick " << k << ": the composite leaves the clamp to the force stage";
+    EXPECT_EQ(sum[k].points_in_contact, a[k].points_in_contact + b[k].points_in_contact);
+    if (a[k].points_in_contact > 0 && b[k].points_in_contact > 0) {
+      ++both_in_contact;
+      largest = std::max(largest, expected.norm());
+    }
+  }
+  // The instrument touches both organs over the last 80 ticks: the wall pushes it back along -x (4 N), the soft plate
+  // (3 kPa, 1 cm thick) up by about 15 mN at 4 mm.
+  EXPECT_GT(both_in_contact, 50);
+  const ContactTick& last = sum.back();
+  EXPECT_LT(last.force.x(), -1.0);
+  EXPECT_GT(last.force.z(), 0.005);
+  std::cout << "[composite] " << both_in_contact << " ticks on both organs; last force (" << last.force.transpose()
+            << ") N = plate (" << a.back().force.transpose() << ") + wall (" << b.back().force.transpose() << ")\n";
+  // The contact entries are the plate's, tagged with its index; the wall deforms nothing.
+  EXPECT_EQ(organ->contact_entries(), plate_alone->contact_entries());
+  for (int l = 0; l < organ->contact_entries(); ++l) EXPECT_EQ(organ->contact_entry(l).organ, 0);
+  // Per-organ identities, in the scene's order.
+  const auto ids = organ->identities();
+  ASSERT_EQ(ids.size(), 2u);
+  EXPECT_EQ(ids[0].name, "plate");
+  EXPECT_EQ(ids[0].model, "liver");
+  EXPECT_EQ(ids[0].mesh_hash, plate_alone->identities()[0].mesh_hash);
+  EXPECT_EQ(ids[1].name, "wall");
+  EXPECT_EQ(ids[1].model, "rigid");
+}
+
+// A corner of two walls: the tip 5 mm into one (10 N) and 1 mm into the other (2 N) with an 8 N device. Clamping each
+// organ's force to 8 N and then the sum points the force at (8, 2); the sum clamped once points it at (10, 2).
+TEST(CompositeOrgan, TheSumIsClampedOnceInTheForceStage) {
+  const fs::path dir = test_dir();
+  const std::string walls =
+      "  - name: side\n"
+      "    model: rigid\n"
+      "    rigid: {generate: plane, size: [0.1, 0.1, 0], stiffness: 2000, damping: 0}\n"
+      "    placement: {translation: [0, 0, 0.05], rotation_deg: [0, 90, 0]}\n"  // x = 0, z in [0, 0.1], normal +x
+      "  - name: floor\n"
+      "    model: rigid\n"
+      "    rigid: {generate: plane, size: [0.1, 0.1, 0], stiffness: 2000, damping: 0}\n"
+      "    placement: {translation: [0.05, 0, 0]}\n";  // z = 0, x in [0, 0.1], normal +z: they meet along an edge
+  const Scene s = load_scene(write(dir / "corner.yaml",
+                                   "name: corner\ntools:\n  - {name: probe, trocar: [0.02, 0.0, 0.2], axis: [0, 0, -1], "
+                                   "shaft_points: 1, tip_radius: 0.005, force_limit: 8}\norgans:\n" +
+                                       walls));
+  const auto organ = make_haptic_organ(s, SURGSIM_TEST_CACHE_DIR, 10, nullptr);
+  // The tip sphere's centre at x = 0 (5 mm into the side wall's offset surface at x = 0.005) and z = 0.004 (1 mm into
+  // the floor's at z = 0.005): the tip, its leading point, 5 mm below along the shaft (straight down).
+  ToolGeometry g = tool_geometry(s.tools[0], Pose5{});
+  g.tip = Eigen::Vector3d(0.0, 0.0, -0.001);
+  ContactTick t;
+  organ->step(&g, 0.0, 1e-3, t);
+  const auto& c = dynamic_cast<const CompositeOrgan&>(*organ);
+  const Eigen::Vector3d side = c.organ_tick(0, 0).force, floor = c.organ_tick(1, 0).force;
+  EXPECT_NEAR(side.x(), 10.0, 1e-5);  // the proxy stands a skin of 1-2 nm off the surface
+  EXPECT_NEAR(floor.z(), 2.0, 1e-5);
+  ASSERT_EQ(t.device_force, side + floor);
+  EXPECT_FALSE(t.saturated);  // not yet: the composite does not clamp
+  ForceStage stage(HapticSpec{}, 8.0);
+  stage.apply(g, 1e-3, t);
+  EXPECT_TRUE(t.saturated);
+  EXPECT_NEAR(t.device_force.norm(), 8.0, 1e-9);
+  const Eigen::Vector3d once = (side + floor).normalized();
+  const Eigen::Vector3d twice = (Eigen::Vector3d(8, 0, 0) + floor).normalized();
+  EXPECT_NEAR(t.device_force.normalized().dot(once), 1.0, 1e-12);
+  EXPECT_LT(t.device_force.normalized().dot(twice), 1.0 - 1e-4) << "clamped per organ first";
+}
+
+TEST(CompositeOrgan, StepAllocatesNothing) {
+  const fs::path dir = test_dir();
+  const Scene both = scene_of(dir, "both.yaml", kPlate + kWall);
+  const auto organ = make_haptic_organ(both, SURGSIM_TEST_CACHE_DIR, 10, nullptr);
+  const auto path = press(both.tools[0]);
+  OrganOutputs out;
+  std::vector<double> points(3 * static_cast<std::size_t>(std::max(organ->output_points(), 1)));
+  out.points = points.data();
+  out.point_capacity = organ->output_points();
+  ContactTick t;
+  organ->step(&path[0], 0.0, 1e-3, t);  // first tick: proxies reset, contacts found
+  long allocations = 0;
+  {
+    test::AllocationCounter counter;
+    for (const ToolGeometry& g : path) {
+      organ->step(&g, 0.0, 1e-3, t);
+      organ->fill_outputs(out);
+    }
+    organ->step(nullptr, 0.0, 1e-3, t);  // input lost
+    allocations = counter.count();
+  }
+  EXPECT_EQ(allocations, 0);
+}
+
+TEST(CompositeOrgan, OrgansOverlappingAtRestAreRefusedNamingBoth) {
+  const fs::path dir = test_dir();
+  // The wall down through the plate: the plate's edge 1 cm behind it.
+  std::string wall = kWall;
+  wall.replace(wall.find("0.0555"), 6, "0.0300");
+  const Scene s = scene_of(dir, "overlap.yaml", kPlate + wall);
+  const std::string e = test::error_of([&] { make_haptic_organ(s, SURGSIM_TEST_CACHE_DIR, 10, nullptr); });
+  EXPECT_NE(e.find("overlap.yaml:"), std::string::npos) << e;
+  EXPECT_NE(e.find("organ 'plate'"), std::string::npos) << e;
+  EXPECT_NE(e.find("organ 'wall'"), std::string::npos) << e;
+  EXPECT_NE(e.find("key 'organs["), std::string::npos) << e;
+  EXPECT_NE(e.find("mm inside"), std::string::npos) << e;
+}
+
+TEST(CompositeOrgan, RigidOrganHoldsTheTipOnTheWallAndResetsAfterALostInput) {
+  const fs::path dir = test_dir();
+  const Scene s = scene_of(dir, "wall.yaml", kWall);
+  const auto organ = make_haptic_organ(s, SURGSIM_TEST_CACHE_DIR, 10, nullptr);
+  const auto& rigid = dynamic_cast<const RigidOrgan&>(dynamic_cast<const CompositeOrgan&>(*organ).organ(0));
+  ToolGeometry g = tool_geometry(s.tools[0], Pose5{});
+  ContactTick t;
+  for (int k = 0; k <= 20; ++k) {  // into the wall (offset surface at x = 0.085) up to 1 mm
+    g.tip = Eigen::Vector3d(0.085 - 0.001 + 1e-4 * k, 0, 0.05);
+    organ->step(&g, 0.0, 1e-3, t);
+  }
+  EXPECT_NEAR(rigid.proxy(0).proxy_point().x(), 0.085, 1e-8);
+  EXPECT_NEAR(rigid.max_penetration(0), 0.001, 1e-8);
+  EXPECT_LT(t.force.x(), -1.9);  // 2000 N/m x 1 mm, plus the damper while moving in
+  organ->step(nullptr, 0.0, 1e-3, t);
+  EXPECT_TRUE(t.force.isZero(0));
+  EXPECT_EQ(organ->contacts(), 0);
+  g.tip.x() = 0.086;  // back 1 mm in: the proxy starts again on the free side
+  organ->step(&g, 0.0, 1e-3, t);
+  EXPECT_NEAR(rigid.proxy(0).proxy_point().x(), 0.085, 1e-8);
+  EXPECT_NEAR(t.force.x(), -2.0, 1e-4);  // no damper kick: a reset is not an impact
+}
+
+}  // namespace
+}  // namespace surgsim
