@@ -111,7 +111,8 @@ class DevicePhysical : public testing::NodeTest {
 
   // One device's summary `d` (the top level of a one-instrument run, or one entry of "instruments"): at rest,
   // pressing with the hand's force. `misses`: deadlines missed by either process in the run.
-  static void expect_at_rest(const nlohmann::json& d, double hand, double misses) {
+  // `disturbed_p2p`: the motion (m) a missed deadline may leave in the last window (below).
+  static void expect_at_rest(const nlohmann::json& d, double hand, double misses, double disturbed_p2p = 5e-3) {
     // At rest: within 1 mm of its final position for the whole last second (a sustained oscillation of this loop is
     // 3-60 mm peak to peak). An overrun of either process on a loaded machine holds, then fades the force for up to
     // 10 ms while the hand keeps pushing, which nudges a light tool by 0.1-3 mm (seen under ctest -j2 on 2 cores): with
@@ -122,7 +123,7 @@ class DevicePhysical : public testing::NodeTest {
       EXPECT_TRUE(d["settled"].get<bool>()) << "settling time " << d["settling_time_s"];
       EXPECT_LT(d["position_p2p_window_m"].get<double>(), 1e-3);
     } else {
-      EXPECT_LT(d["position_p2p_window_m"].get<double>(), 5e-3) << misses << " missed deadlines";
+      EXPECT_LT(d["position_p2p_window_m"].get<double>(), disturbed_p2p) << misses << " missed deadlines";
     }
     // ... and no ringing: without the force stage the light corner keeps a 12 Hz ring (about 24 velocity reversals a
     // second, 0.3-0.5 mm) after its large swings die out; an overrun's nudge reverses the velocity once or twice.
@@ -314,7 +315,10 @@ TEST_F(DevicePhysical, ProbePushedIntoTheAbdominalWallComesToRestPassively) {
     }
     EXPECT_TRUE(wall_touched) << node["organs"].dump(2);
     const double misses = d["deadline_misses"].get<double>() + node["deadline_misses"].get<double>();
-    expect_at_rest(probe, c.hand, misses);
+    // On the wall a missed deadline nudges the light corner further than on the liver: the force faded for up to
+    // 10 ms under a 3 N hand moves 0.05 kg 3 mm at 0.6 m/s, and the 2 N/mm coupling stops that 3 mm later (7 mm
+    // peak to peak seen under ctest -j2 with 26 misses). Still at rest once, and no ringing.
+    expect_at_rest(probe, c.hand, misses, 1e-2);
     EXPECT_LE(probe["environment_energy_j"].get<double>(), 0.0);
     RecordProperty(std::string(c.tag) + "_environment_energy_j",
                    std::to_string(probe["environment_energy_j"].get<double>()));
