@@ -307,6 +307,17 @@ def abdomen(t):
     return [probe, grasper]
 
 
+def abdomen_loop(t):
+    """abdomen() six times, 9 s apart: each 8 s run, then 1 s back to its start pose along a straight line (a load
+    for paired live runs as long as rt_bench's: not shipped, written only when asked for)."""
+    k = t % 9.0
+    if k <= 8.0:
+        return abdomen(k)
+    s = k - 8.0
+    end, start = abdomen(8.0), abdomen(0.0)
+    return [tuple(e + (b - e) * s for e, b in zip(pe, pb)) for pe, pb in zip(end, start)]
+
+
 if __name__ == "__main__":
     import sys
     which = sys.argv[1] if len(sys.argv) > 1 else "all"
@@ -314,6 +325,11 @@ if __name__ == "__main__":
         write("abdomen.csv", 8.0, abdomen,
               "abdomen: the probe presses the liver 8 mm while the grasper pushes into the bowel's folds, then the "
               "probe slides 10 cm along the side wall 0.5 mm deep", instruments=("probe", "grasper"))
+    if which == "abdomen_loop":  # not in "all": a measurement load, not a shipped trajectory (git ignores it)
+        write("abdomen_loop.csv", 53.0, abdomen_loop,
+              "abdomen.csv six times, 9 s apart (1 s back to the start pose between): a 53 s load for paired live "
+              "runs", instruments=("probe", "grasper"))
+        sys.exit(0)
     if which in ("all", "intestine"):
         write("intestine_push.csv", 6.0, intestine_push,
               "intestine: push the folds 22 cm in from the side, swing along the vessel, withdraw")

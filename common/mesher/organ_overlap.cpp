@@ -63,24 +63,13 @@ double signed_distance(const RestShape& shape, const Eigen::Vector3d& p, double 
   const rigid::ClosestPoint c = shape.surface->closest_point(p, search);
   if (!c.found) return kInf;
   if (c.distance >= 0) return c.distance;
-  // Behind the surface: count it only where p lies under the surface, i.e. p projects into the closest triangle
-  // itself (within 1 um), not beside the edge of an open surface, where "behind" means nothing. Inside a closed
-  // surface the nearest point is on a face (or on an edge, where p projects onto that edge of a face): counted.
-  // Behind a convex vertex of a cavity, where p projects into no face, a sample near it is (the faces around).
-  const mesh::TriSurface& m = shape.surface->surface();
-  const Eigen::Vector3d a = m.vertices.row(m.tris(c.triangle, 0)).transpose();
-  const Eigen::Vector3d b = m.vertices.row(m.tris(c.triangle, 1)).transpose();
-  const Eigen::Vector3d e = m.vertices.row(m.tris(c.triangle, 2)).transpose();
-  const Eigen::Vector3d n = (b - a).cross(e - a);
-  const double area2 = n.norm();
-  if (!(area2 > 0)) return kInf;
-  const Eigen::Vector3d q = p - (p - a).dot(n) / (area2 * area2) * n;  // p projected on the triangle's plane
-  const double tol = 1e-6;
-  for (const auto& [u, v] : {std::pair{a, b}, std::pair{b, e}, std::pair{e, a}}) {
-    // Signed distance of q from the edge u -> v inside the plane (positive inside the triangle).
-    const double inside = (v - u).cross(q - u).dot(n) / (area2 * (v - u).norm());
-    if (inside < -tol) return kInf;
-  }
+  // Behind the surface: count it only where p lies under the surface, i.e. p projects into the closest triangle (p
+  // is then along that triangle's normal from its closest point, within 1 um), not beside the edge of an open
+  // surface, where "behind" means nothing. Inside a closed surface the nearest point is on a face: counted. Behind a
+  // convex vertex of a cavity, where p projects into no face, a sample near it is (the faces around).
+  const Eigen::Vector3d d = p - c.point;
+  const Eigen::Vector3d& n = shape.surface->face_normal(c.triangle);
+  if ((d - d.dot(n) * n).norm() > 1e-6) return kInf;
   return c.distance;
 }
 

@@ -28,7 +28,6 @@ RigidOrgan::RigidOrgan(const scene::Scene& scene)
     p.stiffness = scene.rigid.stiffness;
     p.damping = scene.rigid.damping;
     p.radius = t.tip_radius;
-    tip_radius_.at(proxies_.size()) = t.tip_radius;
     p.max_force = kProxyForceGuard;
     proxies_.emplace_back(surface_, p);
   }
@@ -50,7 +49,7 @@ void RigidOrgan::step(const contact::InstrumentInput* inputs, int count, double 
     rigid::Proxy& proxy = proxies_[si];
     // The instrument's end is a hemisphere of its tip radius whose leading point is the tip: as on a deformable
     // organ, the contact begins when the tip itself reaches the surface.
-    const Eigen::Vector3d centre = tool->tip - tip_radius_[si] * tool->direction;
+    const Eigen::Vector3d centre = tool->tip - proxy.params().radius * tool->direction;
     if (!tracking_[si]) {
       proxy.reset(centre);
       tracking_[si] = true;

@@ -52,8 +52,6 @@ class RigidOrgan final : public HapticOrgan {
   std::vector<rigid::Proxy> proxies_;  // one per instrument
   std::array<bool, tool::kMaxInstruments> tracking_{};  // the proxy follows a tip (false: reset at the next input)
   std::array<double, tool::kMaxInstruments> max_penetration_{};
-  std::array<double, tool::kMaxInstruments>
-      tip_radius_{};  // m, the proxy sphere's; its centre is this far behind the tip
   std::array<std::uint64_t, tool::kMaxInstruments> contact_ticks_{};
 };
 
