@@ -94,8 +94,9 @@ MassSpring IntestineModel::build(const IntestineParams& p, double& amplitude, do
   }
   if (!positive(p.intestine_node_mass) || !positive(p.mesentery_node_mass) || !(p.structural_stiffness >= 0) ||
       !(p.shear_stiffness >= 0) || !(p.bending_stiffness >= 0) || !(p.spring_damping >= 0) || !(p.drag >= 0) ||
-      !p.gravity.allFinite() || !(p.probe_stiffness >= 0) || !positive(p.probe_force_limit) ||
-      p.probe_capacity < 1 || p.contact_capacity < 1 || p.response.iterations < 0) {
+      !p.gravity.allFinite() || !(p.probe_stiffness >= 0) || !positive(p.probe_force_limit) || p.probe_capacity < 1 ||
+      p.contact_capacity < 1 || p.response.iterations < 0 || !(p.obstacle_stiffness >= 0) ||
+      !std::isfinite(p.obstacle_stiffness) || p.obstacle_capacity < 0) {
     throw_error("intestine: masses > 0, stiffnesses, damping, drag >= 0, probe_force_limit > 0, capacities >= 1, "
                 "response iterations >= 0");
   }
@@ -226,7 +227,8 @@ IntestineState::IntestineState(const IntestineModel& model, std::uint64_t seed)
       detector_(model.topology(), model.params().detection),
       broad_(model.topology()),
       contacts_(model.params().contact_capacity),
-      probe_contacts_(static_cast<std::size_t>(kMaxProbes) * static_cast<std::size_t>(model.params().probe_capacity)),
+      probe_contacts_(static_cast<std::size_t>(kMaxProbes) * static_cast<std::size_t>(model.params().probe_capacity) +
+                      static_cast<std::size_t>(model.params().obstacle_capacity)),
       x_entry_(model.rest()),
       v_entry_(Eigen::Matrix3Xd::Zero(3, model.node_count())) {
   reset(model, seed);
@@ -344,16 +346,67 @@ void mirror_probe0(StepReport& report) noexcept {
   report.probe_saturated = r0.saturated;
 }
 
+// The obstacles' contacts at the positions on entry, after the probes' (storage from `out`, room for `room`): one
+// single-node penalty contact per free node whose sphere overlaps an obstacle, with each obstacle's range in `begin`.
+int touch_obstacles(const IntestineModel& model, const Eigen::Matrix3Xd& x, const Obstacle* const* obstacles,
+                    int obstacle_count, PenaltyContact* out, int room, StepReport& report,
+                    std::array<int, kMaxObstacles + 1>& begin) noexcept {
+  const IntestineParams& p = model.params();
+  const MassSpring& system = model.mass_spring();
+  const double tube = p.intestine_radius, membrane = 0.5 * p.mesentery_thickness;
+  int n = 0;
+  report.obstacle_count = obstacle_count;
+  for (int k = 0; k < obstacle_count; ++k) {
+    begin[static_cast<std::size_t>(k)] = n;
+    ObstacleReport& r = report.obstacles[static_cast<std::size_t>(k)];
+    if (!(p.obstacle_stiffness > 0)) continue;
+    for (int node = 0; node < system.node_count(); ++node) {
+      if (system.fixed(node)) continue;
+      const double radius = node < p.columns ? tube : membrane;
+      if (!(radius > 0)) continue;
+      ObstacleHit hit;
+      const Eigen::Vector3d xn = x.col(node);
+      if (!obstacles[k]->nearest(xn, radius, hit) || !(hit.distance < radius) || !std::isfinite(hit.distance) ||
+          !hit.normal.allFinite()) {
+        continue;
+      }
+      const double depth = radius - hit.distance;
+      ++r.contacts;
+      r.max_depth = std::max(r.max_depth, depth);
+      if (n >= room) {
+        ++report.obstacle_overflow;
+        continue;
+      }
+      PenaltyContact& c = out[n++];
+      c.count = 1;
+      c.nodes = {{node, -1, -1}};
+      c.weights = {{1, 0, 0}};
+      c.normal = hit.normal;
+      c.depth = depth;
+      c.stiffness = p.obstacle_stiffness;
+    }
+  }
+  begin[static_cast<std::size_t>(obstacle_count)] = n;
+  return n;
+}
+
 }  // namespace
 
 void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
-                   StepReport& report) noexcept {
+                   StepReport& report, const Obstacle* const* obstacles, int obstacle_count) noexcept {
   report = StepReport{};
   const IntestineParams& p = model.params();
   if (!(dt > 0) || !std::isfinite(dt) || probe_count < 0 || probe_count > kMaxProbes ||
-      (probes == nullptr && probe_count > 0)) {
+      (probes == nullptr && probe_count > 0) || obstacle_count < 0 || obstacle_count > kMaxObstacles ||
+      (obstacles == nullptr && obstacle_count > 0)) {
     report.status = StepStatus::kBadInput;
     return;
+  }
+  for (int k = 0; k < obstacle_count; ++k) {
+    if (obstacles[k] == nullptr) {
+      report.status = StepStatus::kBadInput;
+      return;
+    }
   }
   state.x_entry_ = state.x;
   state.v_entry_ = state.v;
@@ -369,11 +422,32 @@ void step_dynamics(const IntestineModel& model, IntestineState& state, const Pro
                 report.probes[static_cast<std::size_t>(i)]);
   }
   mirror_probe0(report);
+  // Then the obstacles' (their storage follows the probes' whole capacity).
+  std::array<int, kMaxObstacles + 1> begin{};
+  const int first_obstacle = np;
+  np += touch_obstacles(model, state.x, obstacles, obstacle_count, state.probe_contacts_.data() + np,
+                        std::min(p.obstacle_capacity, static_cast<int>(state.probe_contacts_.size()) - np), report,
+                        begin);
 
   const IntegrateStatus s =
       integrate(model.mass_spring(), p.integrator, state.probe_contacts_.data(), np, dt, state.x, state.v, state.work_);
   if (s == IntegrateStatus::kNonFinite) report.status = StepStatus::kNonFinite;
   if (s == IntegrateStatus::kNotPositive) report.status = StepStatus::kSolverFailed;
+  if (report.status != StepStatus::kOk) return;
+  // Each obstacle's push over the step: the implicit step's penalty, k (depth0 - n . (x1 - x0)) n per node (the
+  // symplectic step uses the depth at entry).
+  const bool implicit = p.integrator == Integrator::kImplicitEuler;
+  for (int k = 0; k < obstacle_count; ++k) {
+    Eigen::Vector3d f = Eigen::Vector3d::Zero();
+    for (int l = first_obstacle + begin[static_cast<std::size_t>(k)];
+         l < first_obstacle + begin[static_cast<std::size_t>(k) + 1]; ++l) {
+      const PenaltyContact& c = state.probe_contacts_[static_cast<std::size_t>(l)];
+      const int node = c.nodes[0];
+      const double depth = implicit ? c.depth - c.normal.dot(state.x.col(node) - state.x_entry_.col(node)) : c.depth;
+      f += c.stiffness * depth * c.normal;
+    }
+    report.obstacles[static_cast<std::size_t>(k)].force = f;
+  }
 }
 
 void step_detection(const IntestineModel& model, IntestineState& state, StepReport& report) noexcept {
@@ -399,8 +473,8 @@ void step_response(const IntestineModel& model, IntestineState& state, StepRepor
 }
 
 void step(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
-          StepReport& report) noexcept {
-  step_dynamics(model, state, probes, probe_count, dt, report);
+          StepReport& report, const Obstacle* const* obstacles, int obstacle_count) noexcept {
+  step_dynamics(model, state, probes, probe_count, dt, report, obstacles, obstacle_count);
   step_detection(model, state, report);
   step_response(model, state, report);
   if (report.status == StepStatus::kOk && (!state.x.allFinite() || !state.v.allFinite())) {

@@ -54,6 +54,27 @@ const char* to_string(CollisionDetector detector);
 constexpr int kMaxIntestineNodes = 2048;
 /// Most probes one step takes: one per instrument of the scene (kMaxInstruments of tool/trajectory.h).
 constexpr int kMaxProbes = 4;
+/// Most obstacles (other organs' surfaces) one step takes.
+constexpr int kMaxObstacles = 8;
+
+/// The nearest point of an obstacle's surface to a query point.
+struct ObstacleHit {
+  double distance = 0;                                // m, signed: positive on the free side
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // unit, the free side's normal at the nearest point
+};
+
+/// A surface the body may not pass: another organ of the scene (the abdominal wall, a rib, the floor). The body rests
+/// on it and slides along it without friction: each node whose sphere (the tube's radius on the intestine's row, half
+/// the membrane's thickness on the mesentery's) overlaps the surface gets a penalty contact along the surface's normal,
+/// linearized in the implicit step as the probe's are. The intestine library knows nothing of what the surface is:
+/// the haptic node adapts each organ (haptic_node/organs/).
+class Obstacle {
+ public:
+  virtual ~Obstacle() = default;
+  /// Run phase, noexcept, no allocation, deterministic: the surface point nearest `p` among those within
+  /// `max_distance` (m); false when there is none.
+  virtual bool nearest(const Eigen::Vector3d& p, double max_distance, ObstacleHit& hit) const noexcept = 0;
+};
 
 struct IntestineParams {
   // Rest shape.
@@ -103,6 +124,11 @@ struct IntestineParams {
   StochasticParams detection;        // random pairs per step, drop factor, moves, zone budget, capacity, seed
   ResponseParams response;           // iterations
   int contact_capacity = 1024;       // contacts per step (more are counted in StepReport::contacts_overflow)
+
+  // Obstacles (other organs: the wall, the floor, ribs).
+  double obstacle_stiffness = 2000;  // N/m, penalty stiffness of a node on an obstacle (a node's weight, 0.08 N,
+                                     // sinks 0.04 mm; a 2 N push spread over 10 nodes 0.1 mm)
+  int obstacle_capacity = 512;       // node contacts on all obstacles in a step, more are counted and ignored
 };
 
 /// The mesentery's width at intestine column `column` as a fraction of cylinder_radius (1 without a taper).
@@ -166,6 +192,14 @@ struct ProbeReport {
   bool saturated = false;           // force_raw exceeded its limit
 };
 
+/// What one step did against one obstacle. Plain data.
+struct ObstacleReport {
+  int contacts = 0;                                 // nodes on it at the step's start
+  double max_depth = 0;                             // m, deepest overlap of a node's sphere with it at the step's start
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();  // N, its push on the body over the step (the implicit step's
+                                                    // penalty at the step's end positions)
+};
+
 /// What one step did. Plain data.
 struct StepReport {
   StepStatus status = StepStatus::kOk;
@@ -182,6 +216,9 @@ struct StepReport {
   int contacts = 0;                 // self-collision contacts processed
   int contacts_overflow = 0;        // contacts beyond contact_capacity (ignored)
   ResponseReport response;          // penetration before / after
+  int obstacle_count = 0;           // obstacles the step took
+  std::array<ObstacleReport, kMaxObstacles> obstacles{};
+  int obstacle_overflow = 0;  // node contacts beyond obstacle_capacity (ignored)
 };
 
 /// The mutable state: positions, velocities and every workspace of a step, preallocated for one model.
@@ -211,15 +248,18 @@ class IntestineState {
   const MassSpringWorkspace& workspace() const { return work_; }
 
  private:
-  friend void step_dynamics(const IntestineModel&, IntestineState&, const Probe*, int, double, StepReport&) noexcept;
+  friend void step_dynamics(const IntestineModel&, IntestineState&, const Probe*, int, double, StepReport&,
+                            const Obstacle* const*, int) noexcept;
   friend void step_detection(const IntestineModel&, IntestineState&, StepReport&) noexcept;
   friend void step_response(const IntestineModel&, IntestineState&, StepReport&) noexcept;
-  friend void step(const IntestineModel&, IntestineState&, const Probe*, int, double, StepReport&) noexcept;
+  friend void step(const IntestineModel&, IntestineState&, const Probe*, int, double, StepReport&,
+                   const Obstacle* const*, int) noexcept;
   MassSpringWorkspace work_;
   StochasticDetector detector_;
   BroadPhaseDetector broad_;
   ContactList contacts_;
-  std::vector<PenaltyContact> probe_contacts_;  // kMaxProbes x probe_capacity, each step's probes' contacts in order
+  // kMaxProbes x probe_capacity + obstacle_capacity: each step's probes' contacts in order, then the obstacles'
+  std::vector<PenaltyContact> probe_contacts_;
   Eigen::Matrix3Xd x_entry_, v_entry_;  // the state at step entry (guard)
 };
 
@@ -227,8 +267,10 @@ class IntestineState {
 /// nothing): mass-spring (every probe's contacts included), stochastic detection, response. Allocates nothing; on a
 /// non-finite result or a failed solve the state is restored, every probe force is zero and report.status says why;
 /// a probe_count out of range (or null probes with probe_count > 0) is kBadInput (nothing done).
+/// `obstacles[0..obstacle_count)` (0..kMaxObstacles, each non-null) are the surfaces the body rests on; an
+/// obstacle_count out of range is kBadInput.
 void step(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
-          StepReport& report) noexcept;
+          StepReport& report, const Obstacle* const* obstacles = nullptr, int obstacle_count = 0) noexcept;
 /// One probe: step(model, state, &probe, 1, dt, report).
 inline void step(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
                  StepReport& report) noexcept {
@@ -237,7 +279,7 @@ inline void step(const IntestineModel& model, IntestineState& state, const Probe
 
 /// The phases of step(), in order (report is reset by step_dynamics). For tests and benchmarks.
 void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
-                   StepReport& report) noexcept;
+                   StepReport& report, const Obstacle* const* obstacles = nullptr, int obstacle_count = 0) noexcept;
 inline void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe& probe, double dt,
                           StepReport& report) noexcept {
   step_dynamics(model, state, &probe, 1, dt, report);

@@ -561,11 +561,38 @@ VisualSpec read_visual(const Reader& r, const Field& f) {
 
 IntestineSpec read_intestine(const Reader& r, const Field& f) {
   const Map m(r, f,
-              {"length", "cylinder_radius", "folds", "angular_span", "fold_shape", "mesentery_taper", "axis_origin",
-               "axis_direction", "columns", "rows", "intestine_radius", "mesentery_thickness", "intestine_node_mass",
-               "mesentery_node_mass", "structural_stiffness", "shear_stiffness", "bending_stiffness", "spring_damping",
-               "drag", "gravity", "integrator", "probe_radius", "probe_stiffness", "self_collisions", "detector",
-               "random_pairs", "random_mesentery_pairs", "seed", "response_iterations", "contact_capacity"});
+              {"length",
+               "cylinder_radius",
+               "folds",
+               "angular_span",
+               "fold_shape",
+               "mesentery_taper",
+               "axis_origin",
+               "axis_direction",
+               "columns",
+               "rows",
+               "intestine_radius",
+               "mesentery_thickness",
+               "intestine_node_mass",
+               "mesentery_node_mass",
+               "structural_stiffness",
+               "shear_stiffness",
+               "bending_stiffness",
+               "spring_damping",
+               "drag",
+               "gravity",
+               "integrator",
+               "probe_radius",
+               "probe_stiffness",
+               "self_collisions",
+               "detector",
+               "random_pairs",
+               "random_mesentery_pairs",
+               "seed",
+               "response_iterations",
+               "contact_capacity",
+               "obstacle_stiffness",
+               "obstacle_capacity"});
   IntestineSpec spec;
   intestine::IntestineParams& p = spec.params;
   const Range non_negative{0, kInf, false, true};
@@ -644,6 +671,12 @@ IntestineSpec read_intestine(const Reader& r, const Field& f) {
   }
   if (m.has("contact_capacity")) {
     p.contact_capacity = r.integer(m.at("contact_capacity"), 1, 100000, "self-collision contacts per step");
+  }
+  // The other organs of a field (rigid ones): the body rests on them.
+  read_number("obstacle_stiffness", p.obstacle_stiffness, non_negative,
+              "penalty stiffness in N/m of a node on another organ, e.g. 2000 (0: passes through them)");
+  if (m.has("obstacle_capacity")) {
+    p.obstacle_capacity = r.integer(m.at("obstacle_capacity"), 0, 100000, "node contacts on other organs per step");
   }
   return spec;
 }
@@ -927,6 +960,8 @@ void hash_intestine(Hasher& h, const IntestineSpec& intestine) {
   hash_vec(h, p.axis_direction);
   hash_vec(h, p.gravity);
   h.value<std::uint64_t>(p.detection.seed);
+  hash_double(h, p.obstacle_stiffness);
+  h.value<std::int32_t>(p.obstacle_capacity);
 }
 
 void hash_rigid(Hasher& h, const RigidSpec& g) {

@@ -9,6 +9,8 @@
 
 #include "core/error.h"
 #include "mesher/scene_mesh.h"
+#include "organs/intestine_organ.h"
+#include "organs/rigid_organ.h"
 #include "scene/scene.h"
 
 namespace surgsim {
@@ -19,6 +21,15 @@ CompositeOrgan::CompositeOrgan(std::vector<Part> parts) : parts_(std::move(parts
   }
   // Each part learns its index in the scene's organs list (its own topics carry it: BodyState.organ).
   for (std::size_t k = 0; k < parts_.size(); ++k) parts_[k].organ->set_organ_index(static_cast<int>(k));
+  // Organs that touch: every deformable body rests on every rigid organ of the field.
+  for (Part& body : parts_) {
+    auto* bowel = dynamic_cast<IntestineOrgan*>(body.organ.get());
+    if (bowel == nullptr) continue;
+    for (const Part& wall : parts_) {
+      const auto* rigid = dynamic_cast<const RigidOrgan*>(wall.organ.get());
+      if (rigid != nullptr) bowel->add_obstacle(&rigid->obstacle(), wall.name);
+    }
+  }
   ticks_.resize(parts_.size());
   point_offsets_.assign(1, 0);
   for (const Part& p : parts_) point_offsets_.push_back(point_offsets_.back() + p.organ->output_points());

@@ -47,6 +47,16 @@ void IntestineOrgan::create_writers(dds::Participant& participant, std::uint64_t
   sample_.instruments().resize(static_cast<std::size_t>(instruments_));
 }
 
+void IntestineOrgan::add_obstacle(const intestine::Obstacle* obstacle, const std::string& name) {
+  if (obstacle == nullptr) throw_error("intestine: obstacle '", name, "' is null");
+  if (obstacle_count() >= intestine::kMaxObstacles) {
+    throw_error("intestine: more than ", intestine::kMaxObstacles, " organs for the bowel to rest on ('", name,
+                "' is one too many): a field has at most that many rigid organs");
+  }
+  obstacles_[static_cast<std::size_t>(obstacle_count())] = obstacle;
+  obstacle_names_.push_back(name);
+}
+
 void IntestineOrgan::step(const InstrumentInput* inputs, int count, double dt, ContactTick* out) noexcept {
   // --- one probe per instrument at its tool tip; none for an instrument whose input is lost ---
   const int n = std::clamp(count, 0, intestine::kMaxProbes);
@@ -64,7 +74,7 @@ void IntestineOrgan::step(const InstrumentInput* inputs, int count, double dt, C
   }
   // --- the model: mass-spring (every probe included), stochastic detection, response ---
   const std::uint64_t t0 = monotonic_ns();
-  intestine::step(model_, state_, probes_.data(), n, dt, report_);
+  intestine::step(model_, state_, probes_.data(), n, dt, report_, obstacles_.data(), obstacle_count());
   step_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
   ++steps_;
 
@@ -112,6 +122,15 @@ void IntestineOrgan::step(const InstrumentInput* inputs, int count, double dt, C
   if (saturated) ++saturated_ticks_;
   penetration_after_max_ = std::max(penetration_after_max_, r.response.max_penetration_after);
   active_pairs_max_ = std::max(active_pairs_max_, r.detection.segment_pairs + r.detection.cell_pairs);
+  for (int k = 0; k < r.obstacle_count; ++k) {
+    const intestine::ObstacleReport& o = r.obstacles[static_cast<std::size_t>(k)];
+    ObstacleStats& os = obstacle_stats_[static_cast<std::size_t>(k)];
+    os.contacts_max = std::max(os.contacts_max, o.contacts);
+    if (o.contacts > 0) ++os.contact_ticks;
+    os.max_depth_m = std::max(os.max_depth_m, o.max_depth);
+    if (o.force.allFinite()) os.force_max_n = std::max(os.force_max_n, o.force.norm());
+  }
+  if (r.obstacle_overflow > 0) ++obstacle_overflow_ticks_;
 }
 
 int IntestineOrgan::contacts() const noexcept {
@@ -186,6 +205,17 @@ nlohmann::json IntestineOrgan::stats() const {
                       {"force_max_n", ps.force_max_n}});
   }
   j["probes"] = probes;
+  nlohmann::json obstacles = nlohmann::json::array();
+  for (int k = 0; k < obstacle_count(); ++k) {
+    const ObstacleStats& os = obstacle_stats_[static_cast<std::size_t>(k)];
+    obstacles.push_back({{"organ", obstacle_names_[static_cast<std::size_t>(k)]},
+                         {"contacts_max", os.contacts_max},
+                         {"contact_ticks", os.contact_ticks},
+                         {"max_penetration_mm", os.max_depth_m * 1e3},
+                         {"force_max_n", os.force_max_n}});
+  }
+  j["obstacles"] = obstacles;
+  j["obstacle_overflow_ticks"] = obstacle_overflow_ticks_;
   j["body_states_published"] = published_.load(std::memory_order_relaxed);
   j["energy_j"] = intestine::energy(model_, state_);
   j["positions_finite"] = state_.x.allFinite();

@@ -68,6 +68,11 @@ class IntestineOrgan final : public HapticOrgan {
   void add_stats(nlohmann::json& stats) const override;
   void print_summary(std::ostream& out) const override;
 
+  /// Init: `obstacle` (named `name` in the stats; it must outlive this organ) is a surface the body rests on from now
+  /// on (CompositeOrgan gives every rigid organ of the field). Throws surgsim::core::Error past kMaxObstacles.
+  void add_obstacle(const intestine::Obstacle* obstacle, const std::string& name);
+  int obstacle_count() const { return static_cast<int>(obstacle_names_.size()); }
+
   const intestine::IntestineModel& model() const { return model_; }
   const intestine::IntestineState& state() const { return state_; }
   const intestine::StepReport& report() const { return report_; }
@@ -78,6 +83,13 @@ class IntestineOrgan final : public HapticOrgan {
   nlohmann::json stats() const;
 
  private:
+  /// One obstacle's counters over the run (fixed storage).
+  struct ObstacleStats {
+    int contacts_max = 0;
+    std::uint64_t contact_ticks = 0;
+    double max_depth_m = 0;  // deepest overlap of a node's sphere with it
+    double force_max_n = 0;  // largest push on the body
+  };
   /// One probe's counters over the run (fixed storage).
   struct ProbeStats {
     int contacts_max = 0;
@@ -96,6 +108,10 @@ class IntestineOrgan final : public HapticOrgan {
   std::array<double, intestine::kMaxProbes> force_limits_{};  // N, each instrument's device limit
   std::array<intestine::Probe, intestine::kMaxProbes> probes_{};  // this tick's probes
   std::array<ProbeStats, intestine::kMaxProbes> probe_stats_{};
+  std::array<const intestine::Obstacle*, intestine::kMaxObstacles> obstacles_{};
+  std::vector<std::string> obstacle_names_;
+  std::array<ObstacleStats, intestine::kMaxObstacles> obstacle_stats_{};
+  std::uint64_t obstacle_overflow_ticks_ = 0;
   core::SampleRecorder step_us_;
   std::uint64_t steps_ = 0;
   std::uint64_t faults_ = 0;

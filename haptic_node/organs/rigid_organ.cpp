@@ -10,6 +10,14 @@
 
 namespace surgsim {
 
+bool RigidObstacle::nearest(const Eigen::Vector3d& p, double max_distance, intestine::ObstacleHit& hit) const noexcept {
+  const rigid::ClosestPoint c = surface_.closest_point(p, max_distance);
+  if (!c.found) return false;
+  hit.distance = c.distance;
+  hit.normal = c.normal;
+  return true;
+}
+
 namespace {
 
 // Bound on a proxy's force (N): a guard against a wild input, far above any device limit (the force stage clamps

@@ -12,12 +12,24 @@
 #include <string>
 #include <vector>
 
+#include "intestine/intestine_model.h"
 #include "organ.h"
 #include "rigid/proxy.h"
 #include "rigid/rigid_surface.h"
 #include "scene/scene.h"
 
 namespace surgsim {
+
+/// A rigid surface as an obstacle for a deformable body (the bowel resting on the wall): its nearest point and the
+/// free side's normal there.
+class RigidObstacle final : public intestine::Obstacle {
+ public:
+  explicit RigidObstacle(const rigid::RigidSurface& surface) : surface_(surface) {}
+  bool nearest(const Eigen::Vector3d& p, double max_distance, intestine::ObstacleHit& hit) const noexcept override;
+
+ private:
+  const rigid::RigidSurface& surface_;
+};
 
 class RigidOrgan final : public HapticOrgan {
  public:
@@ -41,6 +53,8 @@ class RigidOrgan final : public HapticOrgan {
   void print_summary(std::ostream& out) const override;
 
   const rigid::RigidSurface& surface() const { return surface_; }
+  /// The surface as an obstacle for the field's deformable organs (CompositeOrgan gives it to the intestine).
+  const intestine::Obstacle& obstacle() const { return obstacle_; }
   const rigid::Proxy& proxy(int i) const { return proxies_[static_cast<std::size_t>(i)]; }
   /// Deepest the device point went past the surface (offset by the tip radius), m, instrument i.
   double max_penetration(int i) const { return max_penetration_[static_cast<std::size_t>(i)]; }
@@ -48,6 +62,7 @@ class RigidOrgan final : public HapticOrgan {
  private:
   std::string name_;
   rigid::RigidSurface surface_;
+  RigidObstacle obstacle_{surface_};
   std::uint64_t surface_hash_ = 0;
   std::vector<rigid::Proxy> proxies_;  // one per instrument
   std::array<bool, tool::kMaxInstruments> tracking_{};  // the proxy follows a tip (false: reset at the next input)
