@@ -6,12 +6,15 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include <filesystem>
 #include <fstream>
 #include <string>
 
 #include "core/error.h"
 #include "force_stage.h"
+#include "organs/intestine_organ.h"
 #include "organs/rigid_organ.h"
 #include "support/alloc_counter.h"
 #include "support/error_test_util.h"
@@ -232,6 +235,64 @@ TEST(CompositeOrgan, RigidOrganHoldsTheTipOnTheWallAndResetsAfterALostInput) {
   organ->step(&g, 0.0, 1e-3, t);
   EXPECT_NEAR(rigid.proxy(0).proxy_point().x(), 0.085, 1e-8);
   EXPECT_NEAR(t.force.x(), -2.0, 1e-4);  // no damper kick: a reset is not an impact
+}
+
+// Organs that touch: the bowel of the shipped field (its vessel along x through the origin, its lowest sphere 59.6 mm
+// below the vessel as built, 63.5 mm once it hangs under its weight) above a floor at z = -0.061. Through the
+// composite the bowel rests on the floor; the same bowel alone sags through where the floor would be.
+const std::string kBowel =
+    "  - name: bowel\n"
+    "    model: intestine\n"
+    "    intestine: {length: 1.2, cylinder_radius: 0.05, folds: 4, columns: 50, rows: 4, intestine_radius: 0.012,\n"
+    "                mesentery_thickness: 0.008, intestine_node_mass: 0.008, mesentery_node_mass: 0.003,\n"
+    "                detector: broad_phase}\n";
+const std::string kFloor =
+    "  - name: floor\n"
+    "    model: rigid\n"
+    "    rigid: {generate: plane, size: [0.6, 0.4, 0]}\n"
+    "    placement: {translation: [0, 0, -0.061]}\n";
+
+// Lowest point (m) of the bowel's spheres (tube radius on its first row, half the membrane elsewhere), free nodes.
+double bowel_bottom(const IntestineOrgan& bowel) {
+  const intestine::IntestineParams& p = bowel.model().params();
+  double z = 1e300;
+  for (int n = 0; n < bowel.model().node_count(); ++n) {
+    if (bowel.model().mass_spring().fixed(n)) continue;
+    z = std::min(z, bowel.state().x(2, n) - (n < p.columns ? p.intestine_radius : 0.5 * p.mesentery_thickness));
+  }
+  return z;
+}
+
+TEST(CompositeOrgan, TheBowelRestsOnTheFieldsRigidOrgans) {
+  const fs::path dir = test_dir();
+  const Scene field = scene_of(dir, "field.yaml", kBowel + kFloor);
+  const Scene alone = scene_of(dir, "alone.yaml", kBowel);
+  const auto organ = make_haptic_organ(field, SURGSIM_TEST_CACHE_DIR, 3000, nullptr);
+  const auto bowel_alone = make_haptic_organ(alone, SURGSIM_TEST_CACHE_DIR, 3000, nullptr);
+  auto& composite = dynamic_cast<CompositeOrgan&>(*organ);
+  const auto& bowel = dynamic_cast<const IntestineOrgan&>(composite.organ(0));
+  const auto* alone_composite = dynamic_cast<const CompositeOrgan*>(bowel_alone.get());
+  const auto& free_bowel = dynamic_cast<const IntestineOrgan&>(
+      alone_composite != nullptr ? alone_composite->organ(0) : static_cast<const HapticOrgan&>(*bowel_alone));
+  ASSERT_EQ(bowel.obstacle_count(), 1);
+  ASSERT_EQ(free_bowel.obstacle_count(), 0);
+  const InstrumentInput none{nullptr, 0.0};  // no instrument: the body under its weight alone
+  ContactTick t;
+  for (int k = 0; k < 3000; ++k) {
+    organ->step(&none, 1, 1e-3, &t);
+    bowel_alone->step(&none, 1, 1e-3, &t);
+  }
+  EXPECT_LT(bowel_bottom(free_bowel), -0.0625) << "the control must sag through where the floor is";
+  EXPECT_GT(bowel_bottom(bowel), -0.061 - 1e-3) << "the bowel went through the floor";
+  nlohmann::json stats;
+  organ->add_stats(stats);
+  const nlohmann::json& obstacles = stats["organs"][0]["intestine"]["obstacles"];
+  ASSERT_EQ(obstacles.size(), 1u) << stats.dump(2);
+  EXPECT_EQ(obstacles[0]["organ"], "floor");
+  EXPECT_GT(obstacles[0]["contacts_max"].get<int>(), 0);
+  EXPECT_GT(obstacles[0]["contact_ticks"].get<int>(), 1000) << "it rests there, not bounces off";
+  EXPECT_LT(obstacles[0]["max_penetration_mm"].get<double>(), 1.0);
+  EXPECT_EQ(stats["organs"][0]["intestine"]["faults"].get<int>(), 0);
 }
 
 }  // namespace
