@@ -244,6 +244,7 @@ TEST(SceneLoad, IntestineKeysFillTheModelParameters) {
                                    "  integrator: symplectic_euler\n  probe_radius: 0.008\n  probe_stiffness: 500\n"
                                    "  self_collisions: false\n  random_pairs: 20\n  random_mesentery_pairs: 5\n"
                                    "  seed: 7\n  response_iterations: 2\n  contact_capacity: 256\n"
+                                   "  obstacle_stiffness: 1500\n  obstacle_capacity: 64\n"
                                    "tool: {force_limit: 5}\n"
                                    "visual: {rate_hz: 30, target_fps: 45}\n"));
   const intestine::IntestineParams& p = s.intestine.params;
@@ -277,6 +278,8 @@ TEST(SceneLoad, IntestineKeysFillTheModelParameters) {
   EXPECT_EQ(p.detection.seed, 7u);
   EXPECT_EQ(p.response.iterations, 2);
   EXPECT_EQ(p.contact_capacity, 256);
+  EXPECT_EQ(p.obstacle_stiffness, 1500.0);
+  EXPECT_EQ(p.obstacle_capacity, 64);
   EXPECT_EQ(s.visual.target_fps, 45.0);
   EXPECT_NO_THROW(intestine::IntestineModel model(p));  // what the scene says, the model accepts
 }
@@ -635,6 +638,7 @@ TEST(SceneHash, IntestineParametersEnterTheHash) {
   for (const char* change : {"intestine: {columns: 90}\n", "intestine: {random_pairs: 11}\n", "intestine: {seed: 2}\n",
                              "intestine: {probe_radius: 0.02}\n", "intestine: {gravity: [0, 0, -9]}\n",
                              "intestine: {integrator: symplectic_euler}\n", "intestine: {mesentery_taper: 0.1}\n",
+                             "intestine: {obstacle_stiffness: 1000}\n", "intestine: {obstacle_capacity: 10}\n",
                              "tool: {force_limit: 4}\n"}) {
     EXPECT_NE(h0, load_scene(write(dir / "d.yaml", base + change)).hash()) << change;
   }
@@ -870,6 +874,10 @@ INSTANTIATE_TEST_SUITE_P(
                   "key 'intestine.intestine_radius'", "out of range"},
         ErrorCase{"IntestineShort", kIntestine + "intestine:\n  length: 0.5\n", 4, "key 'intestine.length'",
                   "does not exceed the arc"},
+        ErrorCase{"IntestineObstacleStiffness", kIntestine + "intestine: {obstacle_stiffness: -1}\n", 3,
+                  "key 'intestine.obstacle_stiffness'", "out of range"},
+        ErrorCase{"IntestineObstacleCapacity", kIntestine + "intestine: {obstacle_capacity: -1}\n", 3,
+                  "key 'intestine.obstacle_capacity'", "out of range"},
         ErrorCase{"IntestineTaper", kIntestine + "intestine: {mesentery_taper: 0.5}\n", 3,
                   "key 'intestine.mesentery_taper'", "out of range"},
         ErrorCase{"IntestineTaperNegative", kIntestine + "intestine: {mesentery_taper: -0.1}\n", 3,
