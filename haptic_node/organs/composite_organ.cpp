@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "mesher/scene_mesh.h"
 #include "organs/intestine_organ.h"
+#include "organs/liver_organ.h"
 #include "organs/rigid_organ.h"
 #include "scene/scene.h"
 
@@ -21,13 +22,17 @@ CompositeOrgan::CompositeOrgan(std::vector<Part> parts) : parts_(std::move(parts
   }
   // Each part learns its index in the scene's organs list (its own topics carry it: BodyState.organ).
   for (std::size_t k = 0; k < parts_.size(); ++k) parts_[k].organ->set_organ_index(static_cast<int>(k));
-  // Organs that touch: every deformable body rests on every rigid organ of the field.
+  // Organs that touch: every bowel rests on every rigid organ and every liver of the field (the liver's surface as
+  // its contact solution deforms it: as of this tick for a liver listed before the bowel, else as of the last).
   for (Part& body : parts_) {
     auto* bowel = dynamic_cast<IntestineOrgan*>(body.organ.get());
     if (bowel == nullptr) continue;
-    for (const Part& wall : parts_) {
-      const auto* rigid = dynamic_cast<const RigidOrgan*>(wall.organ.get());
-      if (rigid != nullptr) bowel->add_obstacle(&rigid->obstacle(), wall.name);
+    for (const Part& other : parts_) {
+      if (const auto* rigid = dynamic_cast<const RigidOrgan*>(other.organ.get())) {
+        bowel->add_obstacle(&rigid->obstacle(), other.name);
+      } else if (auto* liver = dynamic_cast<LiverOrgan*>(other.organ.get())) {
+        bowel->add_obstacle(&liver->obstacle("organ '" + other.name + "'"), other.name);
+      }
     }
   }
   ticks_.resize(parts_.size());

@@ -9,6 +9,7 @@
 #include "haptic_dds.h"
 #include "liver/liver_setup.h"
 #include "nonlinear/organ_curves.h"
+#include "mesh/geometry.h"
 #include "mesher/scene_mesh.h"
 
 using namespace surgsim::core;
@@ -23,6 +24,50 @@ using namespace surgsim::scene;
 using namespace surgsim::mesher;
 
 namespace surgsim {
+
+namespace {
+
+// The liver's surface triangles over all its nodes (the triangles index the tetrahedral mesh's nodes).
+TriSurface surface_of(const LiverModel& model, const std::string& where) {
+  TriSurface t;
+  t.vertices = model.mesh.nodes;
+  t.tris = model.surface.tris;
+  t.source = where;
+  return t;
+}
+
+}  // namespace
+
+LiverObstacle::LiverObstacle(const LiverOrgan& liver, const std::string& where)
+    : liver_(liver), rest_(surface_of(liver.model(), where), false, where), generation_(liver.model().generation) {}
+
+bool LiverObstacle::nearest(const Eigen::Vector3d& p, double max_distance, intestine::ObstacleHit& hit) const noexcept {
+  if (liver_.model().generation != generation_) return false;  // cut: the rest surface is not the liver's any more
+  const rigid::ClosestPoint c = rest_.closest_point(p, max_distance + kDentReach);
+  if (!c.found) return false;
+  const auto tri = liver_.model().surface.tris.row(c.triangle);
+  const Eigen::Vector3d a = rest_.surface().vertices.row(tri[0]), b = rest_.surface().vertices.row(tri[1]),
+                        d = rest_.surface().vertices.row(tri[2]);
+  Eigen::Vector3d bary;
+  closest_point_triangle(c.point, a, b, d, bary);
+  const ToolContacts& contacts = liver_.liver_contacts();
+  const Eigen::Vector3d da = contacts.deformed(tri[0]), db = contacts.deformed(tri[1]), dd = contacts.deformed(tri[2]);
+  const Eigen::Vector3d q = bary[0] * da + bary[1] * db + bary[2] * dd;
+  Eigen::Vector3d n = (db - da).cross(dd - da);
+  const double len = n.norm();
+  if (!(len > 0) || !q.allFinite()) return false;
+  n /= len;
+  const double distance = (p - q).dot(n);
+  if (!std::isfinite(distance) || distance > max_distance) return false;
+  hit.distance = distance;
+  hit.normal = n;
+  return true;
+}
+
+const intestine::Obstacle& LiverOrgan::obstacle(const std::string& where) {
+  if (!obstacle_) obstacle_ = std::make_unique<LiverObstacle>(*this, where);
+  return *obstacle_;
+}
 
 LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::ostream* progress, bool tracker_thread,
                        int tracker_threads, bool rotations_in_loop) {

@@ -17,7 +17,9 @@
 #include "nonlinear/nonlinear_law.h"
 #include "compliance/precompute.h"
 #include "mesh/mesh.h"
+#include "intestine/intestine_model.h"
 #include "organ.h"
+#include "rigid/rigid_surface.h"
 #include "contact/tool_contacts.h"
 #include "nonlinear/multirate_contacts.h"
 #include "publisher.h"
@@ -25,6 +27,27 @@
 #include "dds_support.h"
 
 namespace surgsim {
+
+class LiverOrgan;
+
+/// The liver's surface as an obstacle for the field's bowel (the bowel rests on the liver): the nearest point of the
+/// REST surface (a grid over its triangles, searched 2 cm beyond the query's reach), moved to where the liver's
+/// current contact solution has it (the same barycentric point of the deformed triangle), and the deformed triangle's
+/// normal. Exact for the linear model's small displacements; one-way for now: the bowel does not load the liver.
+/// Answers nothing after a change of the liver's topology (a cut: the rest surface it was built on is gone).
+class LiverObstacle final : public intestine::Obstacle {
+ public:
+  /// Init (allocates; throws surgsim::core::Error naming `where` when the liver's surface is not a consistently
+  /// oriented triangle surface).
+  LiverObstacle(const LiverOrgan& liver, const std::string& where);
+  bool nearest(const Eigen::Vector3d& p, double max_distance, intestine::ObstacleHit& hit) const noexcept override;
+
+ private:
+  static constexpr double kDentReach = 0.02;  // m searched beyond the query's reach: the deepest dent it follows
+  const LiverOrgan& liver_;
+  rigid::RigidSurface rest_;
+  std::uint64_t generation_ = 0;
+};
 
 class LiverOrgan final : public HapticOrgan {
  public:
@@ -89,6 +112,9 @@ class LiverOrgan final : public HapticOrgan {
   nonlinear::MultirateContacts* multirate() const { return multirate_.get(); }
   std::uint64_t body_states_published() const { return body_published_.load(std::memory_order_relaxed); }
   const contact::ToolContacts& liver_contacts() const { return *contacts_; }
+  /// Init: the liver as an obstacle for the field's other bodies (built on the first call; CompositeOrgan gives it to
+  /// the bowel). `where` names the organ in errors.
+  const intestine::Obstacle& obstacle(const std::string& where);
 
  private:
   std::vector<tool::ToolSpec> tools_;
@@ -116,6 +142,7 @@ class LiverOrgan final : public HapticOrgan {
   static constexpr std::size_t kInstrumentTicks = 512;  // ticks kept: more than a tracker cycle at 1 kHz
   std::vector<InstrumentsAt> instruments_at_;
   TickRecord scratch_;
+  std::unique_ptr<LiverObstacle> obstacle_;  // obstacle(): built on demand, in a field with a bowel
   std::uint64_t min_period_ns_ = 0;
   std::uint64_t last_body_ns_ = 0;
   std::uint64_t body_seq_ = 0;

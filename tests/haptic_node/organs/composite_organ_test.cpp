@@ -295,5 +295,50 @@ TEST(CompositeOrgan, TheBowelRestsOnTheFieldsRigidOrgans) {
   EXPECT_EQ(stats["organs"][0]["intestine"]["faults"].get<int>(), 0);
 }
 
+// Lowest point (m) of the bowel's spheres over the square |x|, |y| < half (m): where the plate is.
+double bowel_bottom_over(const IntestineOrgan& bowel, double half) {
+  const intestine::IntestineParams& p = bowel.model().params();
+  double z = 1e300;
+  for (int n = 0; n < bowel.model().node_count(); ++n) {
+    if (bowel.model().mass_spring().fixed(n)) continue;
+    const Eigen::Vector3d x = bowel.state().x.col(n);
+    if (std::abs(x.x()) > half || std::abs(x.y()) > half) continue;
+    z = std::min(z, x.z() - (n < p.columns ? p.intestine_radius : 0.5 * p.mesentery_thickness));
+  }
+  return z;
+}
+
+// The bowel on the liver: the same bowel 2 mm above the plate's top (z = 0.005), a liver model: it rests on the
+// plate's surface; alone it sags through where the plate is.
+TEST(CompositeOrgan, TheBowelRestsOnTheLiver) {
+  const fs::path dir = test_dir();
+  const std::string bowel_placed = kBowel + "    placement: {translation: [0, 0, 0.0666]}\n";
+  const Scene field = scene_of(dir, "field.yaml", kPlate + bowel_placed);
+  const Scene alone = scene_of(dir, "alone.yaml", bowel_placed);
+  const auto organ = make_haptic_organ(field, SURGSIM_TEST_CACHE_DIR, 3000, nullptr);
+  const auto bowel_alone = make_haptic_organ(alone, SURGSIM_TEST_CACHE_DIR, 3000, nullptr);
+  auto& composite = dynamic_cast<CompositeOrgan&>(*organ);
+  const auto& bowel = dynamic_cast<const IntestineOrgan&>(composite.organ(1));
+  const auto* alone_composite = dynamic_cast<const CompositeOrgan*>(bowel_alone.get());
+  const auto& free_bowel = dynamic_cast<const IntestineOrgan&>(
+      alone_composite != nullptr ? alone_composite->organ(0) : static_cast<const HapticOrgan&>(*bowel_alone));
+  ASSERT_EQ(bowel.obstacle_count(), 1);
+  const InstrumentInput none{nullptr, 0.0};
+  ContactTick t;
+  for (int k = 0; k < 3000; ++k) {
+    organ->step(&none, 1, 1e-3, &t);
+    bowel_alone->step(&none, 1, 1e-3, &t);
+  }
+  EXPECT_LT(bowel_bottom_over(free_bowel, 0.095), 0.005 - 1.5e-3) << "the control must sag through the plate";
+  EXPECT_GT(bowel_bottom_over(bowel, 0.095), 0.005 - 1e-3) << "the bowel went into the liver";
+  nlohmann::json stats;
+  organ->add_stats(stats);
+  const nlohmann::json& obstacles = stats["organs"][1]["intestine"]["obstacles"];
+  ASSERT_EQ(obstacles.size(), 1u) << stats.dump(2);
+  EXPECT_EQ(obstacles[0]["organ"], "plate");
+  EXPECT_GT(obstacles[0]["contact_ticks"].get<int>(), 1000);
+  EXPECT_LT(obstacles[0]["max_penetration_mm"].get<double>(), 1.0);
+}
+
 }  // namespace
 }  // namespace surgsim
