@@ -45,8 +45,8 @@ ElementMaterials element_materials(const mesh::TetMesh& mesh, const Material& ma
     core::throw_error(
         at, ": material region '", region.name, "' holds no element of ",
         mesh.source.empty() ? std::string("the mesh") : "mesh " + mesh.source, " (", mesh.tets.rows(),
-        " tets): no tet centroid lies in its boxes or ellipsoids, nor outside later regions (give its box or "
-        "ellipsoid in the organ's own frame, around the elements it should hold, or remove it)");
+        " tets): no tet centroid lies in its boxes or ellipsoids, or a later region takes every one that does (give "
+        "its box or ellipsoid in the organ's own frame, around the elements it should hold, or remove it)");
   }
   return out;
 }

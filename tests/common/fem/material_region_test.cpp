@@ -159,6 +159,7 @@ TEST(MaterialRegions, ARegionHoldingNoTetIsAnErrorNamingIt) {
   material.regions[1].boxes.emplace_back(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
   const std::string overridden = test::error_of([&] { element_materials(m, material, "liver.yaml"); });
   EXPECT_EQ(overridden.rfind("liver.yaml: material region 'soft' holds no element", 0), 0u) << overridden;
+  EXPECT_NE(overridden.find("a later region takes every one"), std::string::npos) << overridden;
 }
 
 TEST(MaterialRegions, ARegionsMaterialIsChecked) {

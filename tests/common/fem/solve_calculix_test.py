@@ -155,31 +155,35 @@ def run_case(tmp, ccx, solve, name, soft):
         fail(f'ccx failed on {folder}/bar.inp (exit {p.returncode}):\n{p.stdout[-3000:]}\n{p.stderr[-2000:]}')
     ref, ref_total = read_dat(os.path.join(folder, 'bar.dat'), len(nodes))
 
-    args = [solve, '--mesh', mesh, '--young', repr(STIFF[0]), '--poisson', repr(STIFF[1]),
-            '--fixed', ','.join(map(str, fixed)), '--out', os.path.join(folder, 'out')]
-    if soft:
-        # By tet centroid, as the test picked CalculiX's ESOFT: every tet of the hexahedra beyond x = L/2.
-        args += ['--region', f'soft:{soft[0]!r},{soft[1]!r}:box:{L / 2},-1,-1,1,1,1']
-    for n in loaded:
-        args += ['--impose', f'{n}:' + ','.join(map(repr, END_U))]
-    p = subprocess.run(args, capture_output=True, text=True)
-    if p.returncode != 0:
-        fail(f'surgsim-solve failed (exit {p.returncode}): {" ".join(args)}\n{p.stdout}\n{p.stderr}')
-    if soft and f'{len(soft_tets)} tets soft' not in p.stdout:
-        fail(f'surgsim-solve did not put the {len(soft_tets)} tets of x > L/2 in the region:\n{p.stdout}')
-    u = read_csv(os.path.join(folder, 'out', 'displacement.csv'))
-    reaction = read_csv(os.path.join(folder, 'out', 'reaction.csv'))
+    results = {}
+    for method in ('direct', 'tensor'):  # the reference solve, and the precomputed tensors the nodes use
+        out = os.path.join(folder, method)
+        args = [solve, '--mesh', mesh, '--young', repr(STIFF[0]), '--poisson', repr(STIFF[1]),
+                '--fixed', ','.join(map(str, fixed)), '--method', method, '--out', out]
+        if soft:
+            # By tet centroid, as the test picked CalculiX's ESOFT: every tet of the hexahedra beyond x = L/2.
+            args += ['--region', f'soft:{soft[0]!r},{soft[1]!r}:box:{L / 2},-1,-1,1,1,1']
+        for n in loaded:
+            args += ['--impose', f'{n}:' + ','.join(map(repr, END_U))]
+        p = subprocess.run(args, capture_output=True, text=True)
+        if p.returncode != 0:
+            fail(f'surgsim-solve failed (exit {p.returncode}): {" ".join(args)}\n{p.stdout}\n{p.stderr}')
+        if soft and f'{len(soft_tets)} tets soft' not in p.stdout:
+            fail(f'surgsim-solve did not put the {len(soft_tets)} tets of x > L/2 in the region:\n{p.stdout}')
+        u = read_csv(os.path.join(out, 'displacement.csv'))
+        reaction = read_csv(os.path.join(out, 'reaction.csv'))
 
-    scale = max(max(abs(c) for c in v) for v in ref)
-    error = max(max(abs(a - b) for a, b in zip(u[n], ref[n])) for n in range(len(nodes))) / scale
-    total = tuple(sum(reaction[n][c] for n in loaded) for c in range(3))
-    force_scale = max(abs(c) for c in ref_total)
-    force_error = max(abs(a - b) for a, b in zip(total, ref_total)) / force_scale
-    print(f'{name}: {len(nodes)} nodes, {len(tets)} tets ({len(soft_tets)} soft), max |u| {scale:.6g} m: '
-          f'largest node difference / max |u| = {error:.3e}; end-face reaction surgsim-solve '
-          f'({total[0]:.7g}, {total[1]:.7g}, {total[2]:.7g}) N, CalculiX ({ref_total[0]:.7g}, {ref_total[1]:.7g}, '
-          f'{ref_total[2]:.7g}) N, difference / |max| = {force_error:.3e}')
-    return u, error, force_error
+        scale = max(max(abs(c) for c in v) for v in ref)
+        error = max(max(abs(a - b) for a, b in zip(u[n], ref[n])) for n in range(len(nodes))) / scale
+        total = tuple(sum(reaction[n][c] for n in loaded) for c in range(3))
+        force_scale = max(abs(c) for c in ref_total)
+        force_error = max(abs(a - b) for a, b in zip(total, ref_total)) / force_scale
+        print(f'{name}, --method {method}: {len(nodes)} nodes, {len(tets)} tets ({len(soft_tets)} soft), max |u| '
+              f'{scale:.6g} m: largest node difference / max |u| = {error:.3e}; end-face reaction surgsim-solve '
+              f'({total[0]:.7g}, {total[1]:.7g}, {total[2]:.7g}) N, CalculiX ({ref_total[0]:.7g}, '
+              f'{ref_total[1]:.7g}, {ref_total[2]:.7g}) N, difference / |max| = {force_error:.3e}')
+        results[method] = (u, error, force_error)
+    return results
 
 
 def main():
@@ -193,14 +197,18 @@ def main():
     if not os.access(solve, os.X_OK):
         fail(f'{solve} is not an executable: build surgsim-solve first')
     with tempfile.TemporaryDirectory() as tmp:
-        one, error_one, force_one = run_case(tmp, ccx, solve, 'one material', None)
-        two, error_two, force_two = run_case(tmp, ccx, solve, 'two materials', SOFT)
+        one = run_case(tmp, ccx, solve, 'one material', None)
+        two = run_case(tmp, ccx, solve, 'two materials', SOFT)
     failures = []
-    for name, e, fe in (('one material', error_one, force_one), ('two materials', error_two, force_two)):
-        if not e < TOLERANCE:
-            failures.append(f'{name}: displacements differ from CalculiX by {e:.3e} of the largest (> {TOLERANCE})')
-        if not fe < TOLERANCE:
-            failures.append(f'{name}: the end-face reaction differs from CalculiX by {fe:.3e} (> {TOLERANCE})')
+    for name, results in (('one material', one), ('two materials', two)):
+        for method, (_, e, fe) in results.items():
+            if not e < TOLERANCE:
+                failures.append(f'{name}, --method {method}: displacements differ from CalculiX by {e:.3e} of the '
+                                f'largest (> {TOLERANCE})')
+            if not fe < TOLERANCE:
+                failures.append(f'{name}, --method {method}: the end-face reaction differs from CalculiX by {fe:.3e} '
+                                f'(> {TOLERANCE})')
+    one, two = one['direct'][0], two['direct'][0]
     # The comparison must tell the materials apart: the soft half changes the field by far more than the tolerance.
     scale = max(max(abs(c) for c in v) for v in one.values())
     change = max(max(abs(a - b) for a, b in zip(one[n], two[n])) for n in one) / scale
