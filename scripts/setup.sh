@@ -16,6 +16,7 @@ packages=(
   openssl                             # test CA and certificates for the DDS Security profile
   libturbojpeg0-dev libboost-dev      # surgsim-web: JPEG frames (libturbojpeg), HTTP + WebSocket (Boost.Beast, headers)
   chromium chromium-driver python3-selenium fonts-liberation  # the web view's tests: a real headless browser
+  calculix-ccx                        # CalculiX (ccx): the independent FEM reference of the surgsim-solve tests
 )
 [ "${SURGSIM_WITH_VIDEO:-0}" = 1 ] && packages+=(ffmpeg)
 [ "${SURGSIM_WITH_REPORT:-0}" = 1 ] && packages+=(python3-numpy python3-matplotlib)   # scripts/report.sh plots

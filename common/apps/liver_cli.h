@@ -110,6 +110,36 @@ inline fem::FixedRegion fixed_region(const FixedOptions& o) {
   return r;
 }
 
+/// --region's help: one material region, repeatable, a later one over an earlier one.
+inline const char* const kRegionHelp =
+    "A region of the mesh with its own material, by tet centroid: NAME:E,NU:box:x0,y0,z0,x1,y1,z1 or "
+    "NAME:E,NU:ellipsoid:cx,cy,cz,rx,ry,rz (Pa, m); repeatable, a later region over an earlier one; the other tets "
+    "have --young and --poisson";
+
+/// "NAME:E,NU:box:x0,y0,z0,x1,y1,z1" or "NAME:E,NU:ellipsoid:cx,cy,cz,rx,ry,rz" -> a material region.
+inline fem::MaterialRegion parse_region(const std::string& text) {
+  const std::string what = "--region '" + text + "'";
+  const auto parts = split(text, ':');
+  if (parts.size() != 4 || (parts[2] != "box" && parts[2] != "ellipsoid") || trim(parts[0]).empty())
+    core::throw_error(what, ": expected NAME:E,NU:box:x0,y0,z0,x1,y1,z1 or NAME:E,NU:ellipsoid:cx,cy,cz,rx,ry,rz");
+  fem::MaterialRegion r;
+  r.name = trim(parts[0]);
+  r.where = what;
+  const auto material = parse_numbers(parts[1], 2, what);
+  r.young_modulus = material[0];
+  r.poisson_ratio = material[1];
+  const auto v = parse_numbers(parts[3], 6, what);
+  const Eigen::Vector3d a(v[0], v[1], v[2]), b(v[3], v[4], v[5]);
+  if (parts[2] == "box") {
+    if (!(a.array() < b.array()).all()) core::throw_error(what, ": the box's min must be below its max");
+    r.boxes.emplace_back(a, b);
+  } else {
+    if (!(b.array() > 0).all()) core::throw_error(what, ": the ellipsoid's radii must be > 0");
+    r.ellipsoids.push_back(fem::Ellipsoid{a, b});
+  }
+  return r;
+}
+
 /// Reads and validates a mesh file, or generates an organ (needs the mesher).
 inline mesh::TetMesh load_mesh(const std::string& file, const std::string& generate, int nodes, std::ostream* log) {
   if (!file.empty()) {

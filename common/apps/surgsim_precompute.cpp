@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   int nodes = 1500, max_iter = 0, block = PrecomputeOptions().block_columns, threads = 0;
   double young = -1, poisson = -1, tol = 1e-10, memory_limit_mb = 4096;
   surgsim::apps::cli::FixedOptions fixed_opts;
+  std::vector<std::string> regions;
   bool force = false, quiet = false;
 
   CLI::App app{
@@ -49,7 +50,8 @@ int main(int argc, char** argv) {
   auto* o_plane = app.add_option("--fixed-plane", fixed_opts.plane,
                                  "Fix nodes with (x - p).n >= 0: px,py,pz,nx,ny,nz (m)");
   auto* o_box = app.add_option("--fixed-box", fixed_opts.boxes, "Fix nodes in a box: x0,y0,z0,x1,y1,z1 (m); repeatable");
-  for (auto* o : {o_young, o_poisson, o_fixed, o_plane, o_box}) o->excludes(o_scene);
+  auto* o_region = app.add_option("--region", regions, surgsim::apps::cli::kRegionHelp);
+  for (auto* o : {o_young, o_poisson, o_fixed, o_plane, o_box, o_region}) o->excludes(o_scene);
   app.add_option("--out", out, "Tensor cache file to write")->required();
   app.add_option("--precision", precision,
                  "Stored precision: float | double | auto (as the scenes: double unless it passes 1 GiB)")
@@ -85,6 +87,7 @@ int main(int argc, char** argv) {
       if (young < 0 || poisson < 0) throw_error("--young and --poisson are required with --mesh or --generate");
       material.young_modulus = young;
       material.poisson_ratio = poisson;
+      for (const auto& r : regions) material.regions.push_back(surgsim::apps::cli::parse_region(r));
       if (!fixed_opts.any())
         throw_error("no fixed nodes: give --fixed i,j,k, --fixed-plane or --fixed-box (at least 3 non-collinear nodes)");
       region = surgsim::apps::cli::fixed_region(fixed_opts);

@@ -1,5 +1,6 @@
 // surgsim-solve: one static load case of a linear-elastic organ with imposed node displacements (the paper's
 // reference computation), by CHOLMOD + Lagrange multipliers, by CG, or by precomputed tensors and superposition.
+// The organ may hold regions of other materials (--region), assembled per element.
 // Writes DIR/displacement.csv (every node) and DIR/reaction.csv (the imposed nodes).
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -97,7 +98,7 @@ int main(int argc, char** argv) {
   int nodes = 1500, max_iter = 0;
   double young = 0, poisson = 0, tol = 1e-10;
   surgsim::apps::cli::FixedOptions fixed_opts;
-  std::vector<std::string> imposes;
+  std::vector<std::string> imposes, regions;
   bool vtk = false;
 
   CLI::App app{
@@ -110,6 +111,7 @@ int main(int argc, char** argv) {
   app.add_option("--nodes", nodes, "Approximate node count of a generated organ")->capture_default_str();
   app.add_option("--young", young, "Young's modulus, Pa")->required();
   app.add_option("--poisson", poisson, "Poisson ratio in [0, 0.5)")->required();
+  app.add_option("--region", regions, surgsim::apps::cli::kRegionHelp);
   app.add_option("--fixed", fixed_opts.nodes, "Fixed nodes: 0-based indices i,j,k");
   app.add_option("--fixed-plane", fixed_opts.plane, "Fix nodes with (x - p).n >= 0: px,py,pz,nx,ny,nz (m)");
   app.add_option("--fixed-box", fixed_opts.boxes, "Fix nodes in a box: x0,y0,z0,x1,y1,z1 (m); repeatable");
@@ -137,6 +139,7 @@ int main(int argc, char** argv) {
     Material material;
     material.young_modulus = young;
     material.poisson_ratio = poisson;
+    for (const auto& r : regions) material.regions.push_back(surgsim::apps::cli::parse_region(r));
     const TetMesh mesh = surgsim::apps::cli::load_mesh(mesh_file, generate, nodes, &std::cerr);
     const FixedRegion region = surgsim::apps::cli::fixed_region(fixed_opts);
     const FixedSet fixed = fixed_set_from_region(mesh, region);
@@ -165,6 +168,14 @@ int main(int argc, char** argv) {
     write_csv(out_dir + "/displacement.csv", "node,ux,uy,uz", {}, s.displacement);
     write_csv(out_dir + "/reaction.csv", "node,fx,fy,fz", s.imposed_nodes, s.reaction);
     if (vtk) write_vtk(out_dir + "/deformed.vtk", mesh, &s.displacement);
+    if (!material.regions.empty()) {
+      std::vector<int> count(model.elements.materials.size(), 0);
+      for (int i : model.elements.element) ++count[static_cast<std::size_t>(i)];
+      std::printf("materials: %d tets base", count[0]);
+      for (std::size_t r = 0; r < material.regions.size(); ++r)
+        std::printf(", %d tets %s", count[r + 1], material.regions[r].name.c_str());
+      std::printf("\n");
+    }
     std::printf("%s: %d nodes, %zu imposed, max |u| %.6g m, total reaction (%.6g, %.6g, %.6g) N, %.3f s", method.c_str(),
                 model.node_count(), s.imposed_nodes.size(), s.displacement.rowwise().norm().maxCoeff(),
                 s.total_reaction.x(), s.total_reaction.y(), s.total_reaction.z(), seconds);

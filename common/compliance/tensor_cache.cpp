@@ -247,6 +247,23 @@ std::uint64_t TensorCacheKey::combined() const {
 std::uint64_t material_hash(const Material& material) {
   Hasher h;
   h.str("Material/1").value(material.young_modulus).value(material.poisson_ratio);
+  // Regions only when there are some, so a homogeneous organ keeps its hash (and its caches). Each region's material
+  // and selectors, and the frame they are written in (it moves them over the mesh); not the name, which changes no
+  // element.
+  if (!material.regions.empty()) {
+    h.str("MaterialRegions/1").value<std::uint64_t>(material.regions.size());
+    const auto num = [&h](double v) { h.value(v == 0.0 ? 0.0 : v); };  // -0 and 0 select the same elements
+    const auto vec = [&num](const Eigen::Vector3d& v) { num(v.x()), num(v.y()), num(v.z()); };
+    for (const MaterialRegion& r : material.regions) {
+      num(r.young_modulus), num(r.poisson_ratio);
+      h.value<std::uint64_t>(r.boxes.size());
+      for (const auto& b : r.boxes) vec(b.first), vec(b.second);
+      h.value<std::uint64_t>(r.ellipsoids.size());
+      for (const Ellipsoid& e : r.ellipsoids) vec(e.center), vec(e.radii);
+    }
+    for (int i = 0; i < 9; ++i) num(material.frame.rotation(i / 3, i % 3));
+    vec(material.frame.translation);
+  }
   return h.digest();
 }
 

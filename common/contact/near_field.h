@@ -44,7 +44,9 @@ class NearField {
   static constexpr int kSplit = 4;  // sub-triangles per triangle edge in the hat-function integrals
 
   /// `tensors` (its "haptic" block) give the mesh's own local compliance; null: the hat-function picture alone
-  /// (L_ij = k I_ij, S = 0). Throws surgsim::core::Error for a material out of range.
+  /// (L_ij = k I_ij, S = 0). Throws surgsim::core::Error for a material out of range. The Boussinesq kernel is the
+  /// base material's everywhere: the material regions (fem::Material::regions) are in the tensors, not in this
+  /// sub-mesh correction (it assumes the tissue homogeneous under the tip and one ring around it).
   NearField(const mesh::TetMesh& mesh, const mesh::SurfaceMesh& surface, const fem::Material& material,
             const compliance::Tensors* tensors = nullptr);
 

@@ -13,6 +13,13 @@ using namespace surgsim::mesh;
 namespace surgsim::fem {
 
 void check_material(const Material& material) {
+  for (const MaterialRegion& r : material.regions) {
+    try {
+      check_material(Material(r.young_modulus, r.poisson_ratio));
+    } catch (const Error& e) {
+      throw_error(r.where.empty() ? std::string() : r.where + ": ", "material region '", r.name, "': ", e.what());
+    }
+  }
   if (!(material.young_modulus > 0) || !std::isfinite(material.young_modulus))
     throw_error("Young's modulus must be a positive number of pascals, got ", material.young_modulus);
   if (!(material.poisson_ratio >= 0) || !(material.poisson_ratio < 0.5))
@@ -75,6 +82,16 @@ Eigen::Matrix<double, 12, 12> tet_stiffness(const Eigen::Matrix<double, 4, 3>& x
 
 Eigen::SparseMatrix<double> assemble_stiffness(const TetMesh& mesh, const Material& material) {
   check_material(material);
+  return assemble_stiffness(mesh, element_materials(mesh, material, mesh.source));
+}
+
+Eigen::SparseMatrix<double> assemble_stiffness(const TetMesh& mesh, const ElementMaterials& elements) {
+  for (const Material& m : elements.materials) check_material(m);
+  if (elements.element.size() != static_cast<std::size_t>(mesh.tets.rows()))
+    throw_error("assemble: ", elements.element.size(), " element materials for ", mesh.tets.rows(), " tets");
+  for (int i : elements.element)
+    if (i < 0 || static_cast<std::size_t>(i) >= elements.materials.size())
+      throw_error("assemble: element material ", i, " outside 0..", elements.materials.size() - 1);
   const int n = static_cast<int>(mesh.nodes.rows());
   const Eigen::Index tets = mesh.tets.rows();
 
@@ -112,12 +129,13 @@ Eigen::SparseMatrix<double> assemble_stiffness(const TetMesh& mesh, const Materi
         for (int r = 0; r < 3; ++r) inner[p++] = 3 * i + r;
     }
 
-  const Eigen::Matrix<double, 6, 6> d = elasticity_matrix(material);
+  std::vector<Eigen::Matrix<double, 6, 6>> d;
+  for (const Material& m : elements.materials) d.push_back(elasticity_matrix(m));
   Eigen::Matrix<double, 4, 3> x;
   Eigen::Matrix<double, 12, 12> ke;
   for (Eigen::Index t = 0; t < tets; ++t) {
     for (int a = 0; a < 4; ++a) x.row(a) = mesh.nodes.row(mesh.tets(t, a));
-    if (!tet_stiffness_with(x, d, ke)) {
+    if (!tet_stiffness_with(x, d[static_cast<std::size_t>(elements.element[static_cast<std::size_t>(t)])], ke)) {
       const auto id = [&](int a) {
         const int node = mesh.tets(t, a);
         return mesh.ids.empty() ? static_cast<std::int64_t>(node) : mesh.ids[static_cast<std::size_t>(node)];
@@ -199,8 +217,9 @@ ElasticModel build_elastic_model(const TetMesh& mesh, const Material& material, 
   ElasticModel model;
   model.mesh = &mesh;
   model.material = material;
+  model.elements = element_materials(mesh, material, where);
   model.fixed = fixed;
-  model.k = assemble_stiffness(mesh, material);
+  model.k = assemble_stiffness(mesh, model.elements);
   model.k_ff = free_stiffness(model.k, fixed);
   return model;
 }

@@ -78,6 +78,13 @@ Eigen::Matrix3d deformation_gradient(const TetMesh& mesh, int t, const Eigen::Ma
 
 HyperelasticSolver::HyperelasticSolver(const ElasticModel& model, const HyperelasticOptions& options)
     : model_(model), options_(options), lame_(lame_parameters(model.material)) {
+  // Each tet's own material (a region's, else the base): the model's resolved one, or resolved here for a model put
+  // together by hand.
+  const ElementMaterials elements =
+      model_.elements.element.empty() ? element_materials(*model_.mesh, model_.material) : model_.elements;
+  std::vector<LameParameters> lames;
+  for (const Material& m : elements.materials) lames.push_back(lame_parameters(m));
+  for (int i : elements.element) element_lame_.push_back(lames[static_cast<std::size_t>(i)]);
   if (options_.load_steps < 1) throw_error("hyperelastic: load_steps must be >= 1, got ", options_.load_steps);
   if (options_.max_iterations < 2)
     throw_error("hyperelastic: max_iterations must be >= 2 (a predictor and a correction), got ",
@@ -144,9 +151,10 @@ bool HyperelasticSolver::internal_force(const Eigen::VectorXd& u, Eigen::VectorX
     }
     if (!ok) continue;  // keep scanning for the worst tet only
     const double v = volume_[static_cast<std::size_t>(t)];
-    if (energy) e += v * neo_hookean_energy_density(fg, lame_);
+    const LameParameters& lame = element_lame_[static_cast<std::size_t>(t)];
+    if (energy) e += v * neo_hookean_energy_density(fg, lame);
     // f_a = V P grad_a.
-    const Eigen::Matrix3d p = neo_hookean_stress(fg, lame_);
+    const Eigen::Matrix3d p = neo_hookean_stress(fg, lame);
     for (int a = 0; a < 4; ++a) f.segment<3>(3 * mesh.tets(t, a)) += v * p * g.row(a).transpose();
   }
   if (energy) *energy = e;
@@ -167,8 +175,8 @@ bool HyperelasticSolver::tangent_stiffness(const Eigen::VectorXd& u, Eigen::Spar
     if (!(j > 0) || !std::isfinite(j)) return false;
     // K_e = V B^T A B.
     const Eigen::Matrix<double, 9, 12> b = gradient_operator(g);
-    const Eigen::Matrix<double, 12, 12> ke =
-        volume_[static_cast<std::size_t>(t)] * b.transpose() * (neo_hookean_tangent(fg, lame_) * b);
+    const Eigen::Matrix<double, 12, 12> ke = volume_[static_cast<std::size_t>(t)] * b.transpose() *
+                                             (neo_hookean_tangent(fg, element_lame_[static_cast<std::size_t>(t)]) * b);
     const int* pos = block_pos_.data() + static_cast<std::size_t>(t) * 48;
     for (int a = 0; a < 4; ++a)
       for (int bn = 0; bn < 4; ++bn)

@@ -158,12 +158,14 @@ class HyperelasticSolver {
 
   const HyperelasticOptions& options() const { return options_; }
   const ElasticModel& model() const { return model_; }
+  /// The base material's (a tet in a material region has its region's).
   const LameParameters& lame() const { return lame_; }
 
  private:
   const ElasticModel& model_;
   HyperelasticOptions options_;
   LameParameters lame_;
+  std::vector<LameParameters> element_lame_;       // #T: each tet's own (its region's, else the base's)
   std::vector<Eigen::Matrix<double, 4, 3>> grad_;  // #T: reference gradients of the shape functions, 1/m
   std::vector<double> volume_;                     // #T: reference volumes, m^3
   std::vector<int> block_pos_;                     // #T x 16 x 3: value index of K(3 a, 3 b + k) in the pattern

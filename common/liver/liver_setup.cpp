@@ -70,6 +70,8 @@ PrecomputeOptions scene_precompute_options(int contact_count, const std::vector<
 LiverTensorSetup liver_tensor_setup(const Material& material, const FixedRegion& fixed, const TetMesh& mesh,
                                     const std::string& cache_dir, const std::string& where) {
   LiverTensorSetup s;
+  // A material region holding no element is refused here too: a cached tensor file is loaded without assembling.
+  element_materials(mesh, material, where);
   s.fixed = fixed_set_from_region(mesh, fixed);
   s.contacts = contactable_nodes(mesh, s.fixed);
   if (s.contacts.empty()) throw_error(where, ": key 'fixed': every surface node is fixed; nothing can be touched");

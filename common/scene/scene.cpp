@@ -155,6 +155,9 @@ class Reader {
     return f.node.Scalar();
   }
 
+  // "FILE:LINE: key 'a.b'", the prefix of fail()'s messages, for an error found once the mesh is loaded.
+  std::string where(const Field& f) const { return shown_ + ":" + std::to_string(f.line) + ": key '" + f.key + "'"; }
+
   double number(const Field& f, const Range& range, const std::string& fix) const {
     std::string_view s = plain_scalar(f, "a number", fix);
     if (!s.empty() && s.front() == '+') s.remove_prefix(1);
@@ -313,6 +316,18 @@ class Map {
 // ---------------------------------------------------------------------------------------------------------------
 // Sections.
 
+// A name of letters, digits, '_' or '-' (`what`: e.g. "the organ's name, e.g. liver"; `why` it must be so).
+std::string read_name(const Reader& r, const Field& f, const std::string& what, const std::string& why) {
+  const std::string name = r.text(f, what + " (letters, digits, '_' or '-')");
+  for (const char ch : name) {
+    if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '-')) {
+      r.fail(f.line, f.key, "'" + name + "' has the character '" + std::string(1, ch) + "'",
+             "use letters, digits, '_' or '-' (" + why + ")");
+    }
+  }
+  return name;
+}
+
 MeshSource read_mesh_source(const Reader& r, const Field& f) {
   const Map m(r, f, {"generate", "file", "target_nodes"});
   MeshSource mesh;
@@ -343,15 +358,99 @@ MeshSource read_mesh_source(const Reader& r, const Field& f) {
   return mesh;
 }
 
-Material read_material(const Reader& r, const Field& f) {
-  const Map m(r, f, {"young_modulus", "poisson_ratio"});
+std::pair<Eigen::Vector3d, Eigen::Vector3d> read_box(const Reader& r, const Field& f);
+
+// A list of maps read one by one, each with its own key path "KEY[i]" and line.
+template <class Read>
+void read_list(const Reader& r, const Field& f, const std::string& fix, Read read) {
+  if (!f.node.IsSequence()) r.fail(f.line, f.key, "expected a list, got " + Reader::kind(f.node), fix);
+  for (std::size_t i = 0; i < f.node.size(); ++i) {
+    const YAML::Node e = f.node[i];
+    read(Field{e, f.key + "[" + std::to_string(i) + "]", line_of(e, f.line)});
+  }
+}
+
+Ellipsoid read_ellipsoid(const Reader& r, const Field& f) {
+  const Map m(r, f, {"center", "radii"});
+  if (!m.has("center") || !m.has("radii")) {
+    r.fail(f.line, f.key,
+           std::string("needs both 'center' and 'radii' (missing '") + (m.has("center") ? "radii" : "center") + "')",
+           "write {center: [x, y, z], radii: [rx, ry, rz]} in m, in the organ's own frame");
+  }
+  Ellipsoid e;
+  e.center = r.vec3(m.at("center"), "the centre in m, [x, y, z]");
+  e.radii = r.vec3(m.at("radii"), "the semi-axes along x, y, z in m, each > 0");
+  for (int i = 0; i < 3; ++i) {
+    if (!(e.radii[i] > 0)) {
+      r.fail(m.at("radii").line, m.key("radii"), std::string("the ") + "xyz"[i] + " radius is " + fmt(e.radii[i]),
+             "the semi-axes along x, y, z in m, each > 0");
+    }
+  }
+  return e;
+}
+
+const char* const kMaterialFix = "use a value in [0, 0.5); soft tissue is nearly incompressible, e.g. 0.45";
+
+// One entry of material.regions: a name, its material (Poisson's ratio defaults to the organ's) and where it is.
+MaterialRegion read_material_region(const Reader& r, const Field& f, double base_poisson) {
+  const Map m(r, f, {"name", "young_modulus", "poisson_ratio", "box", "boxes", "ellipsoid", "ellipsoids"});
+  MaterialRegion region;
+  if (!m.has("name")) r.fail(f.line, f.key + ".name", "missing", "name the region, e.g. name: gallbladder");
+  region.name = read_name(r, m.at("name"), "the region's name, e.g. gallbladder", "it names the region in errors");
+  region.where = r.where(f) + " (region '" + region.name + "')";
+  if (!m.has("young_modulus")) {
+    r.fail(f.line, m.key("young_modulus"), "missing", "the region's Young's modulus in Pa, e.g. young_modulus: 1000");
+  }
+  region.young_modulus = r.number(m.at("young_modulus"), positive(), "Young's modulus in Pa, > 0");
+  region.poisson_ratio = base_poisson;
+  if (m.has("poisson_ratio"))
+    region.poisson_ratio = r.number(m.at("poisson_ratio"), {0, 0.5, false, true}, kMaterialFix);
+  // Selectors in the order written: box, boxes, ellipsoid, ellipsoids (any of them holds an element).
+  if (m.has("box")) region.boxes.push_back(read_box(r, m.at("box")));
+  if (m.has("boxes")) {
+    read_list(r, m.at("boxes"), "write a list of {min: [x, y, z], max: [x, y, z]}",
+              [&](const Field& e) { region.boxes.push_back(read_box(r, e)); });
+  }
+  if (m.has("ellipsoid")) region.ellipsoids.push_back(read_ellipsoid(r, m.at("ellipsoid")));
+  if (m.has("ellipsoids")) {
+    read_list(r, m.at("ellipsoids"), "write a list of {center: [x, y, z], radii: [rx, ry, rz]}",
+              [&](const Field& e) { region.ellipsoids.push_back(read_ellipsoid(r, e)); });
+  }
+  if (region.boxes.empty() && region.ellipsoids.empty()) {
+    r.fail(f.line, f.key, "region '" + region.name + "' selects nothing",
+           "give the elements it holds, by their centroid in the organ's own frame: box: {min: [x, y, z], max: [x, "
+           "y, z]} and/or ellipsoid: {center: [x, y, z], radii: [rx, ry, rz]}");
+  }
+  return region;
+}
+
+Material read_material(const Reader& r, const Field& f, const std::string& model) {
+  const Map m(r, f, {"young_modulus", "poisson_ratio", "regions"});
   Material mat;
   if (m.has("young_modulus")) {
     mat.young_modulus = r.number(m.at("young_modulus"), positive(), "Young's modulus in Pa, > 0; liver ~3000");
   }
-  if (m.has("poisson_ratio")) {
-    mat.poisson_ratio = r.number(m.at("poisson_ratio"), {0, 0.5, false, true},
-                                 "use a value in [0, 0.5); soft tissue is nearly incompressible, e.g. 0.45");
+  if (m.has("poisson_ratio")) mat.poisson_ratio = r.number(m.at("poisson_ratio"), {0, 0.5, false, true}, kMaterialFix);
+  if (m.has("regions")) {
+    const Field& rf = m.at("regions");
+    if (model != "liver") {
+      r.fail(rf.line, rf.key, "is only read for model liver (a FEM mesh)",
+             "remove it: model " + model + " has no elements");
+    }
+    read_list(r, rf,
+              "a list of regions, later ones over earlier ones, e.g. - {name: gallbladder, young_modulus: 1000, "
+              "ellipsoid: {center: [x, y, z], radii: [rx, ry, rz]}}",
+              [&](const Field& e) {
+                MaterialRegion region = read_material_region(r, e, mat.poisson_ratio);
+                for (const MaterialRegion& other : mat.regions) {
+                  if (other.name == region.name) {
+                    r.fail(e.line, e.key + ".name", "'" + region.name + "' is also the name of " + other.where,
+                           "give each region its own name");
+                  }
+                }
+                mat.regions.push_back(std::move(region));
+              });
+    if (mat.regions.empty()) r.fail(rf.line, rf.key, "is an empty list", "list at least one region, or remove the key");
   }
   return mat;
 }
@@ -393,13 +492,8 @@ FixedRegion read_fixed(const Reader& r, const Field& f) {
     fixed.boxes.push_back(box);
   }
   if (m.has("boxes")) {
-    const Field& bf = m.at("boxes");
-    const std::string fix = "write a list of {min: [x, y, z], max: [x, y, z]}";
-    if (!bf.node.IsSequence()) r.fail(bf.line, bf.key, "expected a list, got " + Reader::kind(bf.node), fix);
-    for (std::size_t i = 0; i < bf.node.size(); ++i) {
-      const YAML::Node e = bf.node[i];
-      fixed.boxes.push_back(read_box(r, {e, bf.key + "[" + std::to_string(i) + "]", line_of(e, bf.line)}));
-    }
+    read_list(r, m.at("boxes"), "write a list of {min: [x, y, z], max: [x, y, z]}",
+              [&](const Field& e) { fixed.boxes.push_back(read_box(r, e)); });
   }
   if (m.has("plane")) {
     const Map p(r, m.at("plane"), {"point", "normal"});
@@ -448,13 +542,8 @@ ToolSpec read_tool(const Reader& r, const Field& f) {
                "force_limit", "contact_capacity", "contact_model", "tip_radius", "friction"});
   ToolSpec t;
   if (m.has("name")) {
-    t.name = r.text(m.at("name"), "the instrument's name, e.g. grasper (letters, digits, '_' or '-')");
-    for (const char ch : t.name) {
-      if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '-')) {
-        r.fail(m.at("name").line, m.key("name"), "'" + t.name + "' has the character '" + std::string(1, ch) + "'",
-               "use letters, digits, '_' or '-' (the name heads trajectory columns and stats keys)");
-      }
-    }
+    t.name = read_name(r, m.at("name"), "the instrument's name, e.g. grasper",
+                       "the name heads trajectory columns and stats keys");
   }
   if (m.has("trocar")) t.trocar = r.vec3(m.at("trocar"), "the fulcrum in world coordinates, m");
   if (m.has("axis")) t.axis = r.direction(m.at("axis"), "non-zero shaft direction into the body at pitch = yaw = 0");
@@ -810,7 +899,7 @@ OrganSpec read_organ(const Reader& r, const Map& m, const std::vector<ToolSpec>&
     r.fail(o.line, m.key("mesh"), "missing",
            "add 'mesh: {generate: liver}' (liver | plate | cylinder) or 'mesh: {file: x.msh}'");
   }
-  if (m.has("material")) o.material = read_material(r, m.at("material"));
+  if (m.has("material")) o.material = read_material(r, m.at("material"), o.model);
   if (m.has("fixed")) o.fixed = read_fixed(r, m.at("fixed"));
   if (m.has("nonlinear")) o.nonlinear = read_nonlinear(r, m.at("nonlinear"));
   if (m.has("liver")) {
@@ -851,6 +940,7 @@ OrganSpec read_organ(const Reader& r, const Map& m, const std::vector<ToolSpec>&
     }
     if (m.has("placement")) o.placement = read_placement(r, m.at("placement"));
     o.fixed.frame = o.placement;
+    o.material.frame = o.placement;
   }
   return o;
 }
@@ -902,6 +992,28 @@ void hash_organ_keys(Hasher& h, const MeshSource& mesh, const Material& material
     h.str(file_name(nonlinear.displacement_curve));
     h.str(file_name(nonlinear.force_curve));
     h.value<std::int32_t>(nonlinear.degree);
+  }
+
+  // Material regions: hashed only when there are some, so older scenes keep their hash. Their frame is the organ's
+  // placement, hashed with it.
+  if (!material.regions.empty()) {
+    h.str("material-regions");
+    h.value<std::uint64_t>(material.regions.size());
+    for (const MaterialRegion& r : material.regions) {
+      h.str(r.name);
+      hash_double(h, r.young_modulus);
+      hash_double(h, r.poisson_ratio);
+      h.value<std::uint64_t>(r.boxes.size());
+      for (const auto& b : r.boxes) {
+        hash_vec(h, b.first);
+        hash_vec(h, b.second);
+      }
+      h.value<std::uint64_t>(r.ellipsoids.size());
+      for (const Ellipsoid& e : r.ellipsoids) {
+        hash_vec(h, e.center);
+        hash_vec(h, e.radii);
+      }
+    }
   }
 
   // The liver's run-time model (liver.deformation, liver.curves): hashed only when not the default, so older scenes
@@ -1131,13 +1243,7 @@ Scene load_scene(const std::string& path) {
         r.fail(ef.line, ef.key + ".model", "missing", "say what the organ is: model: liver | intestine | rigid");
       }
       OrganSpec o = read_organ(r, em, s.tools, true);
-      o.name = r.text(em.at("name"), "the organ's name, e.g. liver (letters, digits, '_' or '-')");
-      for (const char ch : o.name) {
-        if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '-')) {
-          r.fail(em.at("name").line, em.key("name"), "'" + o.name + "' has the character '" + std::string(1, ch) + "'",
-                 "use letters, digits, '_' or '-' (the name heads stats keys and topics)");
-        }
-      }
+      o.name = read_name(r, em.at("name"), "the organ's name, e.g. liver", "the name heads stats keys and topics");
       for (const OrganSpec& other : s.organs) {
         if (other.name == o.name) {
           r.fail(em.at("name").line, em.key("name"),

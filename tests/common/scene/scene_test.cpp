@@ -14,6 +14,8 @@
 #include "mesher/scene_mesh.h"
 #include "tool/tool.h"
 #include "tool/trajectory.h"
+#include "support/error_test_util.h"
+#include "support/test_files.h"
 
 using namespace surgsim::core;
 using namespace surgsim::mesh;
@@ -30,33 +32,13 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A fresh folder per test under the GoogleTest temp dir.
-fs::path test_dir() {
-  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::string name = std::string("scene_test_") + info->test_suite_name() + "_" + info->name();
-  for (char& c : name) {
-    if (c == '/') c = '_';
-  }
-  const fs::path dir = fs::path(::testing::TempDir()) / name;
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
+fs::path test_dir() { return test::fresh_test_dir("scene_test_"); }
 
-std::string write(const fs::path& path, const std::string& text) {
-  fs::create_directories(path.parent_path());
-  std::ofstream(path, std::ios::binary) << text;
-  return path.string();
-}
+std::string write(const fs::path& path, const std::string& text) { return test::write_file(path, text); }
 
-// The message of the Error thrown by load_scene, or "" if it loaded.
+// The message of the Error load_scene throws, or "" if it loaded.
 std::string load_error(const std::string& path) {
-  try {
-    load_scene(path);
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
+  return test::error_of([&] { load_scene(path); });
 }
 
 std::string shipped_config_dir() {
