@@ -172,6 +172,11 @@ double inverse_norm1_estimate(const double* a, Eigen::Index ld, int n, double* x
 }  // namespace
 
 ContactStatus Superposition::solve(const Contact* contacts, int m, ContactSolution& out) noexcept {
+  return solve(contacts, m, nullptr, 0, out);
+}
+
+ContactStatus Superposition::solve(const Contact* contacts, int m, const Load* loads, int load_count,
+                                   ContactSolution& out) noexcept {
   Merge r;
   out.status = merge_contacts(tensors_, block_, contacts, m, capacity_, out.nodes.data(), out.displacement.data(),
                               merged_count_.data(), r);
@@ -238,10 +243,29 @@ ContactStatus Superposition::solve(const Contact* contacts, int m, ContactSoluti
   if (!std::isfinite(out.rcond)) out.rcond = 0;
   if (!(out.rcond >= near_singular_rcond_)) return fail(ContactStatus::kNearSingular);
 
-  // lambda = L^-T L^-1 u*.
+  // lambda = L^-T L^-1 (u* - G_CB f_B): the loads' displacement at each contact node taken off what it must reach.
   double* y = rhs_.data();
   for (int l = 0; l < r.count; ++l)
     for (int c = 0; c < 3; ++c) y[3 * l + c] = out.displacement[static_cast<std::size_t>(l)][c];
+  for (int j = 0; j < load_count; ++j) {
+    const Load& load = loads[j];
+    const int cb = load.node >= 0 && load.node < tensors_.node_count
+                       ? tensors_.column_of_node[static_cast<std::size_t>(load.node)]
+                       : -1;
+    if (cb < 0) {
+      out.bad_input = m + j;
+      return fail(ContactStatus::kNotContactable);
+    }
+    if (!load.force.allFinite()) {
+      out.bad_input = m + j;
+      return fail(ContactStatus::kNonFinite);
+    }
+    for (int l = 0; l < r.count; ++l) {
+      const int rk = block_.row_of_node[static_cast<std::size_t>(out.nodes[static_cast<std::size_t>(l)])];
+      const Eigen::Vector3d u = block_.block3(rk, cb) * load.force;
+      for (int c = 0; c < 3; ++c) y[3 * l + c] -= u[c];
+    }
+  }
   llt_solve_in_place(a, ld, n, y);
   for (int l = 0; l < r.count; ++l) {
     const auto ul = static_cast<std::size_t>(l);

@@ -47,6 +47,12 @@ struct Contact {
   Eigen::Vector3d displacement = Eigen::Vector3d::Zero();  // m
 };
 
+/// One known force on the organ: node k and the force on it (N).
+struct Load {
+  int node = -1;
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();  // N
+};
+
 /// Result of Superposition::solve(). Fixed capacity, no heap: lives in the caller's preallocated state.
 struct ContactSolution {
   ContactStatus status = ContactStatus::kOk;
@@ -85,6 +91,12 @@ class Superposition {
   /// exceed the capacity if duplicates bring it down). Contact nodes must be rows of this block (true for "haptic"
   /// and "visual"). On any status but kOk the solution has count 0 and zero force.
   ContactStatus solve(const Contact* contacts, int m, ContactSolution& out) noexcept;
+  /// The same with known forces on the organ besides the contacts' (another organ resting on it: the bowel on the
+  /// liver): `loads[0..load_count)` at their nodes (each with a precomputed column; a node may repeat). The contacts
+  /// still reach their imposed displacements: lambda = G_CC^-1 (u* - G_CB f_B), and the organ's displacement is then
+  /// G lambda + G f_B (displacement() of the contacts and of the loads). The tool's force stays -sum lambda. A load on
+  /// a node without a column or a non-finite load is refused (kNotContactable / kNonFinite; bad_input = m + its index).
+  ContactStatus solve(const Contact* contacts, int m, const Load* loads, int load_count, ContactSolution& out) noexcept;
 
   /// Run phase, no allocation: u (m) of `node` (a row of this block, or a fully fixed node: u = 0) under the solved
   /// contacts. False when `node` is neither or `solution` is not ok.

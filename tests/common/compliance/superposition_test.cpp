@@ -3,8 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <Eigen/SparseCholesky>
 
 #include <random>
+#include <sstream>
 
 #include "support/alloc_counter.h"
 #include "core/error.h"
@@ -103,6 +105,120 @@ TEST_F(SuperpositionTest, EqualsTheReferenceSolveForRandomMultiContactLoads) {
       }
     }
   }
+}
+
+// Another organ resting on this one (the bowel on the liver): known forces at surface nodes besides the instrument's
+// imposed displacements. The reference is the test's own: K_ff from the assembled model, the imposed dofs eliminated,
+// K_OO u_O = f_O - K_OI u* solved with Eigen's sparse LDL^T (not CHOLMOD, not the tensors); the contact forces are the
+// reactions K_IO u_O + K_II u* - f_I.
+TEST_F(SuperpositionTest, KnownLoadsBesideTheContactsEqualTheDirectSolve) {
+  std::mt19937 rng(4321);
+  Superposition haptic(*tensors_, "haptic");
+  Superposition all(*tensors_, "all");
+  const FixedSet& fixed = organ_->model.fixed;
+  const Eigen::SparseMatrix<double>& kff = organ_->model.k_ff;
+  const int nodes = static_cast<int>(organ_->mesh.nodes.rows());
+  std::uniform_real_distribution<double> f(-0.05, 0.05);
+  for (int m : {0, 1, 3, 8}) {
+    for (int nb : {1, 6, 20}) {
+      const auto contacts = random_contacts(m, rng);
+      std::vector<Load> loads;
+      for (int node : test::pick(*contacts_, nb + m, rng)) {
+        bool taken = false;
+        for (const auto& c : contacts) taken = taken || c.node == node;
+        if (!taken && static_cast<int>(loads.size()) < nb)
+          loads.push_back({node, Eigen::Vector3d(f(rng), f(rng), f(rng))});
+      }
+      ContactSolution sol;
+      ASSERT_EQ(haptic.solve(contacts.data(), m, loads.data(), static_cast<int>(loads.size()), sol),
+                ContactStatus::kOk);
+      // The reference: free dofs split into imposed (I) and others (O).
+      const std::vector<int>& free_index = fixed.free_index();
+      std::vector<int> role(static_cast<std::size_t>(kff.rows()), -1);  // index in I or O
+      std::vector<bool> imposed(static_cast<std::size_t>(kff.rows()), false);
+      Eigen::VectorXd ustar = Eigen::VectorXd::Zero(kff.rows()), load = Eigen::VectorXd::Zero(kff.rows());
+      for (const auto& c : contacts)
+        for (int d = 0; d < 3; ++d) {
+          const int i = free_index[static_cast<std::size_t>(3 * c.node + d)];
+          imposed[static_cast<std::size_t>(i)] = true;
+          ustar[i] = c.displacement[d];
+        }
+      for (const auto& l : loads)
+        for (int d = 0; d < 3; ++d) load[free_index[static_cast<std::size_t>(3 * l.node + d)]] += l.force[d];
+      int no = 0;
+      for (Eigen::Index i = 0; i < kff.rows(); ++i)
+        if (!imposed[static_cast<std::size_t>(i)]) role[static_cast<std::size_t>(i)] = no++;
+      std::vector<Eigen::Triplet<double>> t;
+      Eigen::VectorXd rhs = Eigen::VectorXd::Zero(no);
+      for (int col = 0; col < kff.outerSize(); ++col)
+        for (Eigen::SparseMatrix<double>::InnerIterator it(kff, col); it; ++it) {
+          const auto r = static_cast<std::size_t>(it.row());
+          if (imposed[r]) continue;
+          if (imposed[static_cast<std::size_t>(col)]) {
+            rhs[role[r]] -= it.value() * ustar[col];
+          } else {
+            t.emplace_back(role[r], role[static_cast<std::size_t>(col)], it.value());
+          }
+        }
+      for (Eigen::Index i = 0; i < kff.rows(); ++i)
+        if (!imposed[static_cast<std::size_t>(i)]) rhs[role[static_cast<std::size_t>(i)]] += load[i];
+      Eigen::SparseMatrix<double> koo(no, no);
+      koo.setFromTriplets(t.begin(), t.end());
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(koo);
+      ASSERT_EQ(ldlt.info(), Eigen::Success);
+      const Eigen::VectorXd uo = ldlt.solve(rhs);
+      Eigen::VectorXd ufree(kff.rows());
+      for (Eigen::Index i = 0; i < kff.rows(); ++i)
+        ufree[i] = imposed[static_cast<std::size_t>(i)] ? ustar[i] : uo[role[static_cast<std::size_t>(i)]];
+      const Eigen::VectorXd reaction = kff * ufree - load;  // on the imposed dofs: the contact forces
+      Eigen::VectorXd ref_u = Eigen::VectorXd::Zero(3 * nodes);
+      for (int dof = 0; dof < 3 * nodes; ++dof) {
+        const int i = free_index[static_cast<std::size_t>(dof)];
+        if (i >= 0) ref_u[dof] = ufree[i];
+      }
+      // Forces: each contact's lambda is the reaction at its node.
+      for (int l = 0; l < sol.count; ++l) {
+        const int node = sol.nodes[static_cast<std::size_t>(l)];
+        Eigen::Vector3d r;
+        for (int d = 0; d < 3; ++d) r[d] = reaction[free_index[static_cast<std::size_t>(3 * node + d)]];
+        EXPECT_LT(test::rel_error(sol.lambda[static_cast<std::size_t>(l)], r), 1e-9) << m << " " << nb;
+      }
+      // Displacements of every node: G lambda + G f_B.
+      std::vector<int> at;
+      std::vector<Eigen::Vector3d> force;
+      for (int l = 0; l < sol.count; ++l) {
+        at.push_back(sol.nodes[static_cast<std::size_t>(l)]);
+        force.push_back(sol.lambda[static_cast<std::size_t>(l)]);
+      }
+      for (const auto& l : loads) {
+        at.push_back(l.node);
+        force.push_back(l.force);
+      }
+      Eigen::VectorXd u(3 * nodes);
+      ASSERT_EQ(all.displacements(at.data(), force.data(), static_cast<int>(at.size()), u), ContactStatus::kOk);
+      const double err = test::rel_error(u, ref_u);
+      EXPECT_LT(err, 1e-9) << m << " contacts, " << nb << " loads";
+      RecordProperty("rel_error_" + std::to_string(m) + "_" + std::to_string(nb), (std::ostringstream() << err).str());
+    }
+  }
+}
+
+TEST_F(SuperpositionTest, AKnownLoadOnANodeWithoutAColumnIsRefused) {
+  Superposition haptic(*tensors_, "haptic");
+  int interior = -1;
+  for (int n = 0; n < tensors_->node_count && interior < 0; ++n)
+    if (tensors_->column_of_node[static_cast<std::size_t>(n)] < 0 &&
+        tensors_->fixed_mask[static_cast<std::size_t>(n)] == 0)
+      interior = n;
+  ASSERT_GE(interior, 0);
+  const Contact c{(*contacts_)[0], Eigen::Vector3d(0, 0, -0.001)};
+  const Load bad{interior, Eigen::Vector3d(0, 0, -0.1)};
+  ContactSolution sol;
+  EXPECT_EQ(haptic.solve(&c, 1, &bad, 1, sol), ContactStatus::kNotContactable);
+  EXPECT_EQ(sol.bad_input, 1);
+  EXPECT_EQ(sol.count, 0);
+  const Load nan{(*contacts_)[1], Eigen::Vector3d(0, 0, std::nan(""))};
+  EXPECT_EQ(haptic.solve(&c, 1, &nan, 1, sol), ContactStatus::kNonFinite);
 }
 
 TEST_F(SuperpositionTest, PaperFormAgrees) {
