@@ -236,6 +236,8 @@ ClosestPoint RigidSurface::closest_point(const Eigen::Vector3d& p, double max_di
   // The side from the pseudo-normal of the feature holding the point: the face's normal inside it, the two faces'
   // sum on an edge, the angle-weighted normal at a vertex (exact for a closed surface, Baerentzen and Aanaes 2005).
   const Tri& t = tris_[static_cast<std::size_t>(out.triangle)];
+  out.corners = Eigen::Vector3i(t.v[0], t.v[1], t.v[2]);
+  out.bary = best_bary;
   const int zeros = (best_bary.array() == 0).count();
   Eigen::Vector3d pseudo = face_normal_[static_cast<std::size_t>(out.triangle)];
   if (zeros == 2) {

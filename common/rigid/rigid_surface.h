@@ -20,6 +20,8 @@ struct ClosestPoint {
                                                      // point when it is on the free side, away from it otherwise)
   double distance = 0;                               // m, signed: positive on the free side
   int triangle = -1;                                 // the triangle holding `point`
+  Eigen::Vector3i corners = Eigen::Vector3i::Constant(-1);  // its vertices (indices into the surface's vertices)
+  Eigen::Vector3d bary = Eigen::Vector3d::Zero();           // `point` = sum bary[k] vertices[corners[k]]
 };
 
 /// The first contact of a sphere moving along a segment.

@@ -9,7 +9,6 @@
 #include "haptic_dds.h"
 #include "liver/liver_setup.h"
 #include "nonlinear/organ_curves.h"
-#include "mesh/geometry.h"
 #include "mesher/scene_mesh.h"
 
 using namespace surgsim::core;
@@ -45,14 +44,11 @@ bool LiverObstacle::nearest(const Eigen::Vector3d& p, double max_distance, intes
   if (liver_.model().generation != generation_) return false;  // cut: the rest surface is not the liver's any more
   const rigid::ClosestPoint c = rest_.closest_point(p, max_distance + kDentReach);
   if (!c.found) return false;
-  const auto tri = liver_.model().surface.tris.row(c.triangle);
-  const Eigen::Vector3d a = rest_.surface().vertices.row(tri[0]), b = rest_.surface().vertices.row(tri[1]),
-                        d = rest_.surface().vertices.row(tri[2]);
-  Eigen::Vector3d bary;
-  closest_point_triangle(c.point, a, b, d, bary);
+  // The same barycentric point of the deformed triangle (the rest surface's vertices are the mesh's nodes).
   const ToolContacts& contacts = liver_.liver_contacts();
-  const Eigen::Vector3d da = contacts.deformed(tri[0]), db = contacts.deformed(tri[1]), dd = contacts.deformed(tri[2]);
-  const Eigen::Vector3d q = bary[0] * da + bary[1] * db + bary[2] * dd;
+  const Eigen::Vector3d da = contacts.deformed(c.corners[0]), db = contacts.deformed(c.corners[1]),
+                        dd = contacts.deformed(c.corners[2]);
+  const Eigen::Vector3d q = c.bary[0] * da + c.bary[1] * db + c.bary[2] * dd;
   Eigen::Vector3d n = (db - da).cross(dd - da);
   const double len = n.norm();
   if (!(len > 0) || !q.allFinite()) return false;

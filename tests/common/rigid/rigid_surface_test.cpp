@@ -71,6 +71,17 @@ void expect_closest_matches_brute_force(const mesh::TriSurface& s, bool cavity, 
     EXPECT_NEAR(std::abs(cp.distance), reference, 1e-12) << "point " << p.transpose();
     EXPECT_NEAR((p - cp.point).norm(), reference, 1e-12);
     EXPECT_NEAR(cp.normal.norm(), 1.0, 1e-12);
+    // The point is the barycentric combination of its triangle's corners, one of the input's triangles.
+    Eigen::Vector3d at_bary = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) at_bary += cp.bary[k] * s.vertices.row(cp.corners[k]).transpose();
+    EXPECT_LT((at_bary - cp.point).norm(), 1e-12);
+    EXPECT_NEAR(cp.bary.sum(), 1.0, 1e-12);
+    EXPECT_GE(cp.bary.minCoeff(), 0.0);
+    Eigen::Vector3i input = s.tris.row(cp.triangle).transpose();
+    Eigen::Vector3i stored = cp.corners;
+    std::sort(input.data(), input.data() + 3);
+    std::sort(stored.data(), stored.data() + 3);
+    EXPECT_EQ(stored, input);
     if (reference > 1e-9)
       EXPECT_LT((cp.normal - (p - cp.point).normalized() * (cp.distance > 0 ? 1.0 : -1.0)).norm(), 1e-9);
     if (closed && reference > 1e-6) EXPECT_EQ(cp.distance > 0, inside(s, p) == cavity) << "point " << p.transpose();
