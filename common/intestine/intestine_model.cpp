@@ -97,8 +97,10 @@ MassSpring IntestineModel::build(const IntestineParams& p, double& amplitude, do
       !p.gravity.allFinite() || !(p.probe_stiffness >= 0) || !positive(p.probe_force_limit) || p.probe_capacity < 1 ||
       p.contact_capacity < 1 || p.response.iterations < 0 || !(p.obstacle_stiffness >= 0) ||
       !std::isfinite(p.obstacle_stiffness) || p.obstacle_capacity < 0) {
-    throw_error("intestine: masses > 0, stiffnesses, damping, drag >= 0, probe_force_limit > 0, capacities >= 1, "
-                "response iterations >= 0");
+    throw_error(
+        "intestine: masses > 0, stiffnesses (obstacle_stiffness finite), damping, drag >= 0, "
+        "probe_force_limit > 0, probe and contact capacities >= 1, obstacle_capacity >= 0, response iterations "
+        ">= 0");
   }
   if (!p.axis_direction.allFinite() || p.axis_direction.norm() < 1e-9 || !p.axis_origin.allFinite()) {
     throw_error("intestine: axis_direction must be a non-zero vector and axis_origin finite");

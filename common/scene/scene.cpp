@@ -1072,8 +1072,13 @@ void hash_intestine(Hasher& h, const IntestineSpec& intestine) {
   hash_vec(h, p.axis_direction);
   hash_vec(h, p.gravity);
   h.value<std::uint64_t>(p.detection.seed);
-  hash_double(h, p.obstacle_stiffness);
-  h.value<std::int32_t>(p.obstacle_capacity);
+  // The other organs' contact (a field): hashed only when not the default, so older scenes keep their hash.
+  const intestine::IntestineParams defaults;
+  if (p.obstacle_stiffness != defaults.obstacle_stiffness || p.obstacle_capacity != defaults.obstacle_capacity) {
+    h.str("obstacles");
+    hash_double(h, p.obstacle_stiffness);
+    h.value<std::int32_t>(p.obstacle_capacity);
+  }
 }
 
 void hash_rigid(Hasher& h, const RigidSpec& g) {
