@@ -192,6 +192,16 @@ ContactStatus Superposition::solve(const Contact* contacts, int m, const Load* l
     return s;
   };
   if (out.status != ContactStatus::kOk) return fail(out.status);
+  // The known loads: each on a node with a precomputed column, finite (checked before any work).
+  for (int j = 0; j < load_count; ++j) {
+    const Load& load = loads[j];
+    const bool column = load.node >= 0 && load.node < tensors_.node_count &&
+                        tensors_.column_of_node[static_cast<std::size_t>(load.node)] >= 0;
+    if (!column || !load.force.allFinite()) {
+      out.bad_input = m + j;
+      return fail(column ? ContactStatus::kNonFinite : ContactStatus::kNotContactable);
+    }
+  }
   const int n = 3 * r.count;
   out.count = r.count;
   if (n == 0) return ContactStatus::kOk;
@@ -248,21 +258,10 @@ ContactStatus Superposition::solve(const Contact* contacts, int m, const Load* l
   for (int l = 0; l < r.count; ++l)
     for (int c = 0; c < 3; ++c) y[3 * l + c] = out.displacement[static_cast<std::size_t>(l)][c];
   for (int j = 0; j < load_count; ++j) {
-    const Load& load = loads[j];
-    const int cb = load.node >= 0 && load.node < tensors_.node_count
-                       ? tensors_.column_of_node[static_cast<std::size_t>(load.node)]
-                       : -1;
-    if (cb < 0) {
-      out.bad_input = m + j;
-      return fail(ContactStatus::kNotContactable);
-    }
-    if (!load.force.allFinite()) {
-      out.bad_input = m + j;
-      return fail(ContactStatus::kNonFinite);
-    }
+    const int cb = tensors_.column_of_node[static_cast<std::size_t>(loads[j].node)];
     for (int l = 0; l < r.count; ++l) {
       const int rk = block_.row_of_node[static_cast<std::size_t>(out.nodes[static_cast<std::size_t>(l)])];
-      const Eigen::Vector3d u = block_.block3(rk, cb) * load.force;
+      const Eigen::Vector3d u = block_.block3(rk, cb) * loads[j].force;
       for (int c = 0; c < 3; ++c) y[3 * l + c] -= u[c];
     }
   }
