@@ -219,6 +219,10 @@ TEST_F(SuperpositionTest, AKnownLoadOnANodeWithoutAColumnIsRefused) {
   EXPECT_EQ(sol.count, 0);
   const Load nan{(*contacts_)[1], Eigen::Vector3d(0, 0, std::nan(""))};
   EXPECT_EQ(haptic.solve(&c, 1, &nan, 1, sol), ContactStatus::kNonFinite);
+  // ... also with no contact at all (nothing to solve, but the loads are still refused).
+  EXPECT_EQ(haptic.solve(nullptr, 0, &bad, 1, sol), ContactStatus::kNotContactable);
+  EXPECT_EQ(sol.bad_input, 0);
+  EXPECT_EQ(haptic.solve(nullptr, 0, &nan, 1, sol), ContactStatus::kNonFinite);
 }
 
 TEST_F(SuperpositionTest, PaperFormAgrees) {
