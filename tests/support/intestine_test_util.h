@@ -1,9 +1,11 @@
 // Shared by the intestine tests: a scripted probe that pushes and lifts the folds (the scripted run of the recall
-// test, also used by intestine_bench).
+// test, also used by intestine_bench), and the body's lowest point (the tests of the bowel resting on other organs).
 #pragma once
 #include <Eigen/Core>
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <limits>
 
 #include "intestine/intestine_model.h"
 
@@ -35,6 +37,19 @@ inline intestine::Probe scripted_probe(double t) {
     }
   }
   return p;
+}
+
+/// Lowest point (m) of the body's spheres at positions `x` (3 x N): the tube's radius on the intestine's row, half the
+/// membrane's thickness on the mesentery, free nodes only, and of those only the nodes with |x|, |y| <= `half` (m).
+inline double lowest_sphere(const intestine::IntestineModel& model, const Eigen::Matrix3Xd& x,
+                            double half = std::numeric_limits<double>::infinity()) {
+  const intestine::IntestineParams& p = model.params();
+  double z = std::numeric_limits<double>::infinity();
+  for (int n = 0; n < model.node_count(); ++n) {
+    if (model.mass_spring().fixed(n) || std::abs(x(0, n)) > half || std::abs(x(1, n)) > half) continue;
+    z = std::min(z, x(2, n) - (n < p.columns ? p.intestine_radius : 0.5 * p.mesentery_thickness));
+  }
+  return z;
 }
 
 }  // namespace surgsim::intestine::test

@@ -10,6 +10,7 @@
 
 #include "intestine/intestine_model.h"
 #include "support/alloc_counter.h"
+#include "support/intestine_test_util.h"
 
 namespace surgsim::intestine {
 namespace {
@@ -44,17 +45,6 @@ IntestineParams field_bowel() {
   p.mesentery_node_mass = 0.003;
   p.self_collisions = false;  // the balance below counts forces only (the response moves positions)
   return p;
-}
-
-// Lowest point (m) of any free node's sphere.
-double lowest(const IntestineModel& model, const Eigen::Matrix3Xd& x) {
-  const IntestineParams& p = model.params();
-  double z = 1e300;
-  for (int n = 0; n < model.node_count(); ++n) {
-    if (model.mass_spring().fixed(n)) continue;
-    z = std::min(z, x(2, n) - (n < p.columns ? p.intestine_radius : 0.5 * p.mesentery_thickness));
-  }
-  return z;
 }
 
 // The force (N) the fixed nodes (the mesentery's root) exert on the free ones through the springs, from positions
@@ -99,7 +89,7 @@ TEST(IntestineObstacle, RestsOnAFloorWithTheFloorAndTheRootCarryingItsWeight) {
   IntestineState hanging(model);
   StepReport report;
   settle(model, hanging, nullptr, 0, 6.0, report);
-  const double sag_low = lowest(model, hanging.x), rest_low = lowest(model, model.rest());
+  const double sag_low = test::lowest_sphere(model, hanging.x), rest_low = test::lowest_sphere(model, model.rest());
   const double height = 0.5 * (sag_low + rest_low);
   ASSERT_LT(height, rest_low) << "the floor must not cut the body as built";
   const Floor floor(height);
@@ -113,7 +103,7 @@ TEST(IntestineObstacle, RestsOnAFloorWithTheFloorAndTheRootCarryingItsWeight) {
   EXPECT_LT(state.v.cwiseAbs().maxCoeff(), 1e-4) << "not at rest";
   // Nothing sinks: a node's weight on 2000 N/m is 0.04 mm.
   EXPECT_LT(on_floor.max_depth, 1e-3);
-  EXPECT_GT(lowest(model, state.x), height - 1e-3);
+  EXPECT_GT(test::lowest_sphere(model, state.x), height - 1e-3);
   // The balance: what the floor and the root carry is the weight, within 1 % of it.
   const Eigen::Vector3d w = weight(model), root = root_reaction(model, state);
   const Eigen::Vector3d residual = on_floor.force + root + w;
@@ -132,19 +122,19 @@ TEST(IntestineObstacle, WithoutTheObstacleTheBodySinksThroughIt) {
   IntestineState a(model), b(model);
   StepReport report;
   settle(model, a, nullptr, 0, 6.0, report);
-  const double height = 0.5 * (lowest(model, a.x) + lowest(model, model.rest()));
+  const double height = 0.5 * (test::lowest_sphere(model, a.x) + test::lowest_sphere(model, model.rest()));
   const Floor floor(height);
   const Obstacle* obstacles[] = {&floor};
   settle(model, b, obstacles, 1, 6.0, report);
-  EXPECT_LT(lowest(model, a.x), height - 1.5e-3);
-  EXPECT_GT(lowest(model, b.x), height - 0.5e-3);
+  EXPECT_LT(test::lowest_sphere(model, a.x), height - 1.5e-3);
+  EXPECT_GT(test::lowest_sphere(model, b.x), height - 0.5e-3);
 }
 
 TEST(IntestineObstacle, ZeroStiffnessPassesThroughAndCountsNoForce) {
   IntestineParams p = field_bowel();
   p.obstacle_stiffness = 0;
   const IntestineModel model(p);
-  const Floor floor(lowest(model, model.rest()) + 0.01);  // cuts the body as built
+  const Floor floor(test::lowest_sphere(model, model.rest()) + 0.01);  // cuts the body as built
   const Obstacle* obstacles[] = {&floor};
   IntestineState state(model);
   StepReport report;
@@ -176,7 +166,7 @@ TEST(IntestineObstacle, OverflowIsCountedAndTheStepAllocatesNothing) {
   IntestineParams p = field_bowel();
   p.obstacle_capacity = 2;
   const IntestineModel model(p);
-  const Floor floor(lowest(model, model.rest()) + 0.01);  // several nodes overlap it
+  const Floor floor(test::lowest_sphere(model, model.rest()) + 0.01);  // several nodes overlap it
   const Obstacle* obstacles[] = {&floor};
   IntestineState state(model);
   StepReport report;
