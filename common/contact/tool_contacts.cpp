@@ -177,6 +177,13 @@ void ToolContacts::reset_instrument(int t) noexcept {
   have_previous_[static_cast<std::size_t>(t)] = false;
 }
 
+void ToolContacts::set_bodies(const BodyPoint* points, int count) noexcept {
+  count = points == nullptr ? 0 : std::max(count, 0);
+  if (count > kMaxBodyPoints) body_overflow_ += count - kMaxBodyPoints;
+  body_count_ = std::min(count, kMaxBodyPoints);
+  for (int j = 0; j < body_count_; ++j) bodies_[static_cast<std::size_t>(j)] = points[j];
+}
+
 void ToolContacts::drop_solution() noexcept {
   solution_ = ContactSolution{};
   instrument_nodes_.fill(0);
@@ -277,11 +284,19 @@ void ToolContacts::step(const InstrumentInput* inputs, int count, ContactTick* o
     geometry_[static_cast<std::size_t>(t)] = nullptr;
     reset_instrument(t);
   }
+  // This step's body points (set_bodies): unsolved until the patch model's solve gives them a row.
+  body_results_ = body_count_;
+  for (int j = 0; j < body_results_; ++j) {
+    body_force_[static_cast<std::size_t>(j)] = BodyForce{};
+    body_row_[static_cast<std::size_t>(j)] = -1;
+  }
+  body_load_.setZero();
   if (model_ == ContactModel::kPatch) {
     step_patch(h, out);
   } else {
     step_triangle(h, out);
   }
+  body_count_ = 0;  // given for one step only
   count_instrument_nodes();
   if (deformation_ == LiverDeformation::kCorotational) publish_solution();
   // Multirate: this tick's solution (nodes, displacements; none without contact) becomes the tracker's targets.
@@ -802,6 +817,66 @@ void ToolContacts::build_patches(double dt, ContactTick* out) noexcept {
       dropped_nodes_ += dropped[static_cast<std::size_t>(t)];
     }
   }
+  add_body_rows();
+}
+
+// Stage 2, continued: the bodies' points (set_bodies), each a patch of its triangle's contactable corners with the
+// penalty's compliance in series and one unilateral row along its normal, while the union has room for its nodes.
+void ToolContacts::add_body_rows() noexcept {
+  if (multirate_ != nullptr) return;  // the tracker's forces replace the linear ones: no load could be solved
+  PatchConstraints& k = *constraints_;
+  const int capacity = kMaxContacts;  // the instruments' own capacities bound their share; the bodies take the rest
+  constexpr int kNewNode = -2;        // a corner not yet in the union
+  for (int j = 0; j < body_results_; ++j) {
+    const BodyPoint& b = bodies_[static_cast<std::size_t>(j)];
+    if (!(b.stiffness > 0) || !std::isfinite(b.stiffness) || !std::isfinite(b.gap) || !b.normal.allFinite() ||
+        !b.bary.allFinite()) {
+      continue;
+    }
+    // Its contactable corners, and the union nodes they need.
+    std::array<int, 3> slot{{-1, -1, -1}};
+    int corners = 0, fresh = 0;
+    for (int c = 0; c < 3; ++c) {
+      const int node = b.nodes[static_cast<std::size_t>(c)];
+      if (!(b.bary[c] > 0) || contact_node_status(tensors_, haptic_, node) != ContactStatus::kOk) continue;
+      int u = 0;
+      while (u < k.node_count && k.nodes[static_cast<std::size_t>(u)] != node) ++u;
+      slot[static_cast<std::size_t>(c)] = u < k.node_count ? u : kNewNode;
+      if (u == k.node_count) ++fresh;
+      ++corners;
+    }
+    if (corners == 0) continue;  // on the fixed set: the support carries it, the owner's own contact holds it
+    if (k.node_count + fresh > capacity || k.patch_count == kMaxPatches || k.row_count == kMaxPatchRows) {
+      ++body_overflow_;
+      continue;
+    }
+    const int p_index = k.patch_count;
+    const int start = k.patch_start[static_cast<std::size_t>(p_index)];
+    int e = 0;
+    for (int c = 0; c < 3; ++c) {
+      int u = slot[static_cast<std::size_t>(c)];
+      if (u == -1) continue;
+      if (u == kNewNode) {  // a node new to the union (a triangle's corners are distinct)
+        u = k.node_count++;
+        union_instrument_[static_cast<std::size_t>(u)] = kBodyInstrument;
+        k.nodes[static_cast<std::size_t>(u)] = b.nodes[static_cast<std::size_t>(c)];
+      }
+      k.entry_node[static_cast<std::size_t>(start + e)] = u;
+      k.entry_weight[static_cast<std::size_t>(start + e)] = b.bary[c];
+      ++e;
+    }
+    k.patch_start[static_cast<std::size_t>(p_index + 1)] = start + e;
+    k.patch_count = p_index + 1;
+    k.near_normal[static_cast<std::size_t>(p_index)] = 1 / b.stiffness;
+    k.near_tangent[static_cast<std::size_t>(p_index)] = 0;
+    k.near_axis[static_cast<std::size_t>(p_index)] = b.normal;
+    const auto kr = static_cast<std::size_t>(k.row_count++);
+    k.row_patch[kr] = p_index;
+    k.row_direction[kr] = b.normal;
+    b_[kr] = b.gap;
+    enabled_[kr] = 1;
+    body_row_[static_cast<std::size_t>(j)] = static_cast<int>(kr);
+  }
 }
 
 // Stage 3: the solve, with an active set for the unilateral contacts (false: nothing to solve or the solve failed;
@@ -834,7 +909,7 @@ bool ToolContacts::solve_active_set(double dt, ContactTick* out) noexcept {
     return false;
   }
   bool solved = false;
-  for (int iteration = 0; iteration <= k.patch_count; ++iteration) {
+  for (int iteration = 0; iteration <= k.patch_count + 1; ++iteration) {
     status_ = patch_solver_->factor(k, enabled_.data());
     if (status_ == ContactStatus::kNearSingular && patch_solver_->dependent_row() >= 0) {
       // A patch whose rows depend on earlier ones (two points on the same spot): the first (deeper-first order
@@ -867,10 +942,21 @@ bool ToolContacts::solve_active_set(double dt, ContactTick* out) noexcept {
         worst = pi;
       }
     }
+    // A body point whose row would pull it onto the organ is not touching: every such row lets go at once (penalty
+    // rows in series with their own compliance: the next tick's gaps decide again).
+    bool released = false;
+    for (int j = 0; j < body_results_; ++j) {
+      const int r = body_row_[static_cast<std::size_t>(j)];
+      if (r >= 0 && enabled_[static_cast<std::size_t>(r)] && mu_[static_cast<std::size_t>(r)] > 0) {
+        enabled_[static_cast<std::size_t>(r)] = 0;
+        released = true;
+      }
+    }
     if (worst >= 0) {
       disable_patch(worst);
       continue;
     }
+    if (released) continue;
     solved = true;
     break;
   }
@@ -988,9 +1074,26 @@ void ToolContacts::distribute_forces(double dt, ContactTick* out) noexcept {
       }
     }
   });
-  // One instrument: the solve's own sum over the union nodes (as a one-instrument solve adds them; the per-point sum
-  // above is the same force in another order of additions).
-  if (count_ == 1) force[0] = s.tool_force;
+  // The bodies' pushes, and their loads taken out of the tool's force (-sum lambda holds them).
+  bool bodies = false;
+  for (int j = 0; j < body_results_; ++j) {
+    const int r = body_row_[static_cast<std::size_t>(j)];
+    if (r < 0) continue;
+    BodyForce& bf = body_force_[static_cast<std::size_t>(j)];
+    bf.solved = true;
+    bf.push = enabled_[static_cast<std::size_t>(r)] ? std::max(0.0, -mu_[static_cast<std::size_t>(r)]) : 0.0;
+    const Eigen::Vector3d& n = bodies_[static_cast<std::size_t>(j)].normal;
+    Eigen::Vector3d on_organ = Eigen::Vector3d::Zero();  // the share of the corners with a row (fixed ones: support)
+    for (int e = k.patch_start[static_cast<std::size_t>(k.row_patch[static_cast<std::size_t>(r)])];
+         e < k.patch_start[static_cast<std::size_t>(k.row_patch[static_cast<std::size_t>(r)]) + 1]; ++e)
+      on_organ -= k.entry_weight[static_cast<std::size_t>(e)] * bf.push * n;
+    s.tool_force += on_organ;
+    body_load_ -= bf.push * n;
+    bodies = true;
+  }
+  // One instrument without bodies: the solve's own sum over the union nodes (as a one-instrument solve adds them; the
+  // per-point sum above is the same force in another order of additions).
+  if (count_ == 1 && !bodies) force[0] = s.tool_force;
   // Multirate: the nodes' forces from the tracker's local model where its snapshot covers them; each instrument's
   // force is the sum over its own nodes.
   if (multirate_ != nullptr) {

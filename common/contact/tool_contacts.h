@@ -104,6 +104,30 @@ struct PointContact {
   bool slipping = false;                             // a sticking contact slid this tick (|F_t| = mu F_n)
 };
 
+/// A point of another body resting on the organ (the field's bowel on the liver), as its owner found it on the REST
+/// surface: a sphere whose nearest rest point lies at barycentric `bary` of the triangle `nodes`, `gap` (m) the signed
+/// distance of the sphere's surface from the rest surface along that triangle's outward unit `normal` (negative:
+/// overlapping it), `stiffness` (N/m) the sphere's penalty. In the patch model's solve it is one more unilateral
+/// row along `normal` on the weighted mean displacement of the three nodes, with the penalty's compliance 1 /
+/// stiffness in series: p = stiffness (n . sum_i w_i u_i - gap) when it pushes (p >= 0 the push on the body), solved
+/// in ONE system with every instrument's rows, so the organ dents under the body as a direct solve with those forces
+/// and the body feels the dented surface at once (no lag between the two). A fixed corner carries its share to the
+/// support (its weight stays, its displacement is 0).
+struct BodyPoint {
+  std::array<int, 3> nodes{{-1, -1, -1}};
+  Eigen::Vector3d bary = Eigen::Vector3d::Zero();
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double gap = 0;        // m
+  double stiffness = 0;  // N/m, > 0
+};
+
+/// The solve's answer for one BodyPoint.
+struct BodyForce {
+  bool solved = false;  // the point had a row in the last solve (false: no room, no free node, no solve: its owner
+                        // falls back to its own contact)
+  double push = 0;      // N, >= 0: the push on the body along the point's normal (0: not touching)
+};
+
 /// The patch of one tool point this tick (patch model).
 struct PointPatch {
   int count = 0;
@@ -153,6 +177,22 @@ class ToolContacts {
     const InstrumentInput in{&geometry, jaw};
     step(&in, 1, &out, dt);
   }
+  /// Bodies resting on the organ for the NEXT step() only (patch model, linear or corotational; with any other
+  /// model, or multirate, no point is solved): at most kMaxBodyPoints, the rest counted in body_overflow(). They come
+  /// after every instrument's points in the union of nodes, which they may fill up to kMaxContacts nodes (the
+  /// instruments' own contact capacities bound theirs). No allocation.
+  static constexpr int kMaxBodyPoints = 96;
+  /// Contact entries of nodes only bodies load carry this instrument index (ContactEntry::instrument).
+  static constexpr int kBodyInstrument = tool::kMaxInstruments;
+  void set_bodies(const BodyPoint* points, int count) noexcept;
+  /// The last step()'s answer for body point j of the set_bodies() before it.
+  int body_count() const { return body_results_; }
+  const BodyForce& body_force(int j) const { return body_force_[static_cast<std::size_t>(j)]; }
+  /// Body points given past kMaxBodyPoints, or left out of a solve for the contact capacity, since construction.
+  long body_overflow() const { return body_overflow_; }
+  /// The push on the organ's side of body points in the last step: sum over solved points of -push n (N).
+  const Eigen::Vector3d& body_load() const { return body_load_; }
+
   /// Corotational only (else nothing): the rest-frame response u~_n = sum_l G(n, k_l) R_l^T lambda_l of every row
   /// of the haptic block under the newest solution step() published, then the rotation of every surface node from
   /// it, published back to step() (lock-free, latest value). Call it from ONE thread other than step()'s at >= 100
@@ -293,6 +333,16 @@ class ToolContacts {
   std::unique_ptr<compliance::NodeRotations> worker_rotations_;  // refresh_rotations()' thread
   Eigen::MatrixX3d worker_u_;
   std::array<Eigen::Vector3d, compliance::kMaxContacts> worker_rest_lambda_{};
+  // --- bodies resting on the organ (set_bodies) ---
+  /// Their patches and rows, after the instruments' (build_patches).
+  void add_body_rows() noexcept;
+  std::array<BodyPoint, kMaxBodyPoints> bodies_{};
+  std::array<BodyForce, kMaxBodyPoints> body_force_{};
+  std::array<int, kMaxBodyPoints> body_row_{};  // row of body point j in constraints_ (-1: none)
+  int body_count_ = 0;                          // set_bodies() for the next step
+  int body_results_ = 0;                        // body_force_ entries of the last step
+  long body_overflow_ = 0;
+  Eigen::Vector3d body_load_ = Eigen::Vector3d::Zero();
   // --- multirate ---
   nonlinear::MultirateContacts* multirate_ = nullptr;
 };

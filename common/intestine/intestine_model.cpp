@@ -355,7 +355,6 @@ int touch_obstacles(const IntestineModel& model, const Eigen::Matrix3Xd& x, cons
                     std::array<int, kMaxObstacles + 1>& begin) noexcept {
   const IntestineParams& p = model.params();
   const MassSpring& system = model.mass_spring();
-  const double tube = p.intestine_radius, membrane = 0.5 * p.mesentery_thickness;
   int n = 0;
   report.obstacle_count = obstacle_count;
   for (int k = 0; k < obstacle_count; ++k) {
@@ -363,12 +362,11 @@ int touch_obstacles(const IntestineModel& model, const Eigen::Matrix3Xd& x, cons
     ObstacleReport& r = report.obstacles[static_cast<std::size_t>(k)];
     if (!(p.obstacle_stiffness > 0)) continue;
     for (int node = 0; node < system.node_count(); ++node) {
-      if (system.fixed(node)) continue;
-      const double radius = node < p.columns ? tube : membrane;
+      const double radius = obstacle_radius(model, node);
       if (!(radius > 0)) continue;
       ObstacleHit hit;
       const Eigen::Vector3d xn = x.col(node);
-      if (!obstacles[k]->nearest(xn, radius, hit) || !(hit.distance < radius) || !std::isfinite(hit.distance) ||
+      if (!obstacles[k]->nearest(node, xn, radius, hit) || !(hit.distance < radius) || !std::isfinite(hit.distance) ||
           !hit.normal.allFinite()) {
         continue;
       }
@@ -393,6 +391,12 @@ int touch_obstacles(const IntestineModel& model, const Eigen::Matrix3Xd& x, cons
 }
 
 }  // namespace
+
+double obstacle_radius(const IntestineModel& model, int node) noexcept {
+  const IntestineParams& p = model.params();
+  if (node < 0 || node >= model.mass_spring().node_count() || model.mass_spring().fixed(node)) return 0;
+  return node < p.columns ? p.intestine_radius : 0.5 * p.mesentery_thickness;
+}
 
 void step_dynamics(const IntestineModel& model, IntestineState& state, const Probe* probes, int probe_count, double dt,
                    StepReport& report, const Obstacle* const* obstacles, int obstacle_count) noexcept {

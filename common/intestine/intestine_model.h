@@ -74,6 +74,12 @@ class Obstacle {
   /// Run phase, noexcept, no allocation, deterministic: the surface point nearest `p` among those within
   /// `max_distance` (m); false when there is none.
   virtual bool nearest(const Eigen::Vector3d& p, double max_distance, ObstacleHit& hit) const noexcept = 0;
+  /// The same for the body's node `node` at `p` (the step asks this one): an obstacle that solved its contacts with
+  /// the body's nodes itself (an organ that yields: the liver) answers by node. Default: nearest(p, ...).
+  virtual bool nearest(int node, const Eigen::Vector3d& p, double max_distance, ObstacleHit& hit) const noexcept {
+    (void)node;
+    return nearest(p, max_distance, hit);
+  }
 };
 
 struct IntestineParams {
@@ -262,6 +268,10 @@ class IntestineState {
   std::vector<PenaltyContact> probe_contacts_;
   Eigen::Matrix3Xd x_entry_, v_entry_;  // the state at step entry (guard)
 };
+
+/// The radius (m) of node `node`'s sphere against obstacles: the tube's on the intestine's row, half the membrane's
+/// thickness on the mesentery; 0 for a fixed node (it touches nothing). No allocation.
+double obstacle_radius(const IntestineModel& model, int node) noexcept;
 
 /// Run phase: one step of dt (s) at the haptic rate with probes[0..probe_count) (0..kMaxProbes; inactive ones touch
 /// nothing): mass-spring (every probe's contacts included), stochastic detection, response. Allocates nothing; on a

@@ -22,8 +22,11 @@ CompositeOrgan::CompositeOrgan(std::vector<Part> parts) : parts_(std::move(parts
   }
   // Each part learns its index in the scene's organs list (its own topics carry it: BodyState.organ).
   for (std::size_t k = 0; k < parts_.size(); ++k) parts_[k].organ->set_organ_index(static_cast<int>(k));
-  // Organs that touch: every bowel rests on every rigid organ and every liver of the field (the liver's surface as
-  // its contact solution deforms it: as of this tick for a liver listed before the bowel, else as of the last).
+  // Organs that touch: every bowel rests on every rigid organ and every liver of the field. On a liver (the first
+  // bowel; a linear or corotational liver with the patch contact model) both ways: the bowel's points are rows of the
+  // liver's own solve (LiverObstacle), which the liver's step gathers from the bowel's positions as they are then (this
+  // tick's entry for a liver listed before the bowel, the positions after the bowel's step otherwise: either way the
+  // bowel's next step starts from the positions the liver solved).
   for (Part& body : parts_) {
     auto* bowel = dynamic_cast<IntestineOrgan*>(body.organ.get());
     if (bowel == nullptr) continue;
@@ -31,7 +34,10 @@ CompositeOrgan::CompositeOrgan(std::vector<Part> parts) : parts_(std::move(parts
       if (const auto* rigid = dynamic_cast<const RigidOrgan*>(other.organ.get())) {
         bowel->add_obstacle(&rigid->obstacle(), other.name);
       } else if (auto* liver = dynamic_cast<LiverOrgan*>(other.organ.get())) {
-        bowel->add_obstacle(&liver->obstacle("organ '" + other.name + "'"), other.name);
+        LiverObstacle& on_liver = liver->obstacle("organ '" + other.name + "'");
+        // The first bowel on a liver is solved with it (two-way); a second one rests on its surface (one-way).
+        if (!on_liver.coupled()) on_liver.couple(bowel->model(), bowel->state(), "organ '" + body.name + "'");
+        bowel->add_obstacle(&on_liver, other.name);
       }
     }
   }

@@ -60,7 +60,72 @@ bool LiverObstacle::nearest(const Eigen::Vector3d& p, double max_distance, intes
   return true;
 }
 
-const intestine::Obstacle& LiverOrgan::obstacle(const std::string& where) {
+bool LiverObstacle::nearest(int node, const Eigen::Vector3d& p, double max_distance,
+                            intestine::ObstacleHit& hit) const noexcept {
+  if (liver_.model().generation != generation_) return false;
+  const int j = coupled() && node >= 0 && node < static_cast<int>(point_of_node_.size())
+                    ? point_of_node_[static_cast<std::size_t>(node)]
+                    : -1;
+  const ToolContacts& contacts = liver_.liver_contacts();
+  if (j < 0 || j >= contacts.body_count() || !contacts.body_force(j).solved) return nearest(p, max_distance, hit);
+  // The liver's solve took this node: its push, as the overlap the bowel's penalty turns back into that push.
+  const double push = contacts.body_force(j).push;
+  if (!(push > 0)) return false;  // the solve let go: not touching
+  hit.distance = max_distance - push / body_stiffness_;
+  hit.normal = points_[static_cast<std::size_t>(j)].normal;
+  return true;
+}
+
+void LiverObstacle::couple(const IntestineModel& model, const IntestineState& state, const std::string& where) {
+  if (coupled()) throw_error(where, ": a second body resting on the same liver (one is solved with it)");
+  body_model_ = &model;
+  body_state_ = &state;
+  body_stiffness_ = model.params().obstacle_stiffness;
+  point_of_node_.assign(static_cast<std::size_t>(model.node_count()), -1);
+}
+
+void LiverObstacle::gather(ToolContacts& contacts) noexcept {
+  gathered_ = 0;
+  if (!coupled()) return;
+  std::fill(point_of_node_.begin(), point_of_node_.end(), -1);
+  if (liver_.model().generation != generation_ || !(body_stiffness_ > 0)) {
+    contacts.set_bodies(points_.data(), 0);
+    return;
+  }
+  const Eigen::Matrix3Xd& x = body_state_->x;
+  const int nodes = std::min(static_cast<int>(x.cols()), static_cast<int>(point_of_node_.size()));
+  const double reach = kDentReach + kEngage;
+  Eigen::AlignedBox3d box = rest_.bounds();
+  for (int node = 0; node < nodes; ++node) {
+    const double radius = obstacle_radius(*body_model_, node);
+    if (!(radius > 0)) continue;
+    const Eigen::Vector3d p = x.col(node);
+    if (!(box.exteriorDistance(p) <= radius + reach)) continue;  // far from the liver (or not finite)
+    const rigid::ClosestPoint c = rest_.closest_point(p, radius + reach);
+    if (!c.found) continue;
+    const double gap = c.distance - radius;  // from the rest surface
+    // What the current solution already moved the surface there (the dent the instruments and the body made).
+    double moved = 0;
+    Eigen::Vector3d u;
+    for (int k = 0; k < 3; ++k)
+      if (contacts.solution_displacement(c.corners[k], u)) moved += c.bary[k] * c.normal.dot(u);
+    if (!(gap - moved < kEngage)) continue;
+    if (gathered_ == ToolContacts::kMaxBodyPoints) {
+      ++overflow_;
+      continue;
+    }
+    BodyPoint& b = points_[static_cast<std::size_t>(gathered_)];
+    b.nodes = {c.corners[0], c.corners[1], c.corners[2]};
+    b.bary = c.bary;
+    b.normal = c.normal;
+    b.gap = gap;
+    b.stiffness = body_stiffness_;
+    point_of_node_[static_cast<std::size_t>(node)] = gathered_++;
+  }
+  contacts.set_bodies(points_.data(), gathered_);
+}
+
+LiverObstacle& LiverOrgan::obstacle(const std::string& where) {
   if (!obstacle_) obstacle_ = std::make_unique<LiverObstacle>(*this, where);
   return *obstacle_;
 }
@@ -228,6 +293,8 @@ void LiverOrgan::step(const InstrumentInput* inputs, int count, double dt, Conta
     instance_ = std::move(next);
     contacts_ = &instance_->contacts();
   }
+  // The field's bowel resting on the liver: its points solved with the instruments' (two-way).
+  if (obstacle_ != nullptr) obstacle_->gather(*contacts_);
   // An instrument whose input is lost drops its own contacts and gets zero force; the others are solved as usual.
   contacts_->step(inputs, count, out, dt);
   // Unpaced: the background rotations refreshed here on simulated time, so a replay gives the same forces every time

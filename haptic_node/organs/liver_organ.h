@@ -30,23 +30,53 @@ namespace surgsim {
 
 class LiverOrgan;
 
-/// The liver's surface as an obstacle for the field's bowel (the bowel rests on the liver): the nearest point of the
-/// REST surface (a grid over its triangles, searched 2 cm beyond the query's reach), moved to where the liver's
-/// current contact solution has it (the same barycentric point of the deformed triangle), and the deformed triangle's
-/// normal. Exact for the linear model's small displacements; one-way for now: the bowel does not load the liver.
+/// The liver's surface as an obstacle for the field's bowel (the bowel rests on the liver), both ways once couple()d:
+/// - Two-way (the coupled bowel): before each liver step, gather() finds the bowel's nodes whose spheres reach the
+///   liver's current surface (the nearest point of the REST surface, its outward normal, the gap there less what the
+///   current solution already moved it) and hands them to the liver's solve as body points (contact::BodyPoint): the
+///   liver solves them in ONE system with the instruments' rows, each a unilateral penalty of the bowel's
+///   obstacle_stiffness in series with the liver's own compliance. Then nearest(node, ...) answers the bowel's step
+///   with that solve's push: a hit whose overlap is push / stiffness along the same normal, so the bowel's implicit
+///   step starts from the push the liver took (action and reaction equal) and linearizes it with its own stiffness.
+///   No lag between the two organs: a lagged exchange (the bowel on last tick's dent) diverges, since the liver's
+///   compliance times the penalty is a loop gain of tens. The dent is in the liver's contact solution, so the
+///   visual node draws it from the ContactFrame as it draws an instrument's.
+/// - One-way (any other body, and a coupled node the solve had no room for): the nearest point of the rest surface
+///   moved to where the liver's current contact solution has it, and the deformed triangle's normal.
 /// Answers nothing after a change of the liver's topology (a cut: the rest surface it was built on is gone).
 class LiverObstacle final : public intestine::Obstacle {
  public:
   /// Init (allocates; throws surgsim::core::Error naming `where` when the liver's surface is not a consistently
   /// oriented triangle surface).
   LiverObstacle(const LiverOrgan& liver, const std::string& where);
+  /// Init (allocates): `model` and `state` (which must outlive this) rest on the liver two-way from now on. One body
+  /// only: throws surgsim::core::Error naming `where` for a second.
+  void couple(const intestine::IntestineModel& model, const intestine::IntestineState& state, const std::string& where);
+  bool coupled() const { return body_model_ != nullptr; }
+  /// Loop thread, before the liver's step, no allocation: the coupled body's points for this step, given to
+  /// `contacts` (set_bodies). Points past ToolContacts::kMaxBodyPoints stay one-way (counted: overflow()).
+  void gather(contact::ToolContacts& contacts) noexcept;
   bool nearest(const Eigen::Vector3d& p, double max_distance, intestine::ObstacleHit& hit) const noexcept override;
+  bool nearest(int node, const Eigen::Vector3d& p, double max_distance,
+               intestine::ObstacleHit& hit) const noexcept override;
+  /// Body points of the last gather(); body points left one-way (no room) since construction.
+  int gathered() const { return gathered_; }
+  long overflow() const { return overflow_; }
 
  private:
   static constexpr double kDentReach = 0.02;  // m searched beyond the query's reach: the deepest dent it follows
+  static constexpr double kEngage = 0.0005;   // m: a node within this of the current surface gets a row (released
+                                              // by the solve when it would pull)
   const LiverOrgan& liver_;
   rigid::RigidSurface rest_;
   std::uint64_t generation_ = 0;
+  const intestine::IntestineModel* body_model_ = nullptr;
+  const intestine::IntestineState* body_state_ = nullptr;
+  double body_stiffness_ = 0;       // N/m, the body's obstacle_stiffness
+  std::vector<int> point_of_node_;  // per body node: its body point in the last gather, or -1
+  std::array<contact::BodyPoint, contact::ToolContacts::kMaxBodyPoints> points_{};
+  int gathered_ = 0;
+  long overflow_ = 0;
 };
 
 class LiverOrgan final : public HapticOrgan {
@@ -114,7 +144,7 @@ class LiverOrgan final : public HapticOrgan {
   const contact::ToolContacts& liver_contacts() const { return *contacts_; }
   /// Init: the liver as an obstacle for the field's other bodies (built on the first call; CompositeOrgan gives it to
   /// the bowel). `where` names the organ in errors.
-  const intestine::Obstacle& obstacle(const std::string& where);
+  LiverObstacle& obstacle(const std::string& where);
 
  private:
   std::vector<tool::ToolSpec> tools_;
@@ -142,7 +172,8 @@ class LiverOrgan final : public HapticOrgan {
   static constexpr std::size_t kInstrumentTicks = 512;  // ticks kept: more than a tracker cycle at 1 kHz
   std::vector<InstrumentsAt> instruments_at_;
   TickRecord scratch_;
-  std::unique_ptr<LiverObstacle> obstacle_;  // obstacle(): built on demand, in a field with a bowel
+  std::unique_ptr<LiverObstacle> obstacle_;  // obstacle(): built on demand, in a field with a bowel (gathers its
+                                             // coupled body's points before each step)
   std::uint64_t min_period_ns_ = 0;
   std::uint64_t last_body_ns_ = 0;
   std::uint64_t body_seq_ = 0;

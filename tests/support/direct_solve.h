@@ -37,6 +37,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <utility>
 #include <vector>
 
 namespace surgsim::test {
@@ -215,6 +216,24 @@ class DirectReference {
       force[static_cast<std::size_t>(patches[row.patch].instrument)] -= mu[r] * row.d;
     }
     return force;
+  }
+  /// The displacement (m) of every node (#V x 3; fixed nodes 0) under forces (N) on nodes: K_ff u = f solved with
+  /// this file's own stiffness (another organ's known loads: the bowel resting on the liver).
+  Eigen::MatrixX3d displacements(const std::vector<std::pair<int, Eigen::Vector3d>>& loads) const {
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(k_ff_.rows());
+    for (const auto& [node, force] : loads)
+      for (int k = 0; k < 3; ++k) {
+        const int d = free_index_[static_cast<std::size_t>(3 * node + k)];
+        if (d >= 0) f[d] += force[k];  // a fixed node's share goes to the support
+      }
+    const Eigen::VectorXd u = lu_->solve(f);
+    Eigen::MatrixX3d out = Eigen::MatrixX3d::Zero(x_.rows(), 3);
+    for (Eigen::Index j = 0; j < x_.rows(); ++j)
+      for (int k = 0; k < 3; ++k) {
+        const int d = free_index_[static_cast<std::size_t>(3 * j + k)];
+        if (d >= 0) out(j, k) = u[d];
+      }
+    return out;
   }
   std::vector<Eigen::Vector3d> forces(const std::vector<ReferenceContact>& contacts, int instruments) const {
     std::vector<ReferencePatch> patches;

@@ -1,5 +1,6 @@
 // Shared by the intestine tests: a scripted probe that pushes and lifts the folds (the scripted run of the recall
-// test, also used by intestine_bench), and the body's lowest point (the tests of the bowel resting on other organs).
+// test, also used by intestine_bench), and the body's lowest point, its weight and what its root carries (the tests of
+// the bowel resting on other organs).
 #pragma once
 #include <Eigen/Core>
 #include <algorithm>
@@ -50,6 +51,33 @@ inline double lowest_sphere(const intestine::IntestineModel& model, const Eigen:
     z = std::min(z, x(2, n) - (n < p.columns ? p.intestine_radius : 0.5 * p.mesentery_thickness));
   }
   return z;
+}
+
+/// The force (N) the fixed nodes (the mesentery's root) exert on the free ones through the springs, from positions
+/// and velocities.
+inline Eigen::Vector3d root_reaction(const intestine::IntestineModel& model, const intestine::IntestineState& state) {
+  const intestine::MassSpring& m = model.mass_spring();
+  Eigen::Vector3d f = Eigen::Vector3d::Zero();
+  for (const intestine::Spring& s : m.springs()) {
+    const bool fi = m.fixed(s.i), fj = m.fixed(s.j);
+    if (fi == fj) continue;
+    const int free = fi ? s.j : s.i, fixed = fi ? s.i : s.j;
+    const Eigen::Vector3d d = state.x.col(fixed) - state.x.col(free);
+    const double l = d.norm();
+    const Eigen::Vector3d u = d / l;
+    const double rate = (state.v.col(fixed) - state.v.col(free)).dot(u);
+    f += (s.stiffness * (l - s.rest) + s.damping * rate) * u;
+  }
+  return f;
+}
+
+/// The weight (N) of the free nodes.
+inline Eigen::Vector3d weight(const intestine::IntestineModel& model) {
+  double mass = 0;
+  for (int n = 0; n < model.node_count(); ++n) {
+    if (!model.mass_spring().fixed(n)) mass += model.mass_spring().mass()[static_cast<std::size_t>(n)];
+  }
+  return mass * model.params().gravity;
 }
 
 }  // namespace surgsim::intestine::test

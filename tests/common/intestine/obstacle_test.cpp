@@ -49,30 +49,6 @@ IntestineParams field_bowel() {
 
 // The force (N) the fixed nodes (the mesentery's root) exert on the free ones through the springs, from positions
 // and velocities.
-Eigen::Vector3d root_reaction(const IntestineModel& model, const IntestineState& state) {
-  const MassSpring& m = model.mass_spring();
-  Eigen::Vector3d f = Eigen::Vector3d::Zero();
-  for (const Spring& s : m.springs()) {
-    const bool fi = m.fixed(s.i), fj = m.fixed(s.j);
-    if (fi == fj) continue;
-    const int free = fi ? s.j : s.i, fixed = fi ? s.i : s.j;
-    const Eigen::Vector3d d = state.x.col(fixed) - state.x.col(free);
-    const double l = d.norm();
-    const Eigen::Vector3d u = d / l;
-    const double rate = (state.v.col(fixed) - state.v.col(free)).dot(u);
-    f += (s.stiffness * (l - s.rest) + s.damping * rate) * u;
-  }
-  return f;
-}
-
-Eigen::Vector3d weight(const IntestineModel& model) {
-  double mass = 0;
-  for (int n = 0; n < model.node_count(); ++n) {
-    if (!model.mass_spring().fixed(n)) mass += model.mass_spring().mass()[static_cast<std::size_t>(n)];
-  }
-  return mass * model.params().gravity;
-}
-
 // Runs `seconds` at 1 kHz on the obstacles.
 void settle(const IntestineModel& model, IntestineState& state, const Obstacle* const* obstacles, int count,
             double seconds, StepReport& report) {
@@ -105,7 +81,7 @@ TEST(IntestineObstacle, RestsOnAFloorWithTheFloorAndTheRootCarryingItsWeight) {
   EXPECT_LT(on_floor.max_depth, 1e-3);
   EXPECT_GT(test::lowest_sphere(model, state.x), height - 1e-3);
   // The balance: what the floor and the root carry is the weight, within 1 % of it.
-  const Eigen::Vector3d w = weight(model), root = root_reaction(model, state);
+  const Eigen::Vector3d w = test::weight(model), root = test::root_reaction(model, state);
   const Eigen::Vector3d residual = on_floor.force + root + w;
   EXPECT_LT(residual.norm(), 0.01 * w.norm()) << "floor " << on_floor.force.transpose() << " N, root "
                                               << root.transpose() << " N, weight " << w.transpose() << " N";
