@@ -2,7 +2,6 @@
 #include "haptic_app.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -16,6 +15,7 @@
 
 #include "haptic_node/dds_write_spy.h"
 #include "support/alloc_counter.h"
+#include "support/test_domain.h"
 
 namespace surgsim {
 namespace {
@@ -27,7 +27,7 @@ HapticOptions test_options() {
   o.speed = 0;  // max
   o.quiet = true;
   o.cache_dir = SURGSIM_TEST_CACHE_DIR;
-  o.domain = 1 + static_cast<int>((getpid() * 13) % 200);
+  o.domain = test::reserve_test_domain();
   o.rt_priority = 0;
   o.lock_memory = false;
   std::filesystem::create_directories(o.cache_dir);
@@ -162,7 +162,7 @@ TEST(HapticApp, SceneInfoListsTheOrganOfAnIntestineScene) { expect_one_organ_sce
 TEST(HapticDds, ContactEntryOrganSurvivesThePublisher) {
   setenv("SURGSIM_CONFIG_DIR", SURGSIM_TEST_CONFIG_DIR, 1);
   dds::DdsOptions options;
-  options.domain = 1 + static_cast<int>((getpid() * 19) % 200);
+  options.domain = test::reserve_test_domain();
   options.profiles_file = std::string(SURGSIM_TEST_CONFIG_DIR) + "/dds/profiles.xml";
   options.name = "surgsim_haptic_dds_organ_test";
   HapticDds dds(options, false, 0x77, 1);

@@ -1,7 +1,6 @@
 // Where the haptic node's threads run and what its loop records about late ticks, on a real paced run of the
 // intestine scene (real Fast DDS, no visual node); the liver's contact stages in the tick trace.
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <array>
 #include <cstdlib>
@@ -13,6 +12,7 @@
 
 #include "haptic_app.h"
 #include "os/cpu_affinity.h"
+#include "support/test_domain.h"
 
 using namespace surgsim::os;
 
@@ -25,7 +25,7 @@ HapticOptions paced_intestine(const std::string& name) {
   o.scene = "intestine";
   o.quiet = true;
   o.cache_dir = SURGSIM_TEST_CACHE_DIR;
-  o.domain = 1 + static_cast<int>((getpid() * 17) % 200);
+  o.domain = test::reserve_test_domain();
   o.rt_priority = 0;  // no SCHED_FIFO needed: placement and the trace do not depend on it
   o.lock_memory = false;
   o.rate_hz = 1000;

@@ -4,10 +4,10 @@
 #include "dds_support.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <string>
 
+#include "support/test_domain.h"
 #include "surgsim_types.h"
 
 namespace surgsim {
@@ -24,7 +24,7 @@ TEST(DdsParticipant, TopicFreesEveryTypeItIsGivenAlsoForAnExistingTopic) {
   g_alive = 0;
   {
     dds::DdsOptions o;
-    o.domain = 1 + static_cast<int>((getpid() * 13) % 200);
+    o.domain = test::reserve_test_domain();
     o.profiles_file = std::string(SURGSIM_TEST_CONFIG_DIR) + "/dds/profiles.xml";
     o.name = "surgsim_dds_support_test";
     dds::Participant participant(o);

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "process.h"
+#include "support/test_domain.h"
 
 namespace surgsim::testing {
 
@@ -21,7 +22,7 @@ class NodeTest : public ::testing::Test {
     dir_ = std::filesystem::path(::testing::TempDir()) / ("surgsim_" + name + "_" + std::to_string(getpid()));
     std::filesystem::remove_all(dir_);
     std::filesystem::create_directories(dir_);
-    domain_ = private_domain(domain_salt);
+    domain_ = test::reserve_test_domain(domain_salt);
     env_ = {"SURGSIM_DOMAIN=" + std::to_string(domain_), "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR,
             "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR};
   }

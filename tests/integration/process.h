@@ -108,7 +108,4 @@ inline bool wait_for_text(const std::string& file, const std::string& text, doub
   return wait_until([&] { return read_file(file).find(text) != std::string::npos; }, timeout_s);
 }
 
-/// A DDS domain id private to this test process, so parallel ctest runs never see each other.
-inline int private_domain(int salt = 0) { return 1 + static_cast<int>((getpid() * 7 + salt) % 200); }
-
 }  // namespace surgsim::testing

@@ -9,7 +9,9 @@ if [ "$(/usr/bin/python3 -c "import os; print(len(os.sched_getaffinity(0)))")" -
   echo "run_local_placement_test: needs 2 CPUs (this process may use $cpus)"; exit 77
 fi
 rm -rf "$out"
-export SURGSIM_BUILD_DIR=$build SURGSIM_OUT=$out SURGSIM_DOMAIN=$(( 1 + ($$ * 13 + 29) % 200 ))
+source "$(dirname "$0")/domain.sh"
+surgsim_reserve_domain 29
+export SURGSIM_BUILD_DIR=$build SURGSIM_OUT=$out
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 SURGSIM_HAPTIC_CPU=0 HAPTIC_ARGS="--cpu-latency-us -1 --duration 0.5" \

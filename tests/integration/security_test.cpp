@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "process.h"
+#include "support/test_domain.h"
 
 namespace surgsim {
 namespace {
@@ -30,7 +31,7 @@ class Security : public ::testing::Test {
   static void TearDownTestSuite() { fs::remove_all(dir_); }
   void SetUp() override {
     ASSERT_TRUE(made_) << testing::read_file((dir_ / "make.log").string());
-    env_ = {"SURGSIM_DOMAIN=" + std::to_string(testing::private_domain(23)),
+    env_ = {"SURGSIM_DOMAIN=" + std::to_string(test::reserve_test_domain(23)),
             "SURGSIM_CONFIG_DIR=" SURGSIM_TEST_CONFIG_DIR, "SURGSIM_CACHE_DIR=" SURGSIM_TEST_CACHE_DIR,
             "FASTRTPS_DEFAULT_PROFILES_FILE=" + (dir_ / "sec" / "secure_profiles.xml").string()};
   }

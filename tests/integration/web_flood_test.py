@@ -27,7 +27,7 @@ import subprocess
 import sys
 import time
 
-from web_support import wait_for
+from web_support import private_domain, reserved_fds, wait_for
 
 TOKEN = 'floodtest0123456789'
 SERVER_FILES = 1024          # the server's soft limit of open files (Debian's default)
@@ -137,11 +137,12 @@ def main():
     bin_dir, config_dir, out = sys.argv[1:4]
     shutil.rmtree(out, ignore_errors=True)
     os.makedirs(out)
-    env = dict(os.environ, SURGSIM_CONFIG_DIR=config_dir, SURGSIM_DOMAIN=str(1 + (os.getpid() * 7 + 59) % 200))
+    env = dict(os.environ, SURGSIM_CONFIG_DIR=config_dir, SURGSIM_DOMAIN=str(private_domain(59)))
     log = open(os.path.join(out, 'web.log'), 'w')
     web = subprocess.Popen([f'{bin_dir}/surgsim-web', '--scene', 'liver', '--port', '0', '--token', TOKEN,
                             '--stats', f'{out}/web.json'],
-                           env=env, stdout=subprocess.PIPE, stderr=log, text=True, preexec_fn=server_limits)
+                           env=env, stdout=subprocess.PIPE, stderr=log, text=True, preexec_fn=server_limits,
+                           pass_fds=reserved_fds())
     try:
         port = int(re.search(r':(\d+)/', web.stdout.readline()).group(1))
         assert resource.prlimit(web.pid, resource.RLIMIT_NOFILE)[0] == SERVER_FILES

@@ -18,6 +18,8 @@ import struct
 import subprocess
 import sys
 
+from web_support import private_domain, reserved_fds
+
 TOKEN = 'reqtest0123456789'
 
 
@@ -121,11 +123,11 @@ def main():
     bin_dir, config_dir, out = sys.argv[1:4]
     shutil.rmtree(out, ignore_errors=True)
     os.makedirs(out)
-    env = dict(os.environ, SURGSIM_CONFIG_DIR=config_dir, SURGSIM_DOMAIN=str(1 + (os.getpid() * 7 + 41) % 200))
+    env = dict(os.environ, SURGSIM_CONFIG_DIR=config_dir, SURGSIM_DOMAIN=str(private_domain(41)))
     log = open(os.path.join(out, 'web.log'), 'w')
     web = subprocess.Popen([f'{bin_dir}/surgsim-web', '--scene', 'liver', '--port', '0', '--token', TOKEN,
                             '--max-clients', '3', '--max-message', '1024', '--stats', f'{out}/web.json'],
-                           env=env, stdout=subprocess.PIPE, stderr=log, text=True)
+                           env=env, stdout=subprocess.PIPE, stderr=log, text=True, pass_fds=reserved_fds())
     try:
         port = int(re.search(r':(\d+)/', web.stdout.readline()).group(1))
         # --- HTTP ---

@@ -5,7 +5,9 @@
 set -euo pipefail
 src=$1 build=$2 out=$3
 rm -rf "$out"
-export SURGSIM_BUILD_DIR=$build SURGSIM_OUT=$out WEB_PORT=0 SURGSIM_DOMAIN=$(( 1 + ($$ * 7 + 43) % 200 ))
+source "$(dirname "$0")/domain.sh"
+surgsim_reserve_domain 43
+export SURGSIM_BUILD_DIR=$build SURGSIM_OUT=$out WEB_PORT=0
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 "$src/scripts/run_local.sh" liver --web "$src/config/trajectories/liver_poke.csv" >"$log" 2>&1 || {

@@ -1,6 +1,7 @@
 """What the web view's tests share: the three real processes on a private DDS domain, surgsim-web's URL and
 /stats, a headless Debian chromium through selenium, and waiting for a condition with a timeout (never a speed
 assertion). Usage from a test: `with Run(bin_dir, out_dir, ...) as run: ...`."""
+import fcntl
 import json
 import os
 import re
@@ -26,8 +27,46 @@ def wait_for(what, condition, timeout, poll=0.05):
     raise AssertionError(f'timed out after {timeout} s waiting for {what} (last: {last!r})')
 
 
+DOMAIN_DIR = '/tmp/surgsim-test-domains'
+DOMAIN_COUNT = 200
+_domains = {}  # salt -> (domain, descriptor holding its lock): kept open until this process exits
+
+
 def private_domain(salt=0):
-    return 1 + (os.getpid() * 7 + salt) % 200
+    """A DDS domain of 1..200 reserved for this process across the machine (tests/support/test_domain.h takes the
+    same locks for the C++ tests): an exclusive flock on DOMAIN_DIR/<d>.lock, held until the process exits. The
+    search starts at 1 + (pid * 7 + salt) % 200 and takes the next free domain; the same salt gets the same domain
+    again, another salt another domain. Pass reserved_fds() to the programs started on it (Popen's pass_fds), so that
+    the domain stays taken while they run. AssertionError when all 200 are taken."""
+    if salt in _domains:
+        return _domains[salt][0]
+    try:
+        os.mkdir(DOMAIN_DIR, 0o1777)
+        os.chmod(DOMAIN_DIR, 0o1777)  # mkdir's mode went through the umask
+    except FileExistsError:
+        pass
+    start = (os.getpid() * 7 + salt) % DOMAIN_COUNT
+    for i in range(DOMAIN_COUNT):
+        d = 1 + (start + i) % DOMAIN_COUNT
+        path = f'{DOMAIN_DIR}/{d}.lock'
+        try:  # read-only, created only when missing: another user's lock file can still be opened
+            fd = os.open(path, os.O_RDONLY)
+        except FileNotFoundError:
+            fd = os.open(path, os.O_RDONLY | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            continue
+        _domains[salt] = (d, fd)
+        return d
+    raise AssertionError(f'no free DDS test domain: all {DOMAIN_COUNT} (1..{DOMAIN_COUNT}) are held by other '
+                         f'processes (locks in {DOMAIN_DIR}/<domain>.lock)')
+
+
+def reserved_fds():
+    """The descriptors holding this process's domains (for Popen's pass_fds)."""
+    return tuple(fd for _, fd in _domains.values())
 
 
 class Run:
@@ -55,7 +94,7 @@ class Run:
     def _start(self, name, args):
         log = open(os.path.join(self.out, name + '.log'), 'w')
         self.procs[name] = subprocess.Popen(args, env=self.env, stdout=subprocess.PIPE if name == 'web' else log,
-                                            stderr=log, text=True)
+                                            stderr=log, text=True, pass_fds=reserved_fds())
         return self.procs[name]
 
     def __enter__(self):

@@ -4,7 +4,6 @@
 #include "organs/intestine_organ.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <cstdlib>
@@ -15,6 +14,7 @@
 
 #include "publisher.h"
 #include "support/alloc_counter.h"
+#include "support/test_domain.h"
 
 using namespace surgsim::tool;
 using namespace surgsim::contact;
@@ -211,7 +211,7 @@ TEST(IntestineOrganTest, BodyStateCarriesEveryInstrument) {
   const Scene scene = two_tool_scene(8.0, 8.0);
   IntestineOrgan organ(scene, 100);
   dds::DdsOptions o;
-  o.domain = 1 + static_cast<int>((getpid() * 17) % 200);
+  o.domain = test::reserve_test_domain();
   o.profiles_file = std::string(SURGSIM_TEST_CONFIG_DIR) + "/dds/profiles.xml";
   o.name = "surgsim_intestine_organ_test";
   dds::Participant participant(o);
