@@ -66,6 +66,7 @@ bool LiverObstacle::nearest(int node, const Eigen::Vector3d& p, double max_dista
   const int j = coupled() && node >= 0 && node < static_cast<int>(point_of_node_.size())
                     ? point_of_node_[static_cast<std::size_t>(node)]
                     : -1;
+  if (j == kAway) return false;  // gather() found it clear of the liver's current surface
   const ToolContacts& contacts = liver_.liver_contacts();
   if (j < 0 || j >= contacts.body_count() || !contacts.body_force(j).solved) return nearest(p, max_distance, hit);
   // The liver's solve took this node: its push, as the overlap the bowel's penalty turns back into that push.
@@ -100,16 +101,25 @@ void LiverObstacle::gather(ToolContacts& contacts) noexcept {
     const double radius = obstacle_radius(*body_model_, node);
     if (!(radius > 0)) continue;
     const Eigen::Vector3d p = x.col(node);
-    if (!(box.exteriorDistance(p) <= radius + reach)) continue;  // far from the liver (or not finite)
+    if (!(box.exteriorDistance(p) <= radius + reach)) {  // far from the liver (or not finite: the step refuses it)
+      if (p.allFinite()) point_of_node_[static_cast<std::size_t>(node)] = kAway;
+      continue;
+    }
     const rigid::ClosestPoint c = rest_.closest_point(p, radius + reach);
-    if (!c.found) continue;
+    if (!c.found) {
+      point_of_node_[static_cast<std::size_t>(node)] = kAway;
+      continue;
+    }
     const double gap = c.distance - radius;  // from the rest surface
     // What the current solution already moved the surface there (the dent the instruments and the body made).
     double moved = 0;
     Eigen::Vector3d u;
     for (int k = 0; k < 3; ++k)
       if (contacts.solution_displacement(c.corners[k], u)) moved += c.bary[k] * c.normal.dot(u);
-    if (!(gap - moved < kEngage)) continue;
+    if (!(gap - moved < kEngage)) {
+      point_of_node_[static_cast<std::size_t>(node)] = kAway;
+      continue;
+    }
     if (gathered_ == ToolContacts::kMaxBodyPoints) {
       ++overflow_;
       continue;

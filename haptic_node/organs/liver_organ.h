@@ -73,7 +73,8 @@ class LiverObstacle final : public intestine::Obstacle {
   const intestine::IntestineModel* body_model_ = nullptr;
   const intestine::IntestineState* body_state_ = nullptr;
   double body_stiffness_ = 0;       // N/m, the body's obstacle_stiffness
-  std::vector<int> point_of_node_;  // per body node: its body point in the last gather, or -1
+  static constexpr int kAway = -2;  // point_of_node_: clear of the surface in the last gather (-1: not looked at)
+  std::vector<int> point_of_node_;  // per body node: its body point in the last gather, or kAway / -1
   std::array<contact::BodyPoint, contact::ToolContacts::kMaxBodyPoints> points_{};
   int gathered_ = 0;
   long overflow_ = 0;
