@@ -27,12 +27,17 @@ Eigen::Vector3f organ_rgb(const OrganSpec& organ) {
   if (organ.has_colour) return organ.colour.cast<float>();
   if (organ.model == "liver") return kLiverRgb;
   if (organ.model == "intestine") return kIntestineRgb;
-  const std::string& g = organ.rigid.generate;
-  if (g == "ribs" || g == "tube" || g == "box" || named(organ.name, {"rib", "bone", "spine", "pelvis"})) {
-    return {0.88f, 0.85f, 0.76f};  // bone
+  if (organ_is_bone(organ)) return {0.88f, 0.85f, 0.76f};
+  if (organ.rigid.generate == "plane" || named(organ.name, {"floor", "retroperitoneum", "back"})) {
+    return {0.62f, 0.32f, 0.30f};
   }
-  if (g == "plane" || named(organ.name, {"floor", "retroperitoneum", "back"})) return {0.62f, 0.32f, 0.30f};
   return {0.76f, 0.42f, 0.40f};  // the abdominal wall's parietal peritoneum
+}
+
+bool organ_is_bone(const OrganSpec& organ) {
+  if (organ.model != "rigid") return false;
+  const std::string& g = organ.rigid.generate;
+  return g == "ribs" || g == "tube" || g == "box" || named(organ.name, {"rib", "bone", "spine", "pelvis"});
 }
 
 std::uint64_t visual_scene_hash(const Scene& scene, std::uint64_t mesh_hash) {

@@ -99,6 +99,9 @@ struct OrganViewOptions {
 /// An organ's display colour (sRGB): the scene's `colour`, else a default by its model and name: the liver dark
 /// red-brown, the bowel pink, a rigid wall pinkish red, a floor (retroperitoneum) darker, ribs and bones pale.
 Eigen::Vector3f organ_rgb(const scene::OrganSpec& organ);
+/// Whether a rigid organ is bone (generated ribs, tube or box, or named rib, bone, spine, pelvis): drawn pale,
+/// smoother.
+bool organ_is_bone(const scene::OrganSpec& organ);
 
 /// The scene identity both nodes compare: the scene's hash mixed with its mesh's (0 without a tetrahedral mesh).
 std::uint64_t visual_scene_hash(const scene::Scene& scene, std::uint64_t mesh_hash);

@@ -64,7 +64,7 @@ LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
   const Eigen::MatrixX3f& rest = deformer_->drawn_positions();
   SurfaceDetail detail;
   detail.scale = 45.0f;
-  detail.mottle = 0.12f;
+  detail.mottle = 0.16f;
   detail.seed = static_cast<std::uint32_t>(mesh_hash_);
   tint_ = surface_tint(rest, detail);
   Eigen::VectorXf gallbladder = Eigen::VectorXf::Zero(rest.rows());

@@ -16,8 +16,7 @@ RigidView::RigidView(const scene::Scene& scene) : name_(scene.organs.at(0).name)
   // mottled with vessel-like streaks, bone faintly mottled.
   const scene::OrganSpec& organ = scene.organs.at(0);
   look_ = SurfaceLook{organ_rgb(organ), 0.25f, 70.0f};
-  const std::string& g = scene.rigid.generate;
-  const bool bone = g == "ribs" || g == "tube" || g == "box";
+  const bool bone = organ_is_bone(organ);
   SurfaceDetail detail;
   detail.seed = static_cast<std::uint32_t>(hash_);
   if (bone) {
