@@ -1,5 +1,7 @@
 #include "organ_view.h"
 
+#include <initializer_list>
+
 #include "core/error.h"
 #include "mesher/scene_mesh.h"
 #include "views/composite_view.h"
@@ -11,6 +13,32 @@ using namespace surgsim::mesh;
 using namespace surgsim::scene;
 
 namespace surgsim {
+
+namespace {
+bool named(const std::string& name, std::initializer_list<const char*> words) {
+  for (const char* w : words) {
+    if (name.find(w) != std::string::npos) return true;
+  }
+  return false;
+}
+}  // namespace
+
+Eigen::Vector3f organ_rgb(const OrganSpec& organ) {
+  if (organ.has_colour) return organ.colour.cast<float>();
+  if (organ.model == "liver") return kLiverRgb;
+  if (organ.model == "intestine") return kIntestineRgb;
+  if (organ_is_bone(organ)) return {0.88f, 0.85f, 0.76f};
+  if (organ.rigid.generate == "plane" || named(organ.name, {"floor", "retroperitoneum", "back"})) {
+    return {0.62f, 0.32f, 0.30f};
+  }
+  return {0.76f, 0.42f, 0.40f};  // the abdominal wall's parietal peritoneum
+}
+
+bool organ_is_bone(const OrganSpec& organ) {
+  if (organ.model != "rigid") return false;
+  const std::string& g = organ.rigid.generate;
+  return g == "ribs" || g == "tube" || g == "box" || named(organ.name, {"rib", "bone", "spine", "pelvis"});
+}
 
 std::uint64_t visual_scene_hash(const Scene& scene, std::uint64_t mesh_hash) {
   return scene.hash() ^ (mesh_hash * 0x9E3779B97F4A7C15ull);
@@ -44,7 +72,9 @@ std::unique_ptr<OrganView> make_organ_view(const Scene& scene, const OrganViewOp
       parts[k].view =
           std::make_unique<IntestineOrganView>(scene.organ_scene(k), whole, options.tube_skinning, static_cast<int>(k));
     }
-    return std::make_unique<CompositeView>(std::move(parts));
+    auto composite = std::make_unique<CompositeView>(std::move(parts));
+    composite->order_for(scene.visual.camera.eye);
+    return composite;
   }
   // The intestine: a skinned tube and the mesentery from BodyStates; no tetrahedral mesh (hash 0, as in the haptic
   // node), no tensors, no deformer.

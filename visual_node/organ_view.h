@@ -11,6 +11,7 @@
 // surgsim::core::Error; update, draw, draw_markers, frame_done run every frame and allocate nothing; the rest is for
 // the frame output (write_vtk, with a PNG) and shutdown (stats).
 #pragma once
+#include <Eigen/Core>
 #include <cstdint>
 #include <iosfwd>
 #include <memory>
@@ -58,6 +59,9 @@ class OrganView {
   virtual double update(const msg::ContactFrame* frame, bool fresh) noexcept = 0;
   /// Draws the organ (before the instruments).
   virtual void draw(Renderer& renderer) const = 0;
+  /// Where the organ comes in a picture of several, seen from `eye` (m): smaller first. Opaque organs nearest first
+  /// (a pixel they cover is not shaded again behind them); a cavity seen from inside and translucent parts after them.
+  virtual double draw_depth(const Eigen::Vector3d& /*eye*/) const { return 0; }
   /// The instruments the organ's own state carries (e.g. the intestine's newest BodyState: the probes at the body's
   /// tick), or null: the app draws those of the newest contact frame (instruments.h).
   virtual const InstrumentPoses* instruments() const { return nullptr; }
@@ -91,6 +95,13 @@ struct OrganViewOptions {
   int organ_index = 0;          // the organ drawn: its index in the scene's organs list (wire v3: ContactEntry.organ,
                                 // BodyState.organ); 0 in a one-organ scene
 };
+
+/// An organ's display colour (sRGB): the scene's `colour`, else a default by its model and name: the liver dark
+/// red-brown, the bowel pink, a rigid wall pinkish red, a floor (retroperitoneum) darker, ribs and bones pale.
+Eigen::Vector3f organ_rgb(const scene::OrganSpec& organ);
+/// Whether a rigid organ is bone (generated ribs, tube or box, or named rib, bone, spine, pelvis): drawn pale,
+/// smoother.
+bool organ_is_bone(const scene::OrganSpec& organ);
 
 /// The scene identity both nodes compare: the scene's hash mixed with its mesh's (0 without a tetrahedral mesh).
 std::uint64_t visual_scene_hash(const scene::Scene& scene, std::uint64_t mesh_hash);

@@ -77,6 +77,7 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
 
   // --- init: renderer (no GL context at all when headless) ---
   renderer_ = make_renderer(options_.headless ? "null" : "osmesa", scene_.visual.width, scene_.visual.height);
+  renderer_->set_lighting(lighting_of(scene_.visual.render));
   organ_->attach(*renderer_);
 
   // --- init: frame output (the folder and frames.csv when PNGs are written) ---
@@ -251,7 +252,7 @@ void VisualApp::render_frame(const msg::ContactFrame& frame, bool have_frame, bo
   const InstrumentPoses* instruments = organ_->instruments();
   if (instruments == nullptr && have_frame) instruments = &instruments_;
   const int drawn = instruments != nullptr ? draw_instruments(*renderer_, scene_.tools, *instruments) : 0;
-  organ_->draw_markers(*renderer_);
+  if (scene_.visual.render.markers) organ_->draw_markers(*renderer_);
   renderer_->end_frame();
   // The synthetic load: this frame's work made load_factor_ times longer (a busy wait, as a slower renderer would).
   std::uint64_t work_end = monotonic_ns();

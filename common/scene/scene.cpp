@@ -602,9 +602,104 @@ HapticSpec read_haptic(const Reader& r, const Field& f) {
   return h;
 }
 
+// The camera: eye/target, or a laparoscope through a port (port/target/insertion/angle_deg/roll_deg).
+Camera read_camera(const Reader& r, const Field& f) {
+  const Map c(r, f, {"eye", "port", "target", "up", "fov_deg", "insertion", "angle_deg", "roll_deg"});
+  Camera cam;
+  const auto line_or = [&](const char* k) { return c.has(k) ? c.at(k).line : c.self().line; };
+  if (c.has("eye") && c.has("port")) {
+    r.fail(c.at("port").line, c.key("port"),
+           "given together with 'eye' (line " + std::to_string(c.at("eye").line) + ")",
+           "keep one: 'eye' for a free camera, 'port' for a laparoscope through the wall (its tip is the eye)");
+  }
+  cam.scope = c.has("port");
+  if (!cam.scope) {
+    for (const char* k : {"insertion", "angle_deg", "roll_deg"}) {
+      if (c.has(k)) {
+        r.fail(c.at(k).line, c.key(k), "is read only for a scope camera",
+               "give 'port: [x, y, z]' instead of 'eye', or remove it");
+      }
+    }
+  }
+  if (c.has("eye")) cam.eye = r.vec3(c.at("eye"), "camera position in m");
+  if (c.has("port")) cam.port = r.vec3(c.at("port"), "where the scope enters the abdominal wall, in m");
+  if (c.has("target")) {
+    cam.target =
+        r.vec3(c.at("target"), cam.scope ? "the point the scope's shaft aims at, in m" : "point looked at, in m");
+  } else if (cam.scope) {
+    r.fail(c.self().line, c.key("target"), "missing",
+           "a scope camera needs the point its shaft aims at: target: [x, y, z]");
+  }
+  if (c.has("up")) cam.up = r.direction(c.at("up"), "a non-zero up direction");
+  if (c.has("fov_deg")) {
+    cam.fov_deg = r.number(c.at("fov_deg"), {1, 170, true, true}, "vertical field of view in degrees");
+  }
+  if (cam.scope) {
+    if (c.has("insertion")) {
+      cam.insertion = r.number(c.at("insertion"), positive(), "m from the port to the scope's tip along its shaft");
+    }
+    if (c.has("angle_deg")) {
+      cam.angle_deg = r.number(c.at("angle_deg"), closed(0, 75), "the scope's oblique angle in degrees: 0 or 30 usual");
+    }
+    if (c.has("roll_deg")) {
+      cam.roll_deg = r.number(c.at("roll_deg"), closed(-360, 360), "the scope turned about its shaft, in degrees");
+    }
+    const Eigen::Vector3d shaft = cam.target - cam.port;
+    if (!(shaft.norm() > 1e-9)) {
+      r.fail(line_or("target"), c.key("target"), "equals the port",
+             "the scope must aim at a point inside, away from the port");
+    }
+    if (!(cam.insertion < shaft.norm())) {
+      r.fail(line_or("insertion"), c.key("insertion"),
+             fmt(cam.insertion) + " m puts the tip at or past the target (" + fmt(shaft.norm()) + " m from the port)",
+             "insert it less, or aim at a point farther in");
+    }
+    if (!(shaft.normalized().cross(cam.up).norm() > 1e-6)) {
+      r.fail(line_or("up"), c.key("up"), "is parallel to the scope's shaft",
+             "choose an up vector across target - port");
+    }
+    cam = scope_camera(cam);
+  }
+  const Eigen::Vector3d view = cam.target - cam.eye;
+  if (!(view.norm() > 1e-9)) {
+    r.fail(line_or("target"), c.key("target"), "equals the camera eye", "the eye must be away from the target");
+  }
+  if (!(view.normalized().cross(cam.up).norm() > 1e-6)) {
+    r.fail(line_or("up"), c.key("up"), "is parallel to the viewing direction",
+           "choose an up vector that is not along target - eye");
+  }
+  return cam;
+}
+
+// How the picture is drawn; `defaults` carries the light the camera implies.
+RenderSpec read_render(const Reader& r, const Field& f, const RenderSpec& defaults) {
+  const Map m(r, f, {"markers", "light", "falloff", "wet"});
+  RenderSpec s = defaults;
+  if (m.has("markers")) s.markers = r.boolean(m.at("markers"));
+  if (m.has("light")) {
+    s.light = r.one_of(m.at("light"), {"scope", "studio"}) == "scope" ? RenderSpec::Light::kScope
+                                                                      : RenderSpec::Light::kStudio;
+  }
+  if (m.has("falloff")) {
+    const Field& ff = m.at("falloff");
+    if (s.light != RenderSpec::Light::kScope) {
+      r.fail(ff.line, ff.key, "is read only for the scope light",
+             "set light: scope (or a camera with 'port'), or remove it");
+    }
+    const std::string fix = "[a, b, c] of 1 / (a + b d + c d^2), d in m: each >= 0 and a > 0, e.g. [0.3, 0, 60]";
+    s.falloff = r.vec3(ff, fix);
+    if (!(s.falloff.minCoeff() >= 0.0) || !(s.falloff.x() > 0.0)) {
+      r.fail(ff.line, ff.key, "has a negative term or a = 0 (the light infinite at the tip)", fix);
+    }
+  }
+  if (m.has("wet")) s.wet = r.number(m.at("wet"), closed(0, 2), "wet speculars, 0 (matte) to 2, default 1");
+  return s;
+}
+
 VisualSpec read_visual(const Reader& r, const Field& f) {
-  const Map m(r, f, {"rate_hz", "width", "height", "camera", "png_every", "vtk", "video", "surface", "target_fps",
-                     "stream_fps", "stream_quality"});
+  const Map m(r, f,
+              {"rate_hz", "width", "height", "camera", "render", "png_every", "vtk", "video", "surface", "target_fps",
+               "stream_fps", "stream_quality"});
   VisualSpec v;
   if (m.has("rate_hz")) v.rate_hz = r.number(m.at("rate_hz"), closed(1, 1000), "frame rate in Hz, e.g. 50");
   if (m.has("target_fps")) {
@@ -626,25 +721,9 @@ VisualSpec read_visual(const Reader& r, const Field& f) {
   if (m.has("vtk")) v.vtk = r.boolean(m.at("vtk"));
   if (m.has("video")) v.video = r.boolean(m.at("video"));
   if (m.has("surface")) v.surface = r.file(m.at("surface"), "a finer visual surface mesh");
-  if (m.has("camera")) {
-    const Map c(r, m.at("camera"), {"eye", "target", "up", "fov_deg"});
-    Camera& cam = v.camera;
-    if (c.has("eye")) cam.eye = r.vec3(c.at("eye"), "camera position in m");
-    if (c.has("target")) cam.target = r.vec3(c.at("target"), "point looked at, in m");
-    if (c.has("up")) cam.up = r.direction(c.at("up"), "a non-zero up direction");
-    if (c.has("fov_deg")) {
-      cam.fov_deg = r.number(c.at("fov_deg"), {1, 170, true, true}, "vertical field of view in degrees");
-    }
-    const Eigen::Vector3d view = cam.target - cam.eye;
-    const auto line_or = [&](const char* k) { return c.has(k) ? c.at(k).line : c.self().line; };
-    if (!(view.norm() > 1e-9)) {
-      r.fail(line_or("target"), c.key("target"), "equals the camera eye", "the eye must be away from the target");
-    }
-    if (!(view.normalized().cross(cam.up).norm() > 1e-6)) {
-      r.fail(line_or("up"), c.key("up"), "is parallel to the viewing direction",
-             "choose an up vector that is not along target - eye");
-    }
-  }
+  if (m.has("camera")) v.camera = read_camera(r, m.at("camera"));
+  v.render.light = v.camera.scope ? RenderSpec::Light::kScope : RenderSpec::Light::kStudio;
+  if (m.has("render")) v.render = read_render(r, m.at("render"), v.render);
   return v;
 }
 
@@ -929,6 +1008,20 @@ OrganSpec read_organ(const Reader& r, const Map& m, const std::vector<ToolSpec>&
     }
     o.intestine = read_intestine(r, inf);
   }
+  // The display colour (either spelling).
+  if (m.has("colour") && m.has("color")) {
+    r.fail(m.at("color").line, m.key("color"),
+           "given together with 'colour' (line " + std::to_string(m.at("colour").line) + ")", "keep one of them");
+  }
+  for (const char* k : {"colour", "color"}) {
+    if (!m.has(k)) continue;
+    const Field& cf = m.at(k);
+    const std::string fix = "display RGB, each 0..1, e.g. [0.5, 0.16, 0.12]";
+    o.colour = r.vec3(cf, fix);
+    if (!(o.colour.minCoeff() >= 0.0 && o.colour.maxCoeff() <= 1.0))
+      r.fail(cf.line, cf.key, "has a value outside [0, 1]", fix);
+    o.has_colour = true;
+  }
   o.intestine.params.probe_force_limit = tools[0].force_limit;  // the device clamp is the tool's (each probe its own)
   if (in_list) {
     if (m.has("rigid")) {
@@ -1121,6 +1214,22 @@ std::uint64_t Scene::hash() const {
   return h.digest();
 }
 
+Camera scope_camera(const Camera& camera) {
+  if (!camera.scope) return camera;
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  Camera c = camera;
+  const Eigen::Vector3d shaft = (camera.target - camera.port).normalized();
+  c.eye = camera.port + camera.insertion * shaft;
+  // The side the oblique lens looks to: `up` across the shaft, turned by the roll about it.
+  Eigen::Vector3d side = camera.up - camera.up.dot(shaft) * shaft;
+  side = side.norm() > 1e-12 ? side.normalized() : shaft.unitOrthogonal();
+  side = Eigen::AngleAxisd(camera.roll_deg * kDeg, shaft) * side;
+  const double a = camera.angle_deg * kDeg;
+  const Eigen::Vector3d view = std::cos(a) * shaft + std::sin(a) * side;
+  c.target = c.eye + (camera.target - c.eye).norm() * view;
+  return c;
+}
+
 Scene Scene::organ_scene(std::size_t i) const {
   if (i >= organs.size()) {
     throw_error(file, ": organ ", i, " asked for, the scene has ", organs.size());
@@ -1173,7 +1282,7 @@ Scene load_scene(const std::string& path) {
 
   const Map top(r, {root, "", 1},
                 {"name", "model", "mesh", "material", "fixed", "nonlinear", "liver", "tool", "tools", "haptic",
-                 "visual", "intestine", "trajectory", "organs"});
+                 "visual", "intestine", "trajectory", "organs", "colour", "color"});
   Scene s;
   s.file = abs.string();
   s.dir = abs.parent_path().string();
@@ -1219,7 +1328,8 @@ Scene load_scene(const std::string& path) {
 
   if (top.has("organs")) {
     // The list form: every organ's keys live in its entry, none at the top level.
-    for (const char* key : {"model", "mesh", "material", "fixed", "nonlinear", "liver", "intestine"}) {
+    for (const char* key :
+         {"model", "mesh", "material", "fixed", "nonlinear", "liver", "intestine", "colour", "color"}) {
       if (top.has(key)) {
         r.fail(top.at(key).line, key, "is given at the top level of a scene with 'organs:' (line " +
                                           std::to_string(top.at("organs").line) + ")",
@@ -1239,8 +1349,9 @@ Scene load_scene(const std::string& path) {
     for (std::size_t i = 0; i < of.node.size(); ++i) {
       const YAML::Node e = of.node[i];
       const Field ef{e, of.key + "[" + std::to_string(i) + "]", line_of(e, of.line)};
-      const Map em(r, ef, {"name", "model", "mesh", "material", "fixed", "nonlinear", "liver", "intestine", "rigid",
-                           "placement"});
+      const Map em(r, ef,
+                   {"name", "model", "mesh", "material", "fixed", "nonlinear", "liver", "intestine", "rigid",
+                    "placement", "colour", "color"});
       if (!em.has("name")) {
         r.fail(ef.line, ef.key + ".name", "missing", "every organ of 'organs:' needs a name, e.g. name: liver");
       }

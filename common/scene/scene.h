@@ -26,11 +26,37 @@ struct HapticSpec {
   double passivity_max_damping = 30.0; // N s/m, cap of the controller's variable damping, (0, 1000]
 };
 
+/// The picture's camera. YAML `camera: {eye, target, up, fov_deg}`, or a laparoscope through a port:
+/// `camera: {port, target, insertion, angle_deg, roll_deg, up, fov_deg}`, whose eye and target load_scene sets
+/// (scope_camera(): target is then the point looked at, on the oblique view direction; the scope keys stay as given).
 struct Camera {
   Eigen::Vector3d eye = Eigen::Vector3d(0.25, -0.3, 0.25);  // m
-  Eigen::Vector3d target = Eigen::Vector3d::Zero();         // m
+  Eigen::Vector3d target = Eigen::Vector3d::Zero();         // m, looked at (the scope form: the shaft aims at it)
   Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
   double fov_deg = 35.0;                                    // vertical field of view, (1, 170)
+  // The scope form (scope true): the shaft goes from `port` towards the target; its tip, `insertion` m in, is the eye.
+  bool scope = false;
+  Eigen::Vector3d port = Eigen::Vector3d::Zero();  // m, where the scope enters the abdominal wall
+  double insertion = 0.03;  // m from the port to the tip along the shaft, (0, port-target distance)
+  double angle_deg = 0.0;   // oblique view: the view direction turned this far from the shaft, [0, 75] (0 or 30 usual)
+  double roll_deg = 0.0;    // the scope turned about its shaft: the oblique side, 0 = towards `up`
+};
+
+/// The eye and target of a scope camera from its port, target (the point the shaft aims at), insertion, angle and
+/// roll (camera.scope true; otherwise `camera` as it is). Applied once, by load_scene. The eye is the tip; the view
+/// direction is the shaft's turned by angle_deg towards `up` (rolled by roll_deg about the shaft); the target is moved
+/// onto it at the same distance from the eye.
+Camera scope_camera(const Camera& camera);
+
+/// How the picture is drawn, YAML `visual.render: {markers, light, falloff, wet}` (not in the scene hash).
+struct RenderSpec {
+  enum class Light { kStudio, kScope };
+  bool markers = false;  // the contact nodes drawn as markers
+  /// kScope: one light at the scope's tip (the eye) with distance falloff; kStudio: a key and a fill light fixed in
+  /// view space. Default: kScope for a scope camera (`camera.port`), kStudio for an eye/target camera.
+  Light light = Light::kStudio;
+  Eigen::Vector3d falloff = Eigen::Vector3d(0.3, 0.0, 60.0);  // scope light: 1 / (a + b d + c d^2), d in m
+  double wet = 1.0;  // wet speculars (a sharp highlight over a broad one), 0 = matte, [0, 2]
 };
 
 struct VisualSpec {
@@ -38,6 +64,7 @@ struct VisualSpec {
   int width = 640;         // 16..8192
   int height = 480;        // 16..8192
   Camera camera;
+  RenderSpec render;
   int png_every = 5;       // write every n-th rendered frame as PNG; 0 = no PNG
   bool vtk = false;        // write the deformed mesh as VTK with each PNG
   bool video = false;      // assemble an MP4 with ffmpeg at exit when available
@@ -91,6 +118,10 @@ struct OrganSpec {
   LiverOptions liver;                  // model liver
   intestine::IntestineSpec intestine;  // model intestine (its axis in the organ's frame)
   RigidSpec rigid;                     // model rigid
+  /// Display colour (sRGB, [0, 1] each), YAML `colour` or `color`; not given: the visual node's default for its model
+  /// and name (visual only: not in the scene hash).
+  bool has_colour = false;
+  Eigen::Vector3d colour = Eigen::Vector3d::Constant(0.8);
 };
 
 struct Scene {

@@ -31,61 +31,62 @@ namespace surgsim {
 namespace {
 
 // The GL entry points this backend uses, loaded with OSMesaGetProcAddress (no GLEW).
-#define SURGSIM_GL_FUNCTIONS(X)                                                                                  \
-  X(PFNGLGETSTRINGPROC, GetString)                                                                               \
-  X(PFNGLGETERRORPROC, GetError)                                                                                 \
-  X(PFNGLVIEWPORTPROC, Viewport)                                                                                 \
-  X(PFNGLCLEARCOLORPROC, ClearColor)                                                                             \
-  X(PFNGLCLEARPROC, Clear)                                                                                       \
-  X(PFNGLENABLEPROC, Enable)                                                                                     \
-  X(PFNGLDISABLEPROC, Disable)                                                                                   \
-  X(PFNGLDEPTHFUNCPROC, DepthFunc)                                                                               \
-  X(PFNGLFINISHPROC, Finish)                                                                                     \
-  X(PFNGLREADBUFFERPROC, ReadBuffer)                                                                             \
-  X(PFNGLREADPIXELSPROC, ReadPixels)                                                                             \
-  X(PFNGLPIXELSTOREIPROC, PixelStorei)                                                                           \
-  X(PFNGLCREATESHADERPROC, CreateShader)                                                                         \
-  X(PFNGLSHADERSOURCEPROC, ShaderSource)                                                                         \
-  X(PFNGLCOMPILESHADERPROC, CompileShader)                                                                       \
-  X(PFNGLGETSHADERIVPROC, GetShaderiv)                                                                           \
-  X(PFNGLGETSHADERINFOLOGPROC, GetShaderInfoLog)                                                                 \
-  X(PFNGLDELETESHADERPROC, DeleteShader)                                                                         \
-  X(PFNGLCREATEPROGRAMPROC, CreateProgram)                                                                       \
-  X(PFNGLATTACHSHADERPROC, AttachShader)                                                                         \
-  X(PFNGLBINDATTRIBLOCATIONPROC, BindAttribLocation)                                                             \
-  X(PFNGLLINKPROGRAMPROC, LinkProgram)                                                                           \
-  X(PFNGLGETPROGRAMIVPROC, GetProgramiv)                                                                         \
-  X(PFNGLGETPROGRAMINFOLOGPROC, GetProgramInfoLog)                                                               \
-  X(PFNGLUSEPROGRAMPROC, UseProgram)                                                                             \
-  X(PFNGLGETUNIFORMLOCATIONPROC, GetUniformLocation)                                                             \
-  X(PFNGLUNIFORMMATRIX4FVPROC, UniformMatrix4fv)                                                                 \
-  X(PFNGLUNIFORMMATRIX3FVPROC, UniformMatrix3fv)                                                                 \
-  X(PFNGLUNIFORM3FVPROC, Uniform3fv)                                                                             \
-  X(PFNGLUNIFORM1FPROC, Uniform1f)                                                                               \
-  X(PFNGLGENVERTEXARRAYSPROC, GenVertexArrays)                                                                   \
-  X(PFNGLBINDVERTEXARRAYPROC, BindVertexArray)                                                                   \
-  X(PFNGLGENBUFFERSPROC, GenBuffers)                                                                             \
-  X(PFNGLBINDBUFFERPROC, BindBuffer)                                                                             \
-  X(PFNGLBUFFERDATAPROC, BufferData)                                                                             \
-  X(PFNGLBUFFERSUBDATAPROC, BufferSubData)                                                                       \
-  X(PFNGLENABLEVERTEXATTRIBARRAYPROC, EnableVertexAttribArray)                                                   \
-  X(PFNGLVERTEXATTRIBPOINTERPROC, VertexAttribPointer)                                                           \
-  X(PFNGLDRAWELEMENTSPROC, DrawElements)                                                                         \
-  X(PFNGLDELETEBUFFERSPROC, DeleteBuffers)                                                                       \
-  X(PFNGLGENTEXTURESPROC, GenTextures)                                                                           \
-  X(PFNGLBINDTEXTUREPROC, BindTexture)                                                                           \
-  X(PFNGLACTIVETEXTUREPROC, ActiveTexture)                                                                       \
-  X(PFNGLTEXBUFFERPROC, TexBuffer)                                                                               \
-  X(PFNGLUNIFORM1IPROC, Uniform1i)                                                                               \
-  X(PFNGLDRAWELEMENTSINSTANCEDPROC, DrawElementsInstanced)                                                       \
-  X(PFNGLDRAWARRAYSINSTANCEDPROC, DrawArraysInstanced)                                                           \
-  X(PFNGLTRANSFORMFEEDBACKVARYINGSPROC, TransformFeedbackVaryings)                                               \
-  X(PFNGLBINDBUFFERBASEPROC, BindBufferBase)                                                                     \
-  X(PFNGLBEGINTRANSFORMFEEDBACKPROC, BeginTransformFeedback)                                                     \
-  X(PFNGLENDTRANSFORMFEEDBACKPROC, EndTransformFeedback)                                                         \
-  X(PFNGLGETBUFFERSUBDATAPROC, GetBufferSubData)                                                                 \
-  X(PFNGLBLENDFUNCPROC, BlendFunc)                                                                               \
-  X(PFNGLDEPTHMASKPROC, DepthMask)
+#define SURGSIM_GL_FUNCTIONS(X)                                    \
+  X(PFNGLGETSTRINGPROC, GetString)                                 \
+  X(PFNGLGETERRORPROC, GetError)                                   \
+  X(PFNGLVIEWPORTPROC, Viewport)                                   \
+  X(PFNGLCLEARCOLORPROC, ClearColor)                               \
+  X(PFNGLCLEARPROC, Clear)                                         \
+  X(PFNGLENABLEPROC, Enable)                                       \
+  X(PFNGLDISABLEPROC, Disable)                                     \
+  X(PFNGLDEPTHFUNCPROC, DepthFunc)                                 \
+  X(PFNGLFINISHPROC, Finish)                                       \
+  X(PFNGLREADBUFFERPROC, ReadBuffer)                               \
+  X(PFNGLREADPIXELSPROC, ReadPixels)                               \
+  X(PFNGLPIXELSTOREIPROC, PixelStorei)                             \
+  X(PFNGLCREATESHADERPROC, CreateShader)                           \
+  X(PFNGLSHADERSOURCEPROC, ShaderSource)                           \
+  X(PFNGLCOMPILESHADERPROC, CompileShader)                         \
+  X(PFNGLGETSHADERIVPROC, GetShaderiv)                             \
+  X(PFNGLGETSHADERINFOLOGPROC, GetShaderInfoLog)                   \
+  X(PFNGLDELETESHADERPROC, DeleteShader)                           \
+  X(PFNGLCREATEPROGRAMPROC, CreateProgram)                         \
+  X(PFNGLATTACHSHADERPROC, AttachShader)                           \
+  X(PFNGLBINDATTRIBLOCATIONPROC, BindAttribLocation)               \
+  X(PFNGLLINKPROGRAMPROC, LinkProgram)                             \
+  X(PFNGLGETPROGRAMIVPROC, GetProgramiv)                           \
+  X(PFNGLGETPROGRAMINFOLOGPROC, GetProgramInfoLog)                 \
+  X(PFNGLUSEPROGRAMPROC, UseProgram)                               \
+  X(PFNGLGETUNIFORMLOCATIONPROC, GetUniformLocation)               \
+  X(PFNGLUNIFORMMATRIX4FVPROC, UniformMatrix4fv)                   \
+  X(PFNGLUNIFORMMATRIX3FVPROC, UniformMatrix3fv)                   \
+  X(PFNGLUNIFORM3FVPROC, Uniform3fv)                               \
+  X(PFNGLUNIFORM1FPROC, Uniform1f)                                 \
+  X(PFNGLGENVERTEXARRAYSPROC, GenVertexArrays)                     \
+  X(PFNGLBINDVERTEXARRAYPROC, BindVertexArray)                     \
+  X(PFNGLGENBUFFERSPROC, GenBuffers)                               \
+  X(PFNGLBINDBUFFERPROC, BindBuffer)                               \
+  X(PFNGLBUFFERDATAPROC, BufferData)                               \
+  X(PFNGLBUFFERSUBDATAPROC, BufferSubData)                         \
+  X(PFNGLENABLEVERTEXATTRIBARRAYPROC, EnableVertexAttribArray)     \
+  X(PFNGLVERTEXATTRIBPOINTERPROC, VertexAttribPointer)             \
+  X(PFNGLDRAWELEMENTSPROC, DrawElements)                           \
+  X(PFNGLDELETEBUFFERSPROC, DeleteBuffers)                         \
+  X(PFNGLGENTEXTURESPROC, GenTextures)                             \
+  X(PFNGLBINDTEXTUREPROC, BindTexture)                             \
+  X(PFNGLACTIVETEXTUREPROC, ActiveTexture)                         \
+  X(PFNGLTEXBUFFERPROC, TexBuffer)                                 \
+  X(PFNGLUNIFORM1IPROC, Uniform1i)                                 \
+  X(PFNGLDRAWELEMENTSINSTANCEDPROC, DrawElementsInstanced)         \
+  X(PFNGLDRAWARRAYSINSTANCEDPROC, DrawArraysInstanced)             \
+  X(PFNGLTRANSFORMFEEDBACKVARYINGSPROC, TransformFeedbackVaryings) \
+  X(PFNGLBINDBUFFERBASEPROC, BindBufferBase)                       \
+  X(PFNGLBEGINTRANSFORMFEEDBACKPROC, BeginTransformFeedback)       \
+  X(PFNGLENDTRANSFORMFEEDBACKPROC, EndTransformFeedback)           \
+  X(PFNGLGETBUFFERSUBDATAPROC, GetBufferSubData)                   \
+  X(PFNGLBLENDFUNCPROC, BlendFunc)                                 \
+  X(PFNGLDEPTHMASKPROC, DepthMask)                                 \
+  X(PFNGLUNIFORM4FVPROC, Uniform4fv)
 
 struct GlApi {
 #define SURGSIM_GL_DECLARE(type, name) type name = nullptr;
@@ -102,20 +103,24 @@ struct GlApi {
   }
 };
 
-// Blinn-Phong with a key and a fill light fixed in view space (they move with the camera, like an endoscope's
-// light). Colours are display (sRGB) values: shading is done in linear light and encoded back, with gamma 2 for
-// sRGB (square on the CPU, sqrt per fragment: pow is the costly part of a fragment on llvmpipe).
+// Blinn-Phong with a key and a fill light fixed in view space (the studio rig), or one light at the eye with distance
+// falloff (the scope: a laparoscope's light at its tip); see Lighting. Colours are display (sRGB) values: shading is
+// done in linear light and encoded back, with gamma 2 for sRGB (square on the CPU, sqrt per fragment: pow is the costly
+// part of a fragment on llvmpipe).
 constexpr const char* kVertexShader = R"(#version 330 core
 layout(location = 0) in vec3 a_position;  // model space
 layout(location = 1) in vec3 a_normal;    // model space
+layout(location = 2) in vec3 a_tint;      // the vertex's colour as a factor of the surface's (display)
 uniform mat4 u_mvp;
 uniform mat4 u_model_view;
 uniform mat3 u_normal_matrix;  // inverse transpose of the model-view's 3x3 block
 out vec3 v_position;           // view space
 out vec3 v_normal;             // view space
+out vec3 v_tint;               // linear factor
 void main() {
   v_position = (u_model_view * vec4(a_position, 1.0)).xyz;
   v_normal = u_normal_matrix * a_normal;
+  v_tint = a_tint * a_tint;
   gl_Position = u_mvp * vec4(a_position, 1.0);
 }
 )";
@@ -123,30 +128,39 @@ void main() {
 // Fragment shaders are the version line, the lights (kLightsGlsl) and their own main.
 constexpr const char* kFragmentVersion = "#version 330 core\n";
 
-// Directions towards the lights, view space: key raking from the upper left, fill from the right. The key is kept
-// well away from the usual surface normals (a camera looking down on an organ at about 45 degrees) so that a dent
-// changes the shading at first order; a light along the normal hides shallow dents.
-// The fill is diffuse only: one specular highlight, one pow per fragment.
+// The lights (set from Lighting every draw). Studio: the key rakes from the upper left, the fill from the right; the
+// key is kept well away from the usual surface normals (a camera looking down on an organ at about 45 degrees) so that
+// a dent changes the shading at first order; a light along the normal hides shallow dents. Scope: the key is a point
+// at the eye with falloff 1 / (a + b d + c d^2) and no fill; the speculars are wet. The fill is diffuse only; the
+// highlight is one pow per fragment: a broad lobe (exponent / 8) and its 8th power, the sharp one (three squarings).
 constexpr const char* kLightsGlsl = R"(
-const vec3 kKeyDir = normalize(vec3(-0.75, 0.45, 0.5));
+uniform vec4 u_key;      // view space: towards the key light (w = 0), or its position (w = 1)
+uniform vec3 u_falloff;  // the key's 1 / (a + b d + c d^2), d its distance (1, 0, 0 for a direction)
+uniform vec4 u_light;    // key, fill, ambient, the broad highlight's share
 const vec3 kFillDir = normalize(vec3(0.75, -0.25, 0.65));
-const float kKey = 0.9;
-const float kFill = 0.3;
-const float kAmbient = 0.08;
 // Linear colour at a view-space position of a surface with unit normal n (facing the viewer's side), diffuse
-// `albedo`, highlight `specular` with exponent `shininess`.
-vec3 lit(vec3 n, vec3 position, vec3 albedo, vec3 specular, float shininess) {
+// `albedo`, highlight `specular` with exponent `shininess`; `through`: the key light reaching its back.
+vec3 lit(vec3 n, vec3 position, vec3 albedo, vec3 specular, float shininess, out float through) {
   vec3 v = normalize(-position);
-  float key = max(dot(n, kKeyDir), 0.0);
+  vec3 to_key = u_key.xyz - u_key.w * position;
+  float d = length(to_key);
+  vec3 l = to_key / d;
+  float key = u_light.x / (u_falloff.x + d * (u_falloff.y + d * u_falloff.z));
+  float diffuse = max(dot(n, l), 0.0);
   float fill = max(dot(n, kFillDir), 0.0);
-  float highlight = key > 0.0 ? pow(max(dot(n, normalize(kKeyDir + v)), 0.0), shininess) : 0.0;
-  return (kAmbient + kKey * key + kFill * fill) * albedo + kKey * highlight * specular;
+  float broad = diffuse > 0.0 ? pow(max(dot(n, normalize(l + v)), 0.0), 0.125 * shininess) : 0.0;
+  float sharp = broad * broad;
+  sharp *= sharp;
+  sharp *= sharp;
+  through = key * max(-dot(n, l), 0.0);
+  return (u_light.z + key * diffuse + u_light.y * fill) * albedo + key * (sharp + u_light.w * broad) * specular;
 }
 )";
 
 constexpr const char* kFragmentShader = R"(
 in vec3 v_position;
 in vec3 v_normal;
+in vec3 v_tint;
 uniform vec3 u_albedo;     // linear: the display colour squared
 uniform vec3 u_specular;   // linear
 uniform float u_shininess;
@@ -154,9 +168,17 @@ out vec4 frag_color;
 void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) n = -n;  // both sides lit (open or cut surfaces)
-  vec3 c = lit(n, v_position, u_albedo, u_specular, u_shininess);
+  float through;
+  vec3 c = lit(n, v_position, u_albedo * v_tint, u_specular, u_shininess, through);
   frag_color = vec4(sqrt(clamp(c, 0.0, 1.0)), 1.0);
 }
+)";
+
+// Object-id pictures (Renderer::set_id_colour): the colour as given, nothing else.
+constexpr const char* kIdFragmentShader = R"(
+uniform vec3 u_id;
+out vec4 frag_color;
+void main() { frag_color = vec4(u_id, 1.0); }
 )";
 
 // Two-matrix skinning of the tube primitive (tube_geometry.h, docs/DESIGN.md, section 'Intestine rendering'): instance
@@ -175,6 +197,7 @@ out vec3 v_position;      // view space
 out vec3 v_normal;        // view space
 out vec3 v_world;         // m
 out vec3 v_world_normal;  // unit
+out vec3 v_tint;          // linear factor: the serosa's mottling, from the interval and the angle around the tube
 // One end's matrix (rows at texel `base`) applied to the vertex: the point and the direction x N + y B + z T.
 void skin_end(int base, out vec3 point, out vec3 direction, out vec3 tangent) {
   vec4 r0 = texelFetch(u_skin, base), r1 = texelFetch(u_skin, base + 1), r2 = texelFetch(u_skin, base + 2);
@@ -197,6 +220,9 @@ void main() {
   v_world_normal = dot(n, n) > 1e-24 ? normalize(n) : ta;
   v_position = (u_model_view * vec4(v_world, 1.0)).xyz;
   v_normal = u_normal_matrix * v_world_normal;
+  float u = float(u_first_interval + gl_InstanceID) + t;
+  float mottle = sin(2.3 * u + 2.0 * a_prim.x) * sin(1.7 * u - 3.0 * a_prim.y) + 0.5 * sin(5.1 * u + 4.0 * a_prim.y);
+  v_tint = vec3(1.0 + 0.10 * mottle, 1.0 + 0.14 * mottle, 1.0 + 0.12 * mottle);
   gl_Position = u_mvp * vec4(v_world, 1.0);
 }
 )";
@@ -261,8 +287,9 @@ void main() {
   vessel = max(vessel, 0.75 * line(d_arcade, 0.011, fwidth(d_arcade)));
   vessel = max(vessel, 0.35 * line(d_recta, 0.03, fwidth(d_recta)) * step(s, arcade) * smoothstep(0.0, 0.12, s));
   vec3 albedo = mix(u_albedo, u_vessel, 0.8 * u_vessels * vessel);
-  float through = max(-dot(n, kKeyDir), 0.0);
-  vec3 c = lit(n, v_position, albedo, u_specular, u_shininess) + kKey * kThrough * through * albedo * kThroughTint;
+  float through;
+  vec3 c = lit(n, v_position, albedo, u_specular, u_shininess, through);
+  c += kThrough * through * albedo * kThroughTint;
   frag_color = vec4(sqrt(clamp(c, 0.0, 1.0)), u_alpha);
 }
 )";
@@ -298,6 +325,15 @@ void main() { frag_color = vec4(v_colour, 1.0); }
 )";
 
 constexpr float kPi = 3.14159265358979323846f;
+// The lights (Lighting). Studio: towards the key light, view space (w = 0: a direction). Scope: its ambient (the
+// cavity's light scattered back), the broad highlight's share and the scale of the surfaces' specular at wet 1.
+const Eigen::Vector4f kStudioKey = [] {
+  const Eigen::Vector3f d = Eigen::Vector3f(-0.75f, 0.45f, 0.5f).normalized();
+  return Eigen::Vector4f(d.x(), d.y(), d.z(), 0.0f);
+}();
+constexpr float kScopeAmbient = 0.05f;
+constexpr float kBroadShare = 0.2f;
+constexpr float kWetSpecular = 1.6f;
 constexpr int kCylinderSegments = 24;
 constexpr int kSphereSubdivisions = 2;  // 320 triangles
 constexpr float kJawRadiusRatio = 0.55f;  // jaw radius / shaft radius
@@ -308,7 +344,10 @@ struct Material {
   float shininess;
 };
 
-/// A vertex array with interleaved position + normal (6 floats) and 32-bit indices. Capacities only grow.
+/// Floats per vertex of a GpuMesh: position, normal, tint.
+constexpr int kVertexFloats = 9;
+
+/// A vertex array with interleaved position + normal + tint (kVertexFloats) and 32-bit indices. Capacities only grow.
 struct GpuMesh {
   GLuint vao = 0, vbo = 0, ebo = 0;
   GLsizei vertex_capacity = 0;  // vertices
@@ -329,6 +368,8 @@ struct Program {
   GLint skin = -1, first_interval = -1;  // skinning programs only
   GLint vessel = -1, alpha = -1, vessels = -1;  // membrane only
   GLint centre = -1, edge = -1, aspect = -1;    // backdrop only
+  GLint key = -1, falloff = -1, light = -1;     // the lights (every program with the lit() shaders)
+  GLint id_colour = -1;                         // id programs only
 };
 
 /// The membrane's buffers: interleaved position, normal, coordinates (8 floats) and the triangles last sent.
@@ -349,7 +390,7 @@ struct PrimitiveMesh {
 };
 
 struct CpuMesh {
-  std::vector<float> vertices;  // x y z nx ny nz per vertex
+  std::vector<float> vertices;  // x y z nx ny nz 1 1 1 per vertex (no tint)
   std::vector<std::uint32_t> indices;
 };
 
@@ -357,8 +398,8 @@ struct CpuMesh {
 CpuMesh make_unit_cylinder() {
   CpuMesh m;
   auto vertex = [&m](float x, float y, float z, float nx, float ny, float nz) {
-    m.vertices.insert(m.vertices.end(), {x, y, z, nx, ny, nz});
-    return static_cast<std::uint32_t>(m.vertices.size() / 6 - 1);
+    m.vertices.insert(m.vertices.end(), {x, y, z, nx, ny, nz, 1.0f, 1.0f, 1.0f});
+    return static_cast<std::uint32_t>(m.vertices.size() / kVertexFloats - 1);
   };
   // Side: two rings with radial normals.
   for (int i = 0; i < kCylinderSegments; ++i) {
@@ -417,7 +458,9 @@ CpuMesh make_unit_sphere(int subdivisions) {
     f.swap(next);
   }
   CpuMesh m;
-  for (const auto& v : p) m.vertices.insert(m.vertices.end(), {v.x(), v.y(), v.z(), v.x(), v.y(), v.z()});
+  for (const auto& v : p) {
+    m.vertices.insert(m.vertices.end(), {v.x(), v.y(), v.z(), v.x(), v.y(), v.z(), 1.0f, 1.0f, 1.0f});
+  }
   m.indices = std::move(f);
   return m;
 }
@@ -433,6 +476,8 @@ class OsMesaRenderer final : public Renderer {
     program_ = build_program(kVertexShader, kFragmentShader, false);
     membrane_program_ = build_program(kMembraneVertexShader, kMembraneFragmentShader, false);
     backdrop_program_ = build_program(kBackdropVertexShader, kBackdropFragmentShader, false);
+    id_program_ = build_program(kVertexShader, kIdFragmentShader, false);
+    membrane_id_program_ = build_program(kMembraneVertexShader, kIdFragmentShader, false);
     gl_.GenVertexArrays(1, &backdrop_vao_);  // the core profile draws only with a vertex array bound
     init_skinning();
     upload_static(make_unit_cylinder(), cylinder_);
@@ -469,13 +514,14 @@ class OsMesaRenderer final : public Renderer {
   using Renderer::draw_surface;
 
   void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
-                    const SurfaceLook& look) override {
+                    const SurfaceLook& look, const Eigen::MatrixX3f* tint) override {
     const Eigen::Vector3f& rgb = look.rgb;
     // Indices to row-major 32-bit, checking the range on the way.
     const Eigen::Index nv = positions.rows();
     const Eigen::Index nt = tris.rows();
     index_staging_.resize(static_cast<std::size_t>(3 * nt));
-    bool ok = positions.allFinite() && rgb.allFinite();
+    bool ok = positions.allFinite() && rgb.allFinite() &&
+              (tint == nullptr || (tint->rows() == positions.rows() && tint->allFinite()));
     for (Eigen::Index f = 0; f < nt && ok; ++f) {
       for (int k = 0; k < 3; ++k) {
         const int i = tris(f, k);
@@ -490,12 +536,17 @@ class OsMesaRenderer final : public Renderer {
     ++counts_.surfaces;
     if (nt == 0) return;
 
-    // Positions and this frame's smooth normals, interleaved (x y z nx ny nz), written in place.
-    vertex_staging_.resize(static_cast<std::size_t>(6 * nv));
+    // Positions, this frame's smooth normals and the tint, interleaved (x y z nx ny nz r g b), written in place.
+    vertex_staging_.resize(static_cast<std::size_t>(kVertexFloats * nv));
     using Interleaved = Eigen::Map<Eigen::MatrixX3f, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
-    const Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic> every_sixth(1, 6);  // (outer, inner)
-    Interleaved(vertex_staging_.data(), nv, 3, every_sixth) = positions;
-    vertex_normals(positions, tris, Interleaved(vertex_staging_.data() + 3, nv, 3, every_sixth));
+    const Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic> every_vertex(1, kVertexFloats);  // (outer, inner)
+    Interleaved(vertex_staging_.data(), nv, 3, every_vertex) = positions;
+    vertex_normals(positions, tris, Interleaved(vertex_staging_.data() + 3, nv, 3, every_vertex));
+    if (tint != nullptr) {
+      Interleaved(vertex_staging_.data() + 6, nv, 3, every_vertex) = *tint;
+    } else {
+      Interleaved(vertex_staging_.data() + 6, nv, 3, every_vertex).setOnes();
+    }
 
     // Upload into this call's slot: vertices every frame, indices only when they changed.
     if (next_surface_slot_ == surface_slots_.size()) surface_slots_.emplace_back();  // first frames only
@@ -549,14 +600,15 @@ class OsMesaRenderer final : public Renderer {
       gl_.BindVertexArray(0);
       m.indices = surface.indices;
     }
-    gl_.UseProgram(membrane_program_.id);
-    set_uniforms(membrane_program_, Eigen::Matrix4f::Identity(),
+    const Program& program = id_mode_ ? membrane_id_program_ : membrane_program_;
+    gl_.UseProgram(program.id);
+    set_uniforms(program, Eigen::Matrix4f::Identity(),
                  {look.rgb, Eigen::Vector3f::Constant(look.specular), look.shininess});
     const Eigen::Vector3f vessel = look.vessel_rgb.cwiseProduct(look.vessel_rgb);  // display -> linear
-    gl_.Uniform3fv(membrane_program_.vessel, 1, vessel.data());
-    gl_.Uniform1f(membrane_program_.alpha, std::clamp(look.alpha, 0.0f, 1.0f));
-    gl_.Uniform1f(membrane_program_.vessels, look.vessels);
-    const bool blend = look.alpha < 1.0f;
+    gl_.Uniform3fv(program.vessel, 1, vessel.data());
+    gl_.Uniform1f(program.alpha, std::clamp(look.alpha, 0.0f, 1.0f));
+    gl_.Uniform1f(program.vessels, look.vessels);
+    const bool blend = look.alpha < 1.0f && !id_mode_;
     if (blend) {
       gl_.Enable(GL_BLEND);
       gl_.BlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
@@ -573,6 +625,7 @@ class OsMesaRenderer final : public Renderer {
       ++counts_.rejected;
       return;
     }
+    if (id_mode_) return;  // an id picture has only the surfaces
     gl_.UseProgram(backdrop_program_.id);
     gl_.Uniform3fv(backdrop_program_.centre, 1, centre_rgb.data());
     gl_.Uniform3fv(backdrop_program_.edge, 1, edge_rgb.data());
@@ -622,14 +675,15 @@ class OsMesaRenderer final : public Renderer {
     }
     ++counts_.surfaces;
     // The tube: one instance per interval; then each cap once, with the first and the last interval's matrices.
-    gl_.UseProgram(skin_program_.id);
-    set_uniforms(skin_program_, Eigen::Matrix4f::Identity(), material(look));
+    const Program& program = id_mode_ ? skin_id_program_ : skin_program_;
+    gl_.UseProgram(program.id);
+    set_uniforms(program, Eigen::Matrix4f::Identity(), material(look));
     gl_.BindVertexArray(mesh->vao);
     const auto offset = [](GLsizei indices) { return reinterpret_cast<const void*>(indices * sizeof(std::uint32_t)); };
-    gl_.Uniform1i(skin_program_.first_interval, 0);
+    gl_.Uniform1i(program.first_interval, 0);
     gl_.DrawElementsInstanced(GL_TRIANGLES, mesh->body_index_count, GL_UNSIGNED_INT, nullptr, intervals);
     gl_.DrawElementsInstanced(GL_TRIANGLES, mesh->cap_index_count, GL_UNSIGNED_INT, offset(mesh->body_index_count), 1);
-    gl_.Uniform1i(skin_program_.first_interval, intervals - 1);
+    gl_.Uniform1i(program.first_interval, intervals - 1);
     gl_.DrawElementsInstanced(GL_TRIANGLES, mesh->cap_index_count, GL_UNSIGNED_INT,
                               offset(mesh->body_index_count + mesh->cap_index_count), 1);
     gl_.BindVertexArray(0);
@@ -799,6 +853,10 @@ class OsMesaRenderer final : public Renderer {
     p.centre = gl_.GetUniformLocation(program, "u_centre");
     p.edge = gl_.GetUniformLocation(program, "u_edge");
     p.aspect = gl_.GetUniformLocation(program, "u_aspect");
+    p.key = gl_.GetUniformLocation(program, "u_key");
+    p.falloff = gl_.GetUniformLocation(program, "u_falloff");
+    p.light = gl_.GetUniformLocation(program, "u_light");
+    p.id_colour = gl_.GetUniformLocation(program, "u_id");
     return p;
   }
 
@@ -809,8 +867,9 @@ class OsMesaRenderer final : public Renderer {
     try {
       skin_program_ = build_program(kSkinVertexShader, kFragmentShader, false);
       capture_program_ = build_program(kSkinVertexShader, kFragmentShader, true);
+      skin_id_program_ = build_program(kSkinVertexShader, kIdFragmentShader, false);
     } catch (const Error& e) {
-      skin_program_ = capture_program_ = Program{};
+      skin_program_ = capture_program_ = skin_id_program_ = Program{};
       info_ += std::string("; no GPU tube skinning (") + e.what() + ")";
       while (gl_.GetError() != GL_NO_ERROR) {
       }
@@ -823,7 +882,7 @@ class OsMesaRenderer final : public Renderer {
     skin_capacity_ = 1;
     gl_.BindTexture(GL_TEXTURE_BUFFER, skin_texture_);
     gl_.TexBuffer(GL_TEXTURE_BUFFER, GL_RGBA32F, skin_buffer_);
-    for (const Program* p : {&skin_program_, &capture_program_}) {
+    for (const Program* p : {&skin_program_, &capture_program_, &skin_id_program_}) {
       gl_.UseProgram(p->id);
       gl_.Uniform1i(p->skin, 0);  // texture unit 0
     }
@@ -897,10 +956,11 @@ class OsMesaRenderer final : public Renderer {
     gl_.BindVertexArray(mesh.vao);
     gl_.BindBuffer(GL_ARRAY_BUFFER, mesh.vbo);
     gl_.EnableVertexAttribArray(0);
-    gl_.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 6 * sizeof(float), nullptr);
-    gl_.EnableVertexAttribArray(1);
-    gl_.VertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, 6 * sizeof(float),
-                            reinterpret_cast<const void*>(3 * sizeof(float)));
+    const auto stride = static_cast<GLsizei>(kVertexFloats * sizeof(float));
+    for (GLuint a = 0; a < 3; ++a) {  // position, normal, tint
+      gl_.EnableVertexAttribArray(a);
+      gl_.VertexAttribPointer(a, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<const void*>(3 * a * sizeof(float)));
+    }
     gl_.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, mesh.ebo);  // recorded in the VAO
     gl_.BindVertexArray(0);
   }
@@ -921,7 +981,7 @@ class OsMesaRenderer final : public Renderer {
   void upload_vertices(GpuMesh& mesh, const std::vector<float>& data) {
     ensure_buffers(mesh);
     gl_.BindBuffer(GL_ARRAY_BUFFER, mesh.vbo);
-    send(GL_ARRAY_BUFFER, data, static_cast<GLsizei>(data.size() / 6), mesh.vertex_capacity);
+    send(GL_ARRAY_BUFFER, data, static_cast<GLsizei>(data.size() / kVertexFloats), mesh.vertex_capacity);
   }
 
   void upload_indices(GpuMesh& mesh, const std::vector<std::uint32_t>& data) {
@@ -938,8 +998,18 @@ class OsMesaRenderer final : public Renderer {
     return {look.rgb, Eigen::Vector3f::Constant(look.specular), look.shininess};
   }
 
-  /// Transforms and material of the program in use.
+  /// Transforms, lights and material of the program in use (and the id colour of an id program).
   void set_uniforms(const Program& program, const Eigen::Matrix4f& model, const Material& material) {
+    const bool scope = lighting_.scope;
+    const Eigen::Vector4f key = scope ? Eigen::Vector4f(0.0f, 0.0f, 0.0f, 1.0f) : kStudioKey;
+    const Eigen::Vector3f falloff = scope ? lighting_.falloff : Eigen::Vector3f(1.0f, 0.0f, 0.0f);
+    const Eigen::Vector4f light = scope ? Eigen::Vector4f(1.0f, 0.0f, kScopeAmbient, kBroadShare * lighting_.wet)
+                                        : Eigen::Vector4f(0.9f, 0.3f, 0.08f, 0.0f);
+    const float specular_scale = scope ? kWetSpecular * lighting_.wet : 1.0f;
+    gl_.Uniform4fv(program.key, 1, key.data());
+    gl_.Uniform3fv(program.falloff, 1, falloff.data());
+    gl_.Uniform4fv(program.light, 1, light.data());
+    if (program.id_colour >= 0) gl_.Uniform3fv(program.id_colour, 1, id_rgb_.data());
     const Eigen::Matrix4f model_view = view_ * model;
     const Eigen::Matrix4f mvp = projection_ * model_view;
     const Eigen::Matrix3f normal_matrix = model_view.topLeftCorner<3, 3>().inverse().transpose();
@@ -948,15 +1018,18 @@ class OsMesaRenderer final : public Renderer {
     gl_.UniformMatrix3fv(program.normal_matrix, 1, GL_FALSE, normal_matrix.data());
     const Eigen::Vector3f albedo = material.rgb.cwiseProduct(material.rgb);  // display -> linear (gamma 2)
     gl_.Uniform3fv(program.albedo, 1, albedo.data());
-    gl_.Uniform3fv(program.specular, 1, material.specular.data());
+    const Eigen::Vector3f specular = specular_scale * material.specular;
+    gl_.Uniform3fv(program.specular, 1, specular.data());
     gl_.Uniform1f(program.shininess, material.shininess);
   }
 
   void draw(const GpuMesh& mesh, const Eigen::Matrix4f& model, const Material& material) {
-    set_uniforms(program_, model, material);
+    if (id_mode_) gl_.UseProgram(id_program_.id);
+    set_uniforms(id_mode_ ? id_program_ : program_, model, material);
     gl_.BindVertexArray(mesh.vao);
     gl_.DrawElements(GL_TRIANGLES, mesh.index_count, GL_UNSIGNED_INT, nullptr);
     gl_.BindVertexArray(0);
+    if (id_mode_) gl_.UseProgram(program_.id);
   }
 
   /// The unit cylinder scaled to `radius` and stretched from a to b. Skipped when a and b (nearly) coincide.
@@ -997,6 +1070,9 @@ class OsMesaRenderer final : public Renderer {
   Program skin_program_;     // tube skinning (id 0: not available)
   Program capture_program_;  // the same with transform feedback, for capture_skinned_tube
   Program membrane_program_;  // draw_membrane
+  Program id_program_;        // the id pictures (set_id_colour): surfaces, tool, markers
+  Program skin_id_program_;   // the tube's
+  Program membrane_id_program_;  // the membrane's
   Program backdrop_program_;  // draw_backdrop
   GLuint backdrop_vao_ = 0;   // empty: the backdrop's vertices come from gl_VertexID
   MembraneMesh membrane_;

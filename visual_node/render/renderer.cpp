@@ -25,8 +25,10 @@ class NullRenderer final : public Renderer {
 
   void begin_frame(const Camera&) override {}
   void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
-                    const SurfaceLook&) override {
-    const bool ok = positions.allFinite() && (tris.size() == 0 || (tris.minCoeff() >= 0 && tris.maxCoeff() < positions.rows()));
+                    const SurfaceLook&, const Eigen::MatrixX3f* tint) override {
+    const bool ok = positions.allFinite() &&
+                    (tint == nullptr || (tint->rows() == positions.rows() && tint->allFinite())) &&
+                    (tris.size() == 0 || (tris.minCoeff() >= 0 && tris.maxCoeff() < positions.rows()));
     ++(ok ? counts_.surfaces : counts_.rejected);
   }
   void draw_membrane(const intestine::MesenterySurface& surface, const MembraneLook& look) override {
@@ -71,6 +73,14 @@ std::unique_ptr<Renderer> make_renderer(const std::string& backend, int width, i
   if (backend == "null") return std::make_unique<NullRenderer>(width, height);
   if (backend == "osmesa") return make_osmesa_renderer(width, height);
   throw_error("renderer: unknown backend '", backend, "' (use 'osmesa' or 'null')");
+}
+
+Lighting lighting_of(const scene::RenderSpec& render) {
+  Lighting l;
+  l.scope = render.light == scene::RenderSpec::Light::kScope;
+  l.falloff = render.falloff.cast<float>();
+  l.wet = static_cast<float>(render.wet);
+  return l;
 }
 
 bool membrane_drawable(const intestine::MesenterySurface& s, const MembraneLook& look) noexcept {

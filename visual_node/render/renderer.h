@@ -21,7 +21,8 @@
 namespace surgsim {
 
 /// Default colours, linear RGB in [0, 1].
-inline const Eigen::Vector3f kLiverRgb(0.58f, 0.20f, 0.15f);    // red-brown liver
+inline const Eigen::Vector3f kLiverRgb(0.50f, 0.16f, 0.12f);        // dark red-brown liver
+inline const Eigen::Vector3f kGallbladderRgb(0.36f, 0.42f, 0.20f);  // the gallbladder, greenish, seen through its wall
 inline const Eigen::Vector3f kMarkerRgb(0.95f, 0.85f, 0.20f);   // contact-point markers
 /// Instruments (several tools told apart in a picture), by index in the scene's tools list: 0 metallic
 /// grey (the one-tool colour), 1 blue, 2 green, 3 violet. instrument_rgb() cycles beyond them.
@@ -53,6 +54,17 @@ struct MembraneLook {
   float shininess = 30.0f;
 };
 
+/// The lights of a picture (set_lighting; kept across frames). The studio rig: a key light raking from the upper left
+/// and a fill from the right, fixed in view space. The scope: one light at the eye (a laparoscope's tip), falling off
+/// with distance as 1 / (a + b d + c d^2); with it the surfaces look wet, a sharp highlight over a broad one.
+struct Lighting {
+  bool scope = false;
+  Eigen::Vector3f falloff = Eigen::Vector3f(0.3f, 0.0f, 60.0f);  // scope: a, b, c (d in m)
+  float wet = 1.0f;                                              // scope: the speculars' scale, 0 = matte
+};
+/// The lighting a scene's visual.render asks for.
+Lighting lighting_of(const scene::RenderSpec& render);
+
 /// What a renderer was asked to do (both backends count the same way).
 struct RenderCounts {
   std::uint64_t frames = 0;     // end_frame calls
@@ -74,8 +86,16 @@ class Renderer {
   /// A triangle surface. positions: #V x 3, m; tris: #F x 3 indices into positions, counter-clockwise seen from
   /// outside. Smooth normals (area-weighted per vertex) are recomputed from the positions on every call; both
   /// sides are lit. GPU buffers are allocated for the largest size seen and then only updated.
+  /// `tint` (#V x 3, or null): each vertex's colour as a factor of look.rgb (procedural detail,
+  /// render/surface_detail.h); rejected when its rows are not the positions'.
   virtual void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions,
-                            const Eigen::Ref<const Eigen::MatrixX3i>& tris, const SurfaceLook& look) = 0;
+                            const Eigen::Ref<const Eigen::MatrixX3i>& tris, const SurfaceLook& look,
+                            const Eigen::MatrixX3f* tint) = 0;
+  /// The same in the look's colour alone.
+  void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
+                    const SurfaceLook& look) {
+    draw_surface(positions, tris, look, nullptr);
+  }
   /// The same, matte, in `rgb`.
   void draw_surface(const Eigen::Ref<const Eigen::MatrixX3f>& positions, const Eigen::Ref<const Eigen::MatrixX3i>& tris,
                     const Eigen::Vector3f& rgb) {
@@ -143,6 +163,19 @@ class Renderer {
   /// One line for logs, e.g. the GL version and renderer string.
   virtual std::string info() const = 0;
 
+  /// The lights of the frames from now on (studio by default).
+  void set_lighting(const Lighting& lighting) { lighting_ = lighting; }
+  const Lighting& lighting() const { return lighting_; }
+
+  /// Object-id pictures (tests, picking): with a colour set, every draw call draws its surface flat in `id_rgb` (no
+  /// lighting, tint, vessels or blending; the backdrop is not drawn), so that each pixel tells which call drew it.
+  /// Each channel is stored exactly when it is a multiple of 1/255. clear_id_colour() goes back to shading.
+  void set_id_colour(const Eigen::Vector3f& id_rgb) {
+    id_mode_ = true;
+    id_rgb_ = id_rgb;
+  }
+  void clear_id_colour() { id_mode_ = false; }
+
   int width() const { return width_; }
   int height() const { return height_; }
   const RenderCounts& counts() const { return counts_; }
@@ -152,6 +185,9 @@ class Renderer {
   int width_;
   int height_;
   RenderCounts counts_;
+  Lighting lighting_;
+  bool id_mode_ = false;
+  Eigen::Vector3f id_rgb_ = Eigen::Vector3f::Zero();
 };
 
 /// Creates a renderer: backend "osmesa" or "null"; width and height in pixels (16..8192).

@@ -12,6 +12,7 @@ namespace surgsim {
 CompositeView::CompositeView(std::vector<Part> parts) : parts_(std::move(parts)) {
   if (parts_.empty()) core::throw_error("CompositeView: no organ");
   frames_.resize(parts_.size());
+  for (std::size_t k = 0; k < parts_.size(); ++k) order_.push_back(static_cast<int>(k));
   for (msg::ContactFrame& f : frames_) {
     f.contacts().reserve(msg::kMaxContacts);
     f.instruments().reserve(msg::kMaxInstruments);
@@ -81,7 +82,15 @@ double CompositeView::update(const msg::ContactFrame* frame, bool fresh) noexcep
 }
 
 void CompositeView::draw(Renderer& renderer) const {
-  for (const Part& p : parts_) p.view->draw(renderer);
+  for (const int k : order_) parts_[static_cast<std::size_t>(k)].view->draw(renderer);
+}
+
+void CompositeView::order_for(const Eigen::Vector3d& eye) {
+  std::vector<double> depth(parts_.size());
+  for (std::size_t k = 0; k < parts_.size(); ++k) depth[k] = parts_[k].view->draw_depth(eye);
+  std::stable_sort(order_.begin(), order_.end(), [&](int a, int b) {
+    return depth[static_cast<std::size_t>(a)] < depth[static_cast<std::size_t>(b)];
+  });
 }
 
 void CompositeView::draw_markers(Renderer& renderer) const {

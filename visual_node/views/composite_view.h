@@ -29,7 +29,11 @@ class CompositeView final : public OrganView {
   void subscribe(dds::Participant& participant) override;
   void print_init(std::ostream& out) const override;
   double update(const msg::ContactFrame* frame, bool fresh) noexcept override;
+  /// Every organ, in the order order_for() set (the scene's until then).
   void draw(Renderer& renderer) const override;
+  /// Init: the organs drawn by their draw_depth from `eye` (the camera's), smallest first; the scene's order for ties.
+  void order_for(const Eigen::Vector3d& eye);
+  const std::vector<int>& draw_order() const { return order_; }
   /// The instruments of the organ views that carry their own (the intestine's BodyState), else null.
   const InstrumentPoses* instruments() const override { return nullptr; }
   void draw_markers(Renderer& renderer) const override;
@@ -45,10 +49,13 @@ class CompositeView final : public OrganView {
 
   int organ_count() const { return static_cast<int>(parts_.size()); }
   const OrganView& organ(int k) const { return *parts_[static_cast<std::size_t>(k)].view; }
+  OrganView& organ(int k) { return *parts_[static_cast<std::size_t>(k)].view; }
+  const std::string& organ_name(int k) const { return parts_[static_cast<std::size_t>(k)].name; }
 
  private:
   std::vector<Part> parts_;
   std::vector<msg::ContactFrame> frames_;  // per organ: the last frame with that organ's entries only
+  std::vector<int> order_;                 // the organs in the order drawn
 };
 
 }  // namespace surgsim

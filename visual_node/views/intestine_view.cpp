@@ -37,6 +37,8 @@ IntestineView::IntestineView(const Scene& scene, std::uint64_t scene_hash, intes
     : rows_(scene.intestine.params.rows),
       cols_(scene.intestine.params.columns),
       tools_(static_cast<int>(scene.tools.size())),
+      look_{scene.organs.empty() ? kIntestineRgb : organ_rgb(scene.organs[0]), kIntestineLook.specular,
+            kIntestineLook.shininess},
       scene_hash_(scene_hash),
       target_fps_(rate_params(scene).target_hz),
       points_(static_cast<std::size_t>(3 * rows_ * cols_), 0.0),
@@ -135,10 +137,10 @@ void IntestineView::draw(Renderer& renderer) const {
   // mesentery blends over both.
   if (have_body_ && tube_.vertex_count > 0) {
     if (skinning_ == intestine::TubeSkinning::kGpu) {
-      renderer.draw_skinned_tube(builder_.primitive(tube_.lod), tube_.skin.data(), tube_.intervals, kIntestineLook);
+      renderer.draw_skinned_tube(builder_.primitive(tube_.lod), tube_.skin.data(), tube_.intervals, look_);
     } else {
       renderer.draw_surface(tube_positions_.topRows(tube_.vertex_count), tube_tris_.topRows(tube_.index_count / 3),
-                            kIntestineLook);
+                            look_);
     }
   }
   renderer.draw_backdrop(kCavityCentreRgb, kCavityEdgeRgb);

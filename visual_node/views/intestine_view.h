@@ -50,7 +50,7 @@ namespace surgsim {
 class BodyStateListener;
 
 /// Colours, display RGB in [0, 1].
-inline const Eigen::Vector3f kIntestineRgb(0.84f, 0.38f, 0.37f);  // pink-red bowel wall
+inline const Eigen::Vector3f kIntestineRgb(0.86f, 0.45f, 0.44f);  // pink bowel wall
 inline const Eigen::Vector3f kMesenteryRgb(0.96f, 0.80f, 0.60f);  // pinkish-yellow fat
 /// The bowel wall is wet serosa: a glossy highlight.
 inline const SurfaceLook kIntestineLook{kIntestineRgb, 0.55f, 60.0f};
@@ -121,6 +121,7 @@ class IntestineView {
 
   int rows_ = 0, cols_ = 0;
   int tools_ = 1;  // the scene's instruments
+  SurfaceLook look_ = kIntestineLook;  // the tube's: the organ's colour (organ_rgb), wet
   std::uint64_t scene_hash_ = 0;
   double target_fps_ = 0;
   std::vector<double> points_;  // 3 rows cols, the shown body state
@@ -173,6 +174,8 @@ class IntestineOrganView : public OrganView {
   /// took a new body state is its deformation time.
   double update(const msg::ContactFrame* frame, bool fresh) noexcept override;
   void draw(Renderer& renderer) const override { view_.draw(renderer); }
+  /// After the other organs: its translucent mesentery blends over what they drew.
+  double draw_depth(const Eigen::Vector3d&) const override { return 2e9; }
   /// The instruments of the shown body state once one carried any (else null: those of the contact frame).
   const InstrumentPoses* instruments() const override {
     return view_.has_body() && view_.instruments().count() > 0 ? &view_.instruments() : nullptr;
@@ -185,6 +188,7 @@ class IntestineOrganView : public OrganView {
   void print_summary(std::ostream& out, const nlohmann::json& stats) const override;
 
   const IntestineView& view() const { return view_; }
+  IntestineView& view() { return view_; }  // tests: a body state without DDS (IntestineView::set_positions)
 
  private:
   IntestineView view_;

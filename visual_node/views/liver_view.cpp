@@ -12,6 +12,7 @@
 #include "nonlinear/organ_curves.h"
 #include "mesher/scene_mesh.h"
 #include "render/renderer.h"
+#include "render/surface_detail.h"
 #include "views/body_state_listener.h"
 
 using namespace surgsim::core;
@@ -57,6 +58,24 @@ LiverView::LiverView(const Scene& scene, const OrganViewOptions& options)
     }
   }
   markers_.resize(kMaxContacts, 3);
+
+  // The look: the organ's colour, wet, mottled per vertex at rest; a gallbladder region tinted green.
+  look_ = SurfaceLook{scene.organs.empty() ? kLiverRgb : organ_rgb(scene.organs[0]), 0.3f, 80.0f};
+  const Eigen::MatrixX3f& rest = deformer_->drawn_positions();
+  SurfaceDetail detail;
+  detail.scale = 45.0f;
+  detail.mottle = 0.16f;
+  detail.seed = static_cast<std::uint32_t>(mesh_hash_);
+  tint_ = surface_tint(rest, detail);
+  Eigen::VectorXf gallbladder = Eigen::VectorXf::Zero(rest.rows());
+  for (const auto& region : scene.material.regions) {
+    if (region.name.find("gall") == std::string::npos) continue;
+    for (Eigen::Index v = 0; v < rest.rows(); ++v) {
+      if (region.contains(scene.material.frame.to_organ(rest.row(v).transpose().cast<double>()))) gallbladder[v] = 1.0f;
+    }
+  }
+  blend_tint(tint_, gallbladder, kGallbladderRgb.cwiseQuotient(look_.rgb.cwiseMax(1e-3f)));
+  centre_ = (0.5f * (rest.colwise().minCoeff() + rest.colwise().maxCoeff())).transpose().cast<double>();
 
   // Multirate: the tracker's shape arrives as BodyState, one position per boundary node.
   multirate_ = scene.liver.deformation == LiverDeformation::kMultirate;
@@ -213,7 +232,7 @@ double LiverView::update(const msg::ContactFrame* frame, bool fresh) noexcept {
 }
 
 void LiverView::draw(Renderer& renderer) const {
-  renderer.draw_surface(deformer_->drawn_positions(), deformer_->drawn_tris(), kLiverRgb);
+  renderer.draw_surface(deformer_->drawn_positions(), deformer_->drawn_tris(), look_, &tint_);
 }
 
 void LiverView::draw_markers(Renderer& renderer) const {

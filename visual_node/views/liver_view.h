@@ -34,6 +34,7 @@
 #include "compliance/superposition.h"
 #include "mesh/mesh.h"
 #include "organ_view.h"
+#include "render/renderer.h"
 #include "views/surface_deformer.h"
 
 namespace surgsim {
@@ -56,6 +57,8 @@ class LiverView : public OrganView {
 
   double update(const msg::ContactFrame* frame, bool fresh) noexcept override;
   void draw(Renderer& renderer) const override;
+  /// The distance from `eye` to its bounding box's centre at rest.
+  double draw_depth(const Eigen::Vector3d& eye) const override { return (centre_ - eye).norm(); }
   void draw_markers(Renderer& renderer) const override;
 
   int contacts_shown() const override { return contacts_; }
@@ -110,6 +113,10 @@ class LiverView : public OrganView {
   InstrumentPoses instruments_;
   int contacts_ = 0;
   Eigen::MatrixX3f markers_;  // contact points drawn as markers
+  SurfaceLook look_;          // the organ's colour (organ_rgb), wet
+  Eigen::MatrixX3f tint_;     // per drawn vertex, from its rest position (render/surface_detail.h); regions named
+                              // "gallbladder" greenish
+  Eigen::Vector3d centre_ = Eigen::Vector3d::Zero();  // of the rest bounding box, m
   int marker_count_ = 0;
   std::uint64_t deform_errors_ = 0;
 

@@ -21,7 +21,9 @@ class RigidView final : public OrganView {
   std::uint64_t mesh_hash() const override { return hash_; }
   long surface_triangles() const override { return static_cast<long>(tris_.rows()); }
   double update(const msg::ContactFrame*, bool) noexcept override { return -1; }
-  void draw(Renderer& renderer) const override { renderer.draw_surface(positions_, tris_, look_); }
+  void draw(Renderer& renderer) const override { renderer.draw_surface(positions_, tris_, look_, &tint_); }
+  /// A cavity (seen from inside, around everything) after the other opaque organs; else its bounding box's centre.
+  double draw_depth(const Eigen::Vector3d& eye) const override;
   void add_stats(nlohmann::json& stats) const override;
 
  private:
@@ -29,6 +31,7 @@ class RigidView final : public OrganView {
   Eigen::MatrixX3f positions_;
   Eigen::MatrixX3i tris_;
   SurfaceLook look_;
+  Eigen::MatrixX3f tint_;  // per vertex, from its position (render/surface_detail.h)
   std::uint64_t hash_ = 0;
   bool cavity_ = false;
 };

@@ -220,9 +220,8 @@ INSTANTIATE_TEST_SUITE_P(
                        "name: t\nmaterial: {young_modulus: 3000}\norgans:\n  - {name: w, model: "
                        "rigid, rigid: {generate: plane}}\n",
                        2, "key 'material'", "move it into the organ"},
-        OrganErrorCase{"UnknownOrganKey",
-                       kList + "  - {name: w, model: rigid, rigid: {generate: plane}, colour: red}\n", 3,
-                       "key 'organs[0].colour': unknown key"},
+        OrganErrorCase{"UnknownOrganKey", kList + "  - {name: w, model: rigid, rigid: {generate: plane}, shade: red}\n",
+                       3, "key 'organs[0].shade': unknown key"},
         OrganErrorCase{"RigidWithoutSurface", kList + "  - {name: w, model: rigid}\n", 3,
                        "key 'organs[0].rigid': missing"},
         OrganErrorCase{"RigidWithMesh",

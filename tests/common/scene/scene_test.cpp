@@ -691,6 +691,7 @@ TEST_P(SceneError, NamesFileLineAndKey) {
 
 const std::string kHead = "name: t\nmesh: {generate: liver}\n";  // 2 lines
 const std::string kIntestine = "name: t\nmodel: intestine\n";    // 2 lines
+const std::string kVisual = kHead + "visual:\n  camera:\n";      // 4 lines
 
 INSTANTIATE_TEST_SUITE_P(
     Cases, SceneError,
@@ -888,6 +889,39 @@ INSTANTIATE_TEST_SUITE_P(
         ErrorCase{"IntestineAxis", kIntestine + "intestine: {axis_direction: [0, 0, 0]}\n", 3,
                   "key 'intestine.axis_direction'", "zero vector"},
         ErrorCase{"TargetFps", kIntestine + "visual: {target_fps: 0}\n", 3, "key 'visual.target_fps'", "[1, 1000]"},
+        // The picture: the scope camera, visual.render, an organ's colour (scene_picture_test.cpp)
+        ErrorCase{"EyeAndPort", kVisual + "    eye: [1, 0, 0]\n    port: [0, 0, 1]\n", 6, "key 'visual.camera.port'",
+                  "given together with 'eye' (line 5)"},
+        ErrorCase{"ScopeKeyWithoutPort", kVisual + "    eye: [1, 0, 0]\n    angle_deg: 30\n", 6,
+                  "key 'visual.camera.angle_deg'", "only for a scope camera"},
+        ErrorCase{"PortWithoutTarget", kVisual + "    port: [0, 0, 1]\n", 4, "key 'visual.camera.target'", "missing"},
+        ErrorCase{"PortAtTarget", kVisual + "    port: [0, 0, 1]\n    target: [0, 0, 1]\n", 6,
+                  "key 'visual.camera.target'", "equals the port"},
+        ErrorCase{"InsertionPastTarget", kVisual + "    port: [0, 0, 0.1]\n    target: [0, 0, 0]\n    insertion: 0.2\n",
+                  7, "key 'visual.camera.insertion'", "at or past the target"},
+        ErrorCase{"AngleTooLarge", kVisual + "    port: [0, 0, 0.1]\n    target: [0, 0, 0]\n    angle_deg: 80\n", 7,
+                  "key 'visual.camera.angle_deg'", "out of range [0, 75]"},
+        ErrorCase{"UpAlongShaft", kVisual + "    port: [0, 0, 0.1]\n    target: [0, 0, 0]\n    up: [0, 0, 1]\n", 7,
+                  "key 'visual.camera.up'", "parallel to the scope's shaft"},
+        ErrorCase{"UnknownRenderKey", kHead + "visual:\n  render:\n    marker: true\n", 5, "key 'visual.render.marker'",
+                  "did you mean 'markers'"},
+        ErrorCase{"MarkersNotBoolean", kHead + "visual:\n  render: {markers: 2}\n", 4, "key 'visual.render.markers'",
+                  "not a boolean"},
+        ErrorCase{"FalloffWithStudioLight", kHead + "visual:\n  render:\n    falloff: [1, 0, 10]\n", 5,
+                  "key 'visual.render.falloff'", "only for the scope light"},
+        ErrorCase{"FalloffZeroConstant", kHead + "visual:\n  render:\n    light: scope\n    falloff: [0, 0, 10]\n", 6,
+                  "key 'visual.render.falloff'", "a = 0"},
+        ErrorCase{"WetOutOfRange", kHead + "visual:\n  render: {wet: 3}\n", 4, "key 'visual.render.wet'", "[0, 2]"},
+        ErrorCase{"ColourOutOfRange", kHead + "colour: [1.2, 0, 0]\n", 3, "key 'colour'", "outside [0, 1]"},
+        ErrorCase{"ColourNotThree", kHead + "colour: [1, 0]\n", 3, "key 'colour'", "3 numbers"},
+        ErrorCase{"ColourAndColor", kHead + "colour: [1, 0, 0]\ncolor: [1, 0, 0]\n", 4, "key 'color'",
+                  "given together with 'colour' (line 3)"},
+        ErrorCase{"OrganColourAtTopOfAList",
+                  "name: f\ncolour: [1, 0, 0]\norgans:\n  - {name: w, model: rigid, rigid: {generate: plane}}\n", 2,
+                  "key 'colour'", "at the top level"},
+        ErrorCase{"OrganColourInTheList",
+                  "name: f\norgans:\n  - name: w\n    model: rigid\n    rigid: {generate: plane}\n    colour: red\n", 6,
+                  "key 'organs[0].colour'", "3 numbers"},
         ErrorCase{"LiverDeformation", kHead + "liver: {deformation: warped}\n", 3, "key 'liver.deformation'",
                   "multirate"},
         ErrorCase{"MultirateWithOrganCurves", kHead + "liver: {deformation: multirate, curves: organ}\n", 3,

@@ -523,6 +523,92 @@ TEST(OsMesaRenderer, MembraneVesselsTranslucencyAndBackdrop) {
   EXPECT_EQ(renderer->counts().gl_errors, 0u);
 }
 
+// The scope's light is at the eye and falls off with distance: the same sphere nearer is brighter in the middle; its
+// wet highlight is where the normal faces the eye (the centre), not where the studio key puts it.
+TEST(OsMesaRenderer, ScopeLightFallsOffWithDistanceAndHighlightsTheCentre) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  Lighting scope;
+  scope.scope = true;
+  scope.falloff = Eigen::Vector3f(0.2f, 0.0f, 0.1f);  // d in m: 1/0.3 at 1 m, 1/1.8 at 4 m
+  renderer->set_lighting(scope);
+  const Surface sphere = icosphere(3, 1.0f);
+  Camera near = front_camera();
+  near.eye = {0, -2, 0};
+  const Image far_image = render_surface(*renderer, sphere);
+  const Image near_image = render_surface(*renderer, sphere, near);
+  const int far_centre = grey(far_image, kWidth / 2, kHeight / 2),
+            near_centre = grey(near_image, kWidth / 2, kHeight / 2);
+  std::printf("scope light: centre grey %d at 3 m from the surface, %d at 1 m\n", far_centre, near_centre);
+  EXPECT_GT(near_centre, far_centre + 60);
+  // The highlight: the centre (normal towards the eye) is the brightest point of the far sphere.
+  int brightest = 0;
+  for (int y = 0; y < kHeight; ++y) {
+    for (int x = 0; x < kWidth; ++x)
+      brightest = std::max(brightest, is_background(far_image, x, y) ? 0 : grey(far_image, x, y));
+  }
+  EXPECT_GE(far_centre + 6, brightest);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+}
+
+// A per-vertex tint changes the surface's colour where it is given, and an id picture is one exact flat colour per
+// draw call: no lighting, tint, vessels, blending or backdrop.
+TEST(OsMesaRenderer, TintColoursVerticesAndIdPicturesAreFlat) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  const Surface sphere = icosphere(3, 1.0f);
+  Eigen::MatrixX3f tint = Eigen::MatrixX3f::Ones(sphere.positions.rows(), 3);
+  for (Eigen::Index v = 0; v < tint.rows(); ++v) {
+    if (sphere.positions(v, 0) > 0.0f) tint.row(v) = Eigen::RowVector3f(0.3f, 1.6f, 0.3f);  // the right half green
+  }
+  renderer->begin_frame(front_camera());
+  renderer->draw_surface(sphere.positions, sphere.tris, SurfaceLook{Eigen::Vector3f(0.5f, 0.5f, 0.5f)}, &tint);
+  renderer->end_frame();
+  Image tinted;
+  ASSERT_TRUE(renderer->read_image(tinted));
+  const std::uint8_t* left = tinted.at(kWidth / 2 - 30, kHeight / 2);
+  const std::uint8_t* right = tinted.at(kWidth / 2 + 30, kHeight / 2);
+  EXPECT_LT(std::abs(static_cast<int>(left[0]) - left[1]), 8) << "grey where the tint is 1";
+  EXPECT_GT(right[1], right[0] + 60) << "green where it is green";
+  Eigen::MatrixX3f short_tint = Eigen::MatrixX3f::Ones(3, 3);
+  renderer->draw_surface(sphere.positions, sphere.tris, SurfaceLook{}, &short_tint);
+  EXPECT_EQ(renderer->counts().rejected, 1u) << "a tint of another vertex count is refused";
+
+  // Id picture: the sphere, a translucent membrane over it and the backdrop; exactly two colours and the background.
+  const Eigen::Vector3f red(200 / 255.0f, 10 / 255.0f, 20 / 255.0f), blue(5 / 255.0f, 30 / 255.0f, 250 / 255.0f);
+  renderer->begin_frame(front_camera());
+  renderer->set_id_colour(red);
+  renderer->draw_surface(sphere.positions, sphere.tris, SurfaceLook{}, &tint);
+  renderer->set_id_colour(blue);
+  MembraneLook look;
+  look.alpha = 0.5f;
+  renderer->draw_membrane(curved_membrane(), look);
+  renderer->draw_backdrop(Eigen::Vector3f(0.3f, 0.1f, 0.1f), Eigen::Vector3f(0.1f, 0.0f, 0.0f));
+  renderer->clear_id_colour();
+  renderer->end_frame();
+  Image ids;
+  ASSERT_TRUE(renderer->read_image(ids));
+  int n_red = 0, n_blue = 0, n_background = 0, other = 0;
+  for (int y = 0; y < kHeight; ++y) {
+    for (int x = 0; x < kWidth; ++x) {
+      const std::uint8_t* p = ids.at(x, y);
+      if (p[0] == 200 && p[1] == 10 && p[2] == 20) {
+        ++n_red;
+      } else if (p[0] == 5 && p[1] == 30 && p[2] == 250) {
+        ++n_blue;
+      } else if (is_background(ids, x, y)) {
+        ++n_background;
+      } else {
+        ++other;
+      }
+    }
+  }
+  std::printf("id picture: %d sphere, %d membrane, %d background, %d other pixels\n", n_red, n_blue, n_background,
+              other);
+  EXPECT_EQ(other, 0);
+  EXPECT_GT(n_red, 1000);
+  EXPECT_GT(n_blue, 1000);
+  EXPECT_GT(n_background, 1000) << "no backdrop in an id picture";
+}
+
 TEST(NullRenderer, CountsAndHasNoImage) {
   auto renderer = make_renderer("null", 640, 480);
   EXPECT_STREQ(renderer->name(), "null");
