@@ -41,6 +41,15 @@ CompositeOrgan::CompositeOrgan(std::vector<Part> parts) : parts_(std::move(parts
       }
     }
   }
+  // Every liver against every rigid organ (the wall, the ribs): the liver's surface nodes are pushed out of them in
+  // its own solve.
+  for (Part& organ : parts_) {
+    auto* liver = dynamic_cast<LiverOrgan*>(organ.organ.get());
+    if (liver == nullptr) continue;
+    for (const Part& other : parts_)
+      if (const auto* rigid = dynamic_cast<const RigidOrgan*>(other.organ.get()))
+        liver->add_wall(rigid->surface(), rigid->stiffness(), other.name);
+  }
   ticks_.resize(parts_.size());
   point_offsets_.assign(1, 0);
   for (const Part& p : parts_) point_offsets_.push_back(point_offsets_.back() + p.organ->output_points());

@@ -73,7 +73,7 @@ bool LiverObstacle::nearest(int node, const Eigen::Vector3d& p, double max_dista
   const double push = contacts.body_force(j).push;
   if (!(push > 0)) return false;  // the solve let go: not touching
   hit.distance = max_distance - push / body_stiffness_;
-  hit.normal = points_[static_cast<std::size_t>(j)].normal;
+  hit.normal = normals_[static_cast<std::size_t>(j)];
   return true;
 }
 
@@ -85,14 +85,12 @@ void LiverObstacle::couple(const IntestineModel& model, const IntestineState& st
   point_of_node_.assign(static_cast<std::size_t>(model.node_count()), -1);
 }
 
-void LiverObstacle::gather(ToolContacts& contacts) noexcept {
+int LiverObstacle::gather(const ToolContacts& contacts, BodyPoint* out, int room) noexcept {
   gathered_ = 0;
-  if (!coupled()) return;
+  if (!coupled()) return 0;
   std::fill(point_of_node_.begin(), point_of_node_.end(), -1);
-  if (liver_.model().generation != generation_ || !(body_stiffness_ > 0)) {
-    contacts.set_bodies(points_.data(), 0);
-    return;
-  }
+  if (liver_.model().generation != generation_ || !(body_stiffness_ > 0)) return 0;
+  room = std::min(room, ToolContacts::kMaxBodyPoints);
   const Eigen::Matrix3Xd& x = body_state_->x;
   const int nodes = std::min(static_cast<int>(x.cols()), static_cast<int>(point_of_node_.size()));
   const double reach = kDentReach + kEngage;
@@ -120,11 +118,12 @@ void LiverObstacle::gather(ToolContacts& contacts) noexcept {
       point_of_node_[static_cast<std::size_t>(node)] = kAway;
       continue;
     }
-    if (gathered_ == ToolContacts::kMaxBodyPoints) {
+    if (gathered_ == room) {
       ++overflow_;
       continue;
     }
-    BodyPoint& b = points_[static_cast<std::size_t>(gathered_)];
+    BodyPoint& b = out[gathered_];
+    normals_[static_cast<std::size_t>(gathered_)] = c.normal;
     b.nodes = {c.corners[0], c.corners[1], c.corners[2]};
     b.bary = c.bary;
     b.normal = c.normal;
@@ -132,7 +131,59 @@ void LiverObstacle::gather(ToolContacts& contacts) noexcept {
     b.stiffness = body_stiffness_;
     point_of_node_[static_cast<std::size_t>(node)] = gathered_++;
   }
-  contacts.set_bodies(points_.data(), gathered_);
+  return gathered_;
+}
+
+void LiverOrgan::add_wall(const rigid::RigidSurface& surface, double stiffness, const std::string& name) {
+  Wall w;
+  w.surface = &surface;
+  w.stiffness = stiffness;
+  w.name = name;
+  for (int node : this->surface().nodes) {
+    if (model().fixed.node_touched(node)) continue;  // held: it does not move into anything
+    const Eigen::Vector3d x = mesh().nodes.row(node).transpose();
+    if (surface.closest_point(x, kWallReach).found) w.nodes.push_back(node);
+  }
+  walls_.push_back(std::move(w));
+}
+
+int LiverOrgan::gather_walls(int begin) noexcept {
+  int n = begin;
+  for (Wall& w : walls_) {
+    w.first = n;
+    w.count = 0;
+    if (!(w.stiffness > 0)) continue;
+    for (int node : w.nodes) {
+      Eigen::Vector3d u;
+      if (!contacts_->solution_displacement(node, u)) continue;  // a fixed node, or no column: it does not move
+      const Eigen::Vector3d rest = mesh().nodes.row(node).transpose();
+      const rigid::ClosestPoint c = w.surface->closest_point(rest + u, kWallEngage);
+      if (!c.found || !(c.distance < kWallEngage)) continue;
+      if (n == ToolContacts::kMaxBodyPoints) break;
+      BodyPoint& b = bodies_[static_cast<std::size_t>(n++)];
+      b.nodes = {node, -1, -1};
+      b.bary = Eigen::Vector3d(1, 0, 0);
+      b.normal = -c.normal;                  // the row's direction: the wall pushes the node along +normal
+      b.gap = c.normal.dot(rest - c.point);  // the rest position's distance from the wall along its normal
+      b.stiffness = w.stiffness;
+      ++w.count;
+    }
+  }
+  return n;
+}
+
+void LiverOrgan::account_walls() noexcept {
+  for (Wall& w : walls_) {
+    int touching = 0;
+    for (int j = w.first; j < w.first + w.count && j < contacts_->body_count(); ++j) {
+      const BodyForce& f = contacts_->body_force(j);
+      if (!(f.push > 0)) continue;
+      ++touching;
+      w.max_penetration = std::max(w.max_penetration, f.push / w.stiffness);
+    }
+    if (touching > 0) ++w.contact_ticks;
+    w.contacts_max = std::max(w.contacts_max, touching);
+  }
 }
 
 LiverObstacle& LiverOrgan::obstacle(const std::string& where) {
@@ -257,6 +308,17 @@ void LiverOrgan::write(const TickRecord& r, std::uint64_t stamp_ns) noexcept {
 }
 
 void LiverOrgan::add_stats(nlohmann::json& j) const {
+  if (!walls_.empty()) {
+    nlohmann::json walls = nlohmann::json::array();
+    for (const Wall& w : walls_) {
+      walls.push_back({{"organ", w.name},
+                       {"nodes_near", w.nodes.size()},
+                       {"contact_ticks", w.contact_ticks},
+                       {"contacts_max", w.contacts_max},
+                       {"max_penetration_mm", 1e3 * w.max_penetration}});
+    }
+    j["walls"] = std::move(walls);
+  }
   if (multirate_ == nullptr) return;
   MultirateContacts& m = *multirate_;
   m.stop();  // shutdown: its counters and cycle times are final
@@ -303,10 +365,15 @@ void LiverOrgan::step(const InstrumentInput* inputs, int count, double dt, Conta
     instance_ = std::move(next);
     contacts_ = &instance_->contacts();
   }
-  // The field's bowel resting on the liver: its points solved with the instruments' (two-way).
-  if (obstacle_ != nullptr) obstacle_->gather(*contacts_);
+  // The field's bowel resting on the liver and its walls: their points solved with the instruments' (two-way).
+  if (obstacle_ != nullptr || !walls_.empty()) {
+    int n = obstacle_ != nullptr ? obstacle_->gather(*contacts_, bodies_.data(), ToolContacts::kMaxBodyPoints) : 0;
+    n = gather_walls(n);
+    contacts_->set_bodies(bodies_.data(), n);
+  }
   // An instrument whose input is lost drops its own contacts and gets zero force; the others are solved as usual.
   contacts_->step(inputs, count, out, dt);
+  if (!walls_.empty()) account_walls();
   // Unpaced: the background rotations refreshed here on simulated time, so a replay gives the same forces every time
   // (on the thread they depend on how many ticks ran between two wall-clock refreshes).
   if (rotations_in_loop_) {

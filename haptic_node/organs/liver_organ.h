@@ -53,9 +53,10 @@ class LiverObstacle final : public intestine::Obstacle {
   /// only: throws surgsim::core::Error naming `where` for a second.
   void couple(const intestine::IntestineModel& model, const intestine::IntestineState& state, const std::string& where);
   bool coupled() const { return body_model_ != nullptr; }
-  /// Loop thread, before the liver's step, no allocation: the coupled body's points for this step, given to
-  /// `contacts` (set_bodies). Points past ToolContacts::kMaxBodyPoints stay one-way (counted: overflow()).
-  void gather(contact::ToolContacts& contacts) noexcept;
+  /// Loop thread, before the liver's step, no allocation: the coupled body's points for this step into out[0..room)
+  /// (the first of the liver's body points: point j is out[j]); returns their count. Points past `room` stay one-way
+  /// (counted: overflow()).
+  int gather(const contact::ToolContacts& contacts, contact::BodyPoint* out, int room) noexcept;
   bool nearest(const Eigen::Vector3d& p, double max_distance, intestine::ObstacleHit& hit) const noexcept override;
   bool nearest(int node, const Eigen::Vector3d& p, double max_distance,
                intestine::ObstacleHit& hit) const noexcept override;
@@ -75,7 +76,7 @@ class LiverObstacle final : public intestine::Obstacle {
   double body_stiffness_ = 0;       // N/m, the body's obstacle_stiffness
   static constexpr int kAway = -2;  // point_of_node_: clear of the surface in the last gather (-1: not looked at)
   std::vector<int> point_of_node_;  // per body node: its body point in the last gather, or kAway / -1
-  std::array<contact::BodyPoint, contact::ToolContacts::kMaxBodyPoints> points_{};
+  std::array<Eigen::Vector3d, contact::ToolContacts::kMaxBodyPoints> normals_{};  // of the last gather's points
   int gathered_ = 0;
   long overflow_ = 0;
 };
@@ -146,6 +147,17 @@ class LiverOrgan final : public HapticOrgan {
   /// Init: the liver as an obstacle for the field's other bodies (built on the first call; CompositeOrgan gives it to
   /// the bowel). `where` names the organ in errors.
   LiverObstacle& obstacle(const std::string& where);
+  /// Init: a rigid organ's surface (which must outlive this) the liver may not pass: each surface node of the liver
+  /// within kWallEngage of it (at its current position) is one more unilateral row of the liver's solve, pushed out
+  /// along the wall's normal with the penalty `stiffness` (N/m) in series (contact::BodyPoint on the node alone), in
+  /// the same system as the instruments' rows and the bowel's. `name` in the stats ("walls"). Only the nodes within
+  /// kWallReach of the surface at rest are looked at.
+  void add_wall(const rigid::RigidSurface& surface, double stiffness, const std::string& name);
+  static constexpr double kWallReach = 0.01;     // m
+  static constexpr double kWallEngage = 0.0005;  // m
+  /// Deepest a liver node went into wall w (push / stiffness, m) since construction.
+  double wall_penetration(int w) const { return walls_[static_cast<std::size_t>(w)].max_penetration; }
+  int wall_count() const { return static_cast<int>(walls_.size()); }
 
  private:
   std::vector<tool::ToolSpec> tools_;
@@ -173,6 +185,22 @@ class LiverOrgan final : public HapticOrgan {
   static constexpr std::size_t kInstrumentTicks = 512;  // ticks kept: more than a tracker cycle at 1 kHz
   std::vector<InstrumentsAt> instruments_at_;
   TickRecord scratch_;
+  struct Wall {
+    const rigid::RigidSurface* surface = nullptr;
+    double stiffness = 0;
+    std::string name;
+    std::vector<int> nodes;    // the liver's surface nodes within kWallReach of it at rest
+    int first = 0, count = 0;  // its body points in the last step
+    double max_penetration = 0;
+    std::uint64_t contact_ticks = 0;
+    int contacts_max = 0;
+  };
+  /// Loop thread: the walls' body points after the bowel's, from `begin`; returns the new count.
+  int gather_walls(int begin) noexcept;
+  /// Loop thread, after the step: each wall's deepest push.
+  void account_walls() noexcept;
+  std::vector<Wall> walls_;
+  std::array<contact::BodyPoint, contact::ToolContacts::kMaxBodyPoints> bodies_{};
   std::unique_ptr<LiverObstacle> obstacle_;  // obstacle(): built on demand, in a field with a bowel (gathers its
                                              // coupled body's points before each step)
   std::uint64_t min_period_ns_ = 0;

@@ -29,7 +29,8 @@ constexpr double kProxyForceGuard = 1e4;
 RigidOrgan::RigidOrgan(const scene::Scene& scene)
     : name_(scene.organs.at(0).name),
       surface_(mesher::load_scene_surface(scene), scene.rigid.cavity, mesher::organ_where(scene)),
-      surface_hash_(mesher::rigid_surface_hash(surface_.surface(), scene.rigid.cavity)) {
+      surface_hash_(mesher::rigid_surface_hash(surface_.surface(), scene.rigid.cavity)),
+      stiffness_(scene.rigid.stiffness) {
   proxies_.reserve(scene.tools.size());
   for (const tool::ToolSpec& t : scene.tools) {
     rigid::ProxyParams p;

@@ -53,6 +53,8 @@ class RigidOrgan final : public HapticOrgan {
   void print_summary(std::ostream& out) const override;
 
   const rigid::RigidSurface& surface() const { return surface_; }
+  /// The surface's stiffness (N/m, scene rigid.stiffness).
+  double stiffness() const { return stiffness_; }
   /// The surface as an obstacle for the field's deformable organs (CompositeOrgan gives it to the intestine).
   const intestine::Obstacle& obstacle() const { return obstacle_; }
   const rigid::Proxy& proxy(int i) const { return proxies_[static_cast<std::size_t>(i)]; }
@@ -64,6 +66,7 @@ class RigidOrgan final : public HapticOrgan {
   rigid::RigidSurface surface_;
   RigidObstacle obstacle_{surface_};
   std::uint64_t surface_hash_ = 0;
+  double stiffness_ = 0;
   std::vector<rigid::Proxy> proxies_;  // one per instrument
   std::array<bool, tool::kMaxInstruments> tracking_{};  // the proxy follows a tip (false: reset at the next input)
   std::array<double, tool::kMaxInstruments> max_penetration_{};

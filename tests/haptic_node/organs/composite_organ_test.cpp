@@ -432,5 +432,53 @@ TEST(CompositeOrgan, TheShippedFieldRestsSixtySecondsWithBoundedEnergy) {
   EXPECT_TRUE(t[0].force.isZero(0)) << "no instrument: no force";
 }
 
+// The liver against a rigid organ: the plate (held at its corners) over a floor 2 mm below its underside, pressed 4 mm
+// at its centre. Its underside's nodes are rows of its own solve against the floor: they stop on it (less than 1 mm
+// into it, the floor's 2000 N/m penalty), and the instrument feels the floor through the plate. Alone, the same press
+// takes the underside through where the floor is.
+TEST(CompositeOrgan, TheLiverStopsOnARigidOrganUnderAnInstrumentsPress) {
+  const fs::path dir = test_dir();
+  const std::string floor =
+      "  - name: floor\n"
+      "    model: rigid\n"
+      "    rigid: {generate: plane, size: [0.3, 0.3, 0]}\n"
+      "    placement: {translation: [0, 0, -0.007]}\n";
+  const Scene both = scene_of(dir, "on_floor.yaml", kPlate + floor);
+  const Scene alone = scene_of(dir, "plate.yaml", kPlate);
+  const auto organ = make_haptic_organ(both, SURGSIM_TEST_CACHE_DIR, 10, nullptr);
+  const auto plate_alone = make_haptic_organ(alone, SURGSIM_TEST_CACHE_DIR, 10, nullptr);
+  const auto& plate = dynamic_cast<const LiverOrgan&>(dynamic_cast<const CompositeOrgan&>(*organ).organ(0));
+  ASSERT_EQ(plate.wall_count(), 1);
+  const auto path = press(both.tools[0]);
+  const auto with = run(*organ, path);
+  const auto without = run(*plate_alone, path);
+  // The lowest point of the underside under each solution.
+  const auto lowest = [](const LiverOrgan& liver) {
+    double z = 1;
+    for (int n : liver.surface().nodes) {
+      Eigen::Vector3d u;
+      if (liver.liver_contacts().solution_displacement(n, u)) z = std::min(z, liver.mesh().nodes(n, 2) + u.z());
+    }
+    return z;
+  };
+  const auto* alone_composite = dynamic_cast<const CompositeOrgan*>(plate_alone.get());
+  const auto& plate_only = dynamic_cast<const LiverOrgan&>(
+      alone_composite != nullptr ? alone_composite->organ(0) : static_cast<const HapticOrgan&>(*plate_alone));
+  const double z_with = lowest(plate), z_without = lowest(plate_only);
+  nlohmann::json stats;
+  organ->add_stats(stats);
+  const nlohmann::json& walls = stats["organs"][0]["walls"];
+  std::cout << "[plate on floor] lowest underside point " << z_with * 1e3 << " mm (alone " << z_without * 1e3
+            << " mm; floor at -7 mm); force " << with.back().force.z() << " N (alone " << without.back().force.z()
+            << " N); " << walls.dump() << "\n";
+  EXPECT_LT(z_without, -0.007 - 0.001) << "the control must go through where the floor is";
+  EXPECT_GT(z_with, -0.007 - 0.001);
+  ASSERT_EQ(walls.size(), 1u);
+  EXPECT_EQ(walls[0]["organ"], "floor");
+  EXPECT_GT(walls[0]["contact_ticks"].get<int>(), 10);
+  EXPECT_LT(walls[0]["max_penetration_mm"].get<double>(), 1.0);
+  EXPECT_GT(with.back().force.z(), without.back().force.z() + 0.01) << "the floor must hold the plate up";
+}
+
 }  // namespace
 }  // namespace surgsim
