@@ -188,6 +188,8 @@ class ToolContacts {
   /// The last step()'s answer for body point j of the set_bodies() before it.
   int body_count() const { return body_results_; }
   const BodyForce& body_force(int j) const { return body_force_[static_cast<std::size_t>(j)]; }
+  /// Body point j as the last step() was given it.
+  const BodyPoint& body(int j) const { return bodies_[static_cast<std::size_t>(j)]; }
   /// Body points given past kMaxBodyPoints, or left out of a solve for the contact capacity, since construction.
   long body_overflow() const { return body_overflow_; }
   /// The push on the organ's side of body points in the last step: sum over solved points of -push n (N).

@@ -73,7 +73,7 @@ bool LiverObstacle::nearest(int node, const Eigen::Vector3d& p, double max_dista
   const double push = contacts.body_force(j).push;
   if (!(push > 0)) return false;  // the solve let go: not touching
   hit.distance = max_distance - push / body_stiffness_;
-  hit.normal = normals_[static_cast<std::size_t>(j)];
+  hit.normal = contacts.body(j).normal;
   return true;
 }
 
@@ -86,15 +86,14 @@ void LiverObstacle::couple(const IntestineModel& model, const IntestineState& st
 }
 
 int LiverObstacle::gather(const ToolContacts& contacts, BodyPoint* out, int room) noexcept {
-  gathered_ = 0;
   if (!coupled()) return 0;
   std::fill(point_of_node_.begin(), point_of_node_.end(), -1);
   if (liver_.model().generation != generation_ || !(body_stiffness_ > 0)) return 0;
-  room = std::min(room, ToolContacts::kMaxBodyPoints);
   const Eigen::Matrix3Xd& x = body_state_->x;
   const int nodes = std::min(static_cast<int>(x.cols()), static_cast<int>(point_of_node_.size()));
   const double reach = kDentReach + kEngage;
-  Eigen::AlignedBox3d box = rest_.bounds();
+  int n = 0;
+  const Eigen::AlignedBox3d& box = rest_.bounds();
   for (int node = 0; node < nodes; ++node) {
     const double radius = obstacle_radius(*body_model_, node);
     if (!(radius > 0)) continue;
@@ -118,20 +117,19 @@ int LiverObstacle::gather(const ToolContacts& contacts, BodyPoint* out, int room
       point_of_node_[static_cast<std::size_t>(node)] = kAway;
       continue;
     }
-    if (gathered_ == room) {
+    if (n == room) {
       ++overflow_;
       continue;
     }
-    BodyPoint& b = out[gathered_];
-    normals_[static_cast<std::size_t>(gathered_)] = c.normal;
+    BodyPoint& b = out[n];
     b.nodes = {c.corners[0], c.corners[1], c.corners[2]};
     b.bary = c.bary;
     b.normal = c.normal;
     b.gap = gap;
     b.stiffness = body_stiffness_;
-    point_of_node_[static_cast<std::size_t>(node)] = gathered_++;
+    point_of_node_[static_cast<std::size_t>(node)] = n++;
   }
-  return gathered_;
+  return n;
 }
 
 void LiverOrgan::add_wall(const rigid::RigidSurface& surface, double stiffness, const std::string& name) {
@@ -318,6 +316,10 @@ void LiverOrgan::add_stats(nlohmann::json& j) const {
                        {"max_penetration_mm", 1e3 * w.max_penetration}});
     }
     j["walls"] = std::move(walls);
+  }
+  if (obstacle_ != nullptr && obstacle_->coupled()) {
+    // The bowel's points left one-way: no room in the liver's solve (gathered past its points, or past its nodes).
+    j["body_points_one_way"] = obstacle_->overflow() + contacts_->body_overflow();
   }
   if (multirate_ == nullptr) return;
   MultirateContacts& m = *multirate_;

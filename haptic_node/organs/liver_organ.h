@@ -60,8 +60,7 @@ class LiverObstacle final : public intestine::Obstacle {
   bool nearest(const Eigen::Vector3d& p, double max_distance, intestine::ObstacleHit& hit) const noexcept override;
   bool nearest(int node, const Eigen::Vector3d& p, double max_distance,
                intestine::ObstacleHit& hit) const noexcept override;
-  /// Body points of the last gather(); body points left one-way (no room) since construction.
-  int gathered() const { return gathered_; }
+  /// Body points left one-way (no room in the solve) since construction.
   long overflow() const { return overflow_; }
 
  private:
@@ -76,8 +75,6 @@ class LiverObstacle final : public intestine::Obstacle {
   double body_stiffness_ = 0;       // N/m, the body's obstacle_stiffness
   static constexpr int kAway = -2;  // point_of_node_: clear of the surface in the last gather (-1: not looked at)
   std::vector<int> point_of_node_;  // per body node: its body point in the last gather, or kAway / -1
-  std::array<Eigen::Vector3d, contact::ToolContacts::kMaxBodyPoints> normals_{};  // of the last gather's points
-  int gathered_ = 0;
   long overflow_ = 0;
 };
 
@@ -155,8 +152,6 @@ class LiverOrgan final : public HapticOrgan {
   void add_wall(const rigid::RigidSurface& surface, double stiffness, const std::string& name);
   static constexpr double kWallReach = 0.01;     // m
   static constexpr double kWallEngage = 0.0005;  // m
-  /// Deepest a liver node went into wall w (push / stiffness, m) since construction.
-  double wall_penetration(int w) const { return walls_[static_cast<std::size_t>(w)].max_penetration; }
   int wall_count() const { return static_cast<int>(walls_.size()); }
 
  private:

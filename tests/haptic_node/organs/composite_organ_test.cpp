@@ -256,6 +256,12 @@ const std::string kFloor =
     "    rigid: {generate: plane, size: [0.6, 0.4, 0]}\n"
     "    placement: {translation: [0, 0, -0.061]}\n";
 
+// The organ of a one-organ scene, whether make_haptic_organ built it alone or as a composite of one.
+const HapticOrgan& only_organ(const HapticOrgan& organ) {
+  const auto* composite = dynamic_cast<const CompositeOrgan*>(&organ);
+  return composite != nullptr ? composite->organ(0) : organ;
+}
+
 // The bowel of `field` (organ `index`) and the same bowel alone (`alone`), each stepped 3 s at 1 kHz with no
 // instrument: the body under its weight.
 struct BowelRuns {
@@ -268,9 +274,7 @@ BowelRuns rest_3s(const Scene& field, int index, const Scene& alone) {
   r.field = make_haptic_organ(field, SURGSIM_TEST_CACHE_DIR, 3000, nullptr);
   r.alone = make_haptic_organ(alone, SURGSIM_TEST_CACHE_DIR, 3000, nullptr);
   r.bowel = &dynamic_cast<const IntestineOrgan&>(dynamic_cast<const CompositeOrgan&>(*r.field).organ(index));
-  const auto* alone_composite = dynamic_cast<const CompositeOrgan*>(r.alone.get());
-  r.free_bowel = &dynamic_cast<const IntestineOrgan&>(
-      alone_composite != nullptr ? alone_composite->organ(0) : static_cast<const HapticOrgan&>(*r.alone));
+  r.free_bowel = &dynamic_cast<const IntestineOrgan&>(only_organ(*r.alone));
   const InstrumentInput none{nullptr, 0.0};
   ContactTick t;
   for (int k = 0; k < 3000; ++k) {
@@ -461,9 +465,7 @@ TEST(CompositeOrgan, TheLiverStopsOnARigidOrganUnderAnInstrumentsPress) {
     }
     return z;
   };
-  const auto* alone_composite = dynamic_cast<const CompositeOrgan*>(plate_alone.get());
-  const auto& plate_only = dynamic_cast<const LiverOrgan&>(
-      alone_composite != nullptr ? alone_composite->organ(0) : static_cast<const HapticOrgan&>(*plate_alone));
+  const auto& plate_only = dynamic_cast<const LiverOrgan&>(only_organ(*plate_alone));
   const double z_with = lowest(plate), z_without = lowest(plate_only);
   nlohmann::json stats;
   organ->add_stats(stats);
