@@ -173,6 +173,10 @@ HapticApp::HapticApp(const HapticOptions& options)
   popt.body_points = organ_->output_points();
   popt.lossless = options_.speed <= 0;
   popt.samples = static_cast<std::size_t>(total_ticks_) + 16;
+  // haptic.publish_hz: ContactFrame and the organ's topics for one tick in this many (ForceFeedback every tick).
+  if (scene_.haptic.publish_hz > 0) {
+    popt.frame_every = static_cast<std::uint64_t>(std::max(1.0, std::round(rate_hz_ / scene_.haptic.publish_hz)));
+  }
   // SURGSIM_HAPTIC_PUBLISHER=inline: the writes on the loop thread as before the publisher thread existed, to
   // measure against (stats publisher_mode "inline (loop thread)"); anything else: the publisher thread.
   const char* pub_env = std::getenv("SURGSIM_HAPTIC_PUBLISHER");
@@ -516,6 +520,7 @@ void HapticApp::shutdown() {
                         : publisher_->back_pressure() ? "newest force, every frame (loop waits when 64 behind)"
                                                       : "newest force, frames in order unless 32 behind";
   j["publisher_written"] = publisher_->written();
+  j["publisher_thinned"] = publisher_->thinned();  // frames not written by design (haptic.publish_hz)
   j["publisher_skipped"] = publisher_->skipped();
   j["publisher_forces_written"] = publisher_->forces_written();
   j["publisher_forces_skipped"] = publisher_->forces_skipped();

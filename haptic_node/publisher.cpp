@@ -55,6 +55,16 @@ Publisher::Publisher(TickSink& sink, const PublisherOptions& options)
 
 Publisher::~Publisher() { finish(); }
 
+void Publisher::write_frame_if_due(const TickRecord& r, std::uint64_t stamp_ns) noexcept {
+  if (r.seq < next_frame_seq_ && !r.last_tick) {
+    thinned_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  next_frame_seq_ = r.seq + std::max<std::uint64_t>(options_.frame_every, 1);
+  sink_.write_frame(r, stamp_ns);
+  written_.fetch_add(1, std::memory_order_relaxed);
+}
+
 TickRecord& Publisher::begin() noexcept {
   const std::uint64_t i = ring_.head(std::memory_order_relaxed);
   const std::size_t n = ring_.size();
@@ -83,8 +93,7 @@ void Publisher::commit() noexcept {
   if (options_.inline_writes) {  // measurement only: the writes on the loop thread (no publisher thread)
     const std::uint64_t t0 = monotonic_ns();
     write_record_force(r, r.commit_ns);
-    sink_.write_frame(r, monotonic_ns());
-    written_.fetch_add(1, std::memory_order_relaxed);
+    write_frame_if_due(r, monotonic_ns());
     write_us_.add(static_cast<double>(monotonic_ns() - t0) * 1e-3);
     inline_last_ = r;
     inline_have_last_ = true;
@@ -176,8 +185,7 @@ void Publisher::run() noexcept {
         const std::uint64_t i = next_frame;
         if (read(i, frame, frame_points)) {
           write_record_force(frame, frame.commit_ns);
-          sink_.write_frame(frame, monotonic_ns());
-          written_.fetch_add(1, std::memory_order_relaxed);
+          write_frame_if_due(frame, monotonic_ns());
           last = frame;
           have_last = true;
         } else {
@@ -210,15 +218,11 @@ void Publisher::run() noexcept {
           const std::uint64_t i = next_frame;
           bool ok = true;
           if (i == n && newest_ok) {
-            sink_.write_frame(newest, monotonic_ns());
+            write_frame_if_due(newest, monotonic_ns());
           } else if ((ok = read(i, frame, frame_points))) {
-            sink_.write_frame(frame, monotonic_ns());
+            write_frame_if_due(frame, monotonic_ns());
           }
-          if (ok) {
-            written_.fetch_add(1, std::memory_order_relaxed);
-          } else {
-            skipped_.fetch_add(1, std::memory_order_relaxed);
-          }
+          if (!ok) skipped_.fetch_add(1, std::memory_order_relaxed);
           next_frame = i + 1;
         }
         consumed_.store(next_frame, std::memory_order_release);

@@ -26,6 +26,9 @@
 //    periods), the publisher re-sends tick k's force with kFlagHeld, once per missed period: the first missed period
 //    holds it, then it fades linearly to exactly zero `fade_ns` (10 ms) after the first missed deadline. Each such
 //    sample counts in overrun_hold_ticks(). A fresh record is sent as computed the moment it arrives.
+//  - Thinned frames (frame_every > 1, the scene's haptic.publish_hz): ContactFrame and the organ's topics go out for
+//    one record in frame_every at most (seq 0, then the first record at least frame_every after the last written) and
+//    for the last tick; the others are counted in thinned(). ForceFeedback is still every tick's.
 //  - Shutdown (finish()): every record handed over is drained (the last tick's ForceFeedback and ContactFrame are
 //    written), then a final zero ForceFeedback (seq = last tick + 1, the last tick's flags | kFlagHeld).
 #pragma once
@@ -112,6 +115,7 @@ struct PublisherOptions {
                                        // only to measure against: SURGSIM_HAPTIC_PUBLISHER=inline)
   std::uint64_t fade_ns = 10'000'000;  // overrun: from hold to zero
   std::size_t samples = 1 << 16;       // write-time samples kept for the percentiles
+  std::uint64_t frame_every = 1;       // ContactFrame and organ topics for one record in this many at most (>= 1)
 };
 
 class Publisher {
@@ -142,6 +146,8 @@ class Publisher {
   std::uint64_t committed() const { return ring_.head(std::memory_order_relaxed); }
   std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }  // frames written
   std::uint64_t skipped() const { return skipped_.load(std::memory_order_relaxed); }  // frames never written
+  /// Records whose frame was not written by design (frame_every): not in written() nor skipped().
+  std::uint64_t thinned() const { return thinned_.load(std::memory_order_relaxed); }
   std::uint64_t forces_written() const { return forces_written_.load(std::memory_order_relaxed); }
   std::uint64_t forces_skipped() const { return forces_skipped_.load(std::memory_order_relaxed); }
   std::uint64_t overrun_hold_ticks() const { return hold_ticks_.load(std::memory_order_relaxed); }
@@ -162,6 +168,8 @@ class Publisher {
   void write_record_force(const TickRecord& r, std::uint64_t commit_ns) noexcept;
   /// The final zero force of every instrument of `last` (null: instrument 0 only, nothing was handed over).
   void write_zero(const TickRecord* last) noexcept;
+  /// The record's ContactFrame and organ topics when due (frame_every), counted in written(); else in thinned().
+  void write_frame_if_due(const TickRecord& r, std::uint64_t stamp_ns) noexcept;
   void wait_for(std::uint64_t seen_head, std::uint64_t deadline_ns) noexcept;
 
   TickSink& sink_;
@@ -177,7 +185,8 @@ class Publisher {
   std::atomic<bool> stop_{false};
   std::atomic<bool> back_pressure_{false};
   std::atomic<std::uint64_t> written_{0}, skipped_{0}, forces_written_{0}, forces_skipped_{0}, hold_ticks_{0},
-      faded_to_zero_{0};
+      faded_to_zero_{0}, thinned_{0};
+  std::uint64_t next_frame_seq_ = 0;  // frame_every: the first seq whose frame is due (the writing thread's only)
   std::atomic<bool> final_zero_{false};
   core::SampleRecorder write_us_;
   core::SampleRecorder latency_us_;

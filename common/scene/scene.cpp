@@ -586,7 +586,7 @@ ToolSpec read_tool(const Reader& r, const Field& f) {
 }
 
 HapticSpec read_haptic(const Reader& r, const Field& f) {
-  const Map m(r, f, {"rate_hz", "passivity", "coupling_damping", "passivity_max_damping"});
+  const Map m(r, f, {"rate_hz", "passivity", "coupling_damping", "passivity_max_damping", "publish_hz"});
   HapticSpec h;
   if (m.has("rate_hz"))
     h.rate_hz = r.number(m.at("rate_hz"), closed(50, 20000), "haptic rate in Hz, >= 300 for stable force feedback");
@@ -598,6 +598,16 @@ HapticSpec read_haptic(const Reader& r, const Field& f) {
   if (m.has("passivity_max_damping")) {
     h.passivity_max_damping = r.number(m.at("passivity_max_damping"), {0, 1000, true, false},
                                        "largest damping of the passivity controller in N s/m, (0, 1000], e.g. 30");
+  }
+  if (m.has("publish_hz")) {
+    const Field& b = m.at("publish_hz");
+    h.publish_hz =
+        r.number(b, closed(0, 20000), "contact frames and body states per second, 0 (every tick) or 1..rate_hz");
+    if (h.publish_hz > 0 && (h.publish_hz < 1 || h.publish_hz > h.rate_hz)) {
+      r.fail(b.line, m.key("publish_hz"),
+             "publish_hz = " + fmt(h.publish_hz) + " is not 0 or within 1..rate_hz (" + fmt(h.rate_hz) + ")",
+             "use 0 for every tick, or a rate up to the haptic rate, e.g. 4 x visual.rate_hz");
+    }
   }
   return h;
 }

@@ -24,6 +24,11 @@ struct HapticSpec {
   bool passivity = true;               // the passivity controller acts (the observer always runs)
   double coupling_damping = 3.0;       // N s/m along the contact force, 0..1000 (0: no coupling damper)
   double passivity_max_damping = 30.0; // N s/m, cap of the controller's variable damping, (0, 1000]
+  // ContactFrame and the organs' own topics (a mass-spring body's BodyState: its every position) are published at
+  // most this often; 0 = every tick. ForceFeedback is every tick's regardless. The visual node draws the newest at
+  // its own rate, so more than a few per frame is work for nothing on every node that reads them (not in the scene
+  // hash: no physics).
+  double publish_hz = 0;  // Hz, 0 or 1..rate_hz
 };
 
 /// The picture's camera. YAML `camera: {eye, target, up, fov_deg}`, or a laparoscope through a port:

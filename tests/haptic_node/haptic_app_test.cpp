@@ -2,9 +2,12 @@
 #include "haptic_app.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -77,11 +80,15 @@ TEST(HapticApp, IntestineTickAllocatesNothingOnceWarm) {
 
 // Nothing but physics on the loop thread: tick() hands its outputs over and the publisher thread makes
 // every DDS write. Every tick's ForceFeedback is written before its ContactFrame (--speed max keeps all of them), the
-// intestine's BodyState after both, and finish_publishing() ends with a zero force (seq = last tick + 1).
-void expect_no_dds_write_on_the_loop_thread(const std::string& scene, double duration, int per_tick) {
+// intestine's BodyState after both, and finish_publishing() ends with a zero force (seq = last tick + 1). With
+// frame_every > 1 (haptic.publish_hz) the ContactFrame and the BodyState go out only on ticks 0, frame_every,
+// 2 frame_every, ... and the last; the force still every tick.
+void expect_no_dds_write_on_the_loop_thread(const std::string& scene, double duration, bool body,
+                                            std::uint64_t frame_every = 1) {
   HapticOptions o = test_options();
   o.scene = scene;
   o.duration = duration;
+  o.stats = ::testing::TempDir() + "/haptic_app_publish_stats.json";
   HapticApp app(o);
   test::dds_spy_start();
   for (std::uint64_t k = 0; k < app.total_ticks(); ++k) app.tick(k);  // this thread is the loop
@@ -91,22 +98,37 @@ void expect_no_dds_write_on_the_loop_thread(const std::string& scene, double dur
   long on_loop = 0;
   for (const auto& x : w) on_loop += x.thread == std::this_thread::get_id() ? 1 : 0;
   EXPECT_EQ(on_loop, 0) << "DDS writes made by the loop thread";
-  ASSERT_EQ(w.size(), static_cast<std::size_t>(per_tick) * n + 1) << "every tick's topics and the final zero";
+  std::size_t i = 0;  // the next write expected
+  std::uint64_t frames = 0;
   for (std::uint64_t k = 0; k < n; ++k) {
-    const auto& f = w[per_tick * k];
+    ASSERT_LT(i, w.size()) << "tick " << k << ": its force was not written";
+    const auto& f = w[i++];
     EXPECT_EQ(f.topic, dds::kForceFeedbackTopic) << "tick " << k << ": the force goes first";
     EXPECT_EQ(f.seq, k);
-    EXPECT_EQ(w[per_tick * k + 1].topic, dds::kContactFrameTopic) << "tick " << k;
-    EXPECT_EQ(w[per_tick * k + 1].seq, k);
-    // A one-organ scene: every contact entry is organ 0's.
-    for (int organ : w[per_tick * k + 1].contact_organs) EXPECT_EQ(organ, 0) << "tick " << k;
-    if (per_tick == 3) {
-      EXPECT_EQ(w[per_tick * k + 2].topic, dds::kBodyStateTopic) << "tick " << k;
-      EXPECT_EQ(w[per_tick * k + 2].seq, k);
-      EXPECT_EQ(w[per_tick * k + 2].organ, 0) << "tick " << k << ": BodyState's key, the one organ's index";
+    if (k % frame_every == 0 || k + 1 == n) {
+      ASSERT_LT(i, w.size()) << "tick " << k << ": no ContactFrame";
+      EXPECT_EQ(w[i].topic, dds::kContactFrameTopic) << "tick " << k;
+      EXPECT_EQ(w[i].seq, k);
+      // A one-organ scene: every contact entry is organ 0's.
+      for (int organ : w[i].contact_organs) EXPECT_EQ(organ, 0) << "tick " << k;
+      ++i;
+      ++frames;
+      if (body) {
+        ASSERT_LT(i, w.size()) << "tick " << k << ": no BodyState";
+        EXPECT_EQ(w[i].topic, dds::kBodyStateTopic) << "tick " << k;
+        EXPECT_EQ(w[i].seq, k);
+        EXPECT_EQ(w[i].organ, 0) << "tick " << k << ": BodyState's key, the one organ's index";
+        ++i;
+      }
     }
     if (::testing::Test::HasFailure()) break;
   }
+  ASSERT_EQ(w.size(), i + 1) << "every tick's topics and the final zero, nothing else";
+  EXPECT_EQ(frames, (n - 1) / frame_every + 1 + ((n - 1) % frame_every != 0 ? 1 : 0));
+  app.shutdown();
+  std::ifstream stats(o.stats);
+  ASSERT_TRUE(stats) << o.stats;
+  EXPECT_EQ(nlohmann::json::parse(stats)["publisher_thinned"].get<std::uint64_t>(), n - frames);
   const auto& last = w.back();
   EXPECT_EQ(last.topic, dds::kForceFeedbackTopic);
   EXPECT_EQ(last.seq, n);
@@ -115,8 +137,29 @@ void expect_no_dds_write_on_the_loop_thread(const std::string& scene, double dur
   EXPECT_EQ(last.force[2], 0.0);
 }
 
-TEST(HapticApp, NoDdsWriteOnTheLoopThreadLiver) { expect_no_dds_write_on_the_loop_thread("liver", 2.0, 2); }
-TEST(HapticApp, NoDdsWriteOnTheLoopThreadIntestine) { expect_no_dds_write_on_the_loop_thread("intestine", 0.5, 3); }
+TEST(HapticApp, NoDdsWriteOnTheLoopThreadLiver) { expect_no_dds_write_on_the_loop_thread("liver", 2.0, false); }
+TEST(HapticApp, NoDdsWriteOnTheLoopThreadIntestine) { expect_no_dds_write_on_the_loop_thread("intestine", 0.5, true); }
+
+// haptic.publish_hz: the intestine scene at 1 kHz publishing at 250 Hz writes its ContactFrame and BodyState on ticks
+// 0, 4, 8, ... and the last one; the force every tick.
+TEST(HapticApp, FramesAndBodyStatesAtTheScenesPublishRate) {
+  const std::string config = SURGSIM_TEST_CONFIG_DIR;
+  std::ifstream in(config + "/intestine.yaml");
+  ASSERT_TRUE(in) << config << "/intestine.yaml";
+  std::stringstream text;
+  text << in.rdbuf();
+  std::string yaml = text.str();
+  const std::string rate = "haptic:\n  rate_hz: 1000\n";
+  const std::string trajectory = "trajectory: trajectories/";
+  ASSERT_NE(yaml.find(rate), std::string::npos) << "the shipped intestine scene's haptic block changed";
+  ASSERT_NE(yaml.find(trajectory), std::string::npos) << "the shipped intestine scene's trajectory changed";
+  yaml.replace(yaml.find(rate), rate.size(), rate + "  publish_hz: 250\n");
+  yaml.replace(yaml.find(trajectory), trajectory.size(), "trajectory: " + config + "/trajectories/");
+  const std::string path = ::testing::TempDir() + "/haptic_app_publish_rate.yaml";
+  std::ofstream(path) << yaml;
+  expect_no_dds_write_on_the_loop_thread(path, 0.5, true, 4);    // 500 ticks: 0, 4, ..., 496 and the last, 499
+  expect_no_dds_write_on_the_loop_thread(path, 0.501, true, 4);  // 501 ticks: 0, 4, ..., 500 (the last)
+}
 
 // SceneInfo (wire v3) of a one-organ scene: one OrganInfo, named after the scene, of the scene's model, whose hashes
 // and counts are the whole scene's (the scalar fields).

@@ -214,6 +214,46 @@ TEST(Publisher, FarBehindSkipsStaleFramesAndNeverWaitsTheProducer) {
   EXPECT_EQ(p.written() + p.skipped(), p.committed());
 }
 
+// frame_every (haptic.publish_hz): every tick's force, but the frame (and the organ's topics) of one tick in
+// frame_every and of the last tick; the others are counted as thinned, neither written nor skipped.
+TEST(Publisher, ThinnedFramesEveryForceAndTheLastTicksFrame) {
+  RecordingSink sink;
+  PublisherOptions o;
+  o.lossless = true;
+  o.frame_every = 4;
+  Publisher p(sink, o);
+  for (std::uint64_t k = 0; k <= 10; ++k) push(p, k, 1.0 + static_cast<double>(k), 0, 0, k == 10);
+  p.finish();
+  std::string order;
+  for (const auto& e : sink.events()) order += e.kind + std::to_string(e.seq) + " ";
+  EXPECT_EQ(order, "F0 C0 F1 F2 F3 F4 C4 F5 F6 F7 F8 C8 F9 F10 C10 F11 ");
+  EXPECT_EQ(p.written(), 4u);
+  EXPECT_EQ(p.thinned(), 7u);
+  EXPECT_EQ(p.skipped(), 0u);
+  EXPECT_EQ(p.forces_written(), 11u);
+}
+
+// Real-time mode behind, thinned: the newest force first, then the due frames in order (seq 3, 6, 9 after 0).
+TEST(Publisher, BehindAndThinnedWritesTheDueFramesInOrder) {
+  RecordingSink sink;
+  PublisherOptions o;
+  o.slots = 64;
+  o.frame_every = 3;
+  Publisher p(sink, o);
+  sink.hold_next();
+  push(p, 0, 1.0);
+  sink.wait_blocked();  // the publisher is inside the force write of tick 0
+  for (std::uint64_t k = 1; k <= 9; ++k) push(p, k, 1.0 + static_cast<double>(k));
+  sink.release();
+  p.finish();
+  std::string order;
+  for (const auto& e : sink.events()) order += e.kind + std::to_string(e.seq) + " ";
+  EXPECT_EQ(order, "F0 C0 F9 C3 C6 C9 F10 ");
+  EXPECT_EQ(p.written(), 4u);
+  EXPECT_EQ(p.thinned(), 6u);
+  EXPECT_EQ(p.written() + p.skipped() + p.thinned(), p.committed());
+}
+
 // A paced loop without SCHED_FIFO: the newest force first, but no frame skipped (the producer waits when full).
 TEST(Publisher, BackPressureKeepsEveryFrame) {
   RecordingSink sink;

@@ -139,7 +139,7 @@ tool:
   contact_model: triangle
   tip_radius: 0.004
   friction: 0.25
-haptic: {rate_hz: 1000, passivity: false, coupling_damping: 1.5, passivity_max_damping: 12}
+haptic: {rate_hz: 1000, passivity: false, coupling_damping: 1.5, passivity_max_damping: 12, publish_hz: 120}
 visual:
   rate_hz: 60
   width: 800
@@ -178,6 +178,7 @@ trajectory: ../traj/poke.csv
   EXPECT_FALSE(s.haptic.passivity);
   EXPECT_EQ(s.haptic.coupling_damping, 1.5);
   EXPECT_EQ(s.haptic.passivity_max_damping, 12.0);
+  EXPECT_EQ(s.haptic.publish_hz, 120.0);
   EXPECT_EQ(s.visual.width, 800);
   EXPECT_EQ(s.visual.png_every, 0);
   EXPECT_TRUE(s.visual.vtk);
@@ -580,6 +581,8 @@ TEST(SceneHash, IgnoresVisualSettingsButNotPhysics) {
   EXPECT_NE(h0, load_scene(write(dir / "e1.yaml", base + "haptic: {passivity: false}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "e2.yaml", base + "haptic: {coupling_damping: 0}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "e3.yaml", base + "haptic: {passivity_max_damping: 10}\n")).hash());
+  // How often the body's state is published: no physics.
+  EXPECT_EQ(h0, load_scene(write(dir / "e4.yaml", base + "haptic: {publish_hz: 100}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "f.yaml", base + "tool: {force_limit: 4}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "f1.yaml", base + "tool: {friction: 0.1}\n")).hash());
   EXPECT_NE(h0, load_scene(write(dir / "f2.yaml", base + "tool: {tip_radius: 0.003}\n")).hash());
@@ -831,6 +834,12 @@ INSTANTIATE_TEST_SUITE_P(
                   "key 'haptic.passivity_max_damping'", "(0, 1000]"},
         ErrorCase{"PassivityMaxDampingHigh", kHead + "haptic:\n  rate_hz: 1000\n  passivity_max_damping: 1e4\n", 5,
                   "key 'haptic.passivity_max_damping'", "out of range"},
+        ErrorCase{"PublishRateNegative", kHead + "haptic: {publish_hz: -5}\n", 3, "key 'haptic.publish_hz'",
+                  "[0, 20000]"},
+        ErrorCase{"PublishRateAboveTheHapticRate", kHead + "haptic:\n  rate_hz: 500\n  publish_hz: 1000\n", 5,
+                  "key 'haptic.publish_hz'", "within 1..rate_hz (500)"},
+        ErrorCase{"PublishRateBelowOne", kHead + "haptic: {publish_hz: 0.5}\n", 3, "key 'haptic.publish_hz'",
+                  "not 0 or within"},
         ErrorCase{"HapticUnknownKey", kHead + "haptic: {coupling_stiffness: 100}\n", 3, "coupling_stiffness"},
         ErrorCase{"VisualRate", kHead + "visual: {rate_hz: 0}\n", 3, "key 'visual.rate_hz'", "[1, 1000]"},
         ErrorCase{"Width", kHead + "visual: {width: 8}\n", 3, "key 'visual.width'", "[16, 8192]"},
