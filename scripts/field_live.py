@@ -104,6 +104,7 @@ def main():
     ap.add_argument('--trajectory', default=None, help='default config/trajectories/<scene>.csv')
     ap.add_argument('--fps', type=float, default=20, help='frames streamed to the page per second (default 20)')
     ap.add_argument('--build', default=os.environ.get('SURGSIM_BUILD_DIR', os.path.join(root, 'build')))
+    ap.add_argument('--csv', default=None, help='also write the table to this file (scripts/report.sh: csv/)')
     args = ap.parse_args()
     trajectory = args.trajectory or os.path.join(root, 'config', 'trajectories', args.scene + '.csv')
     for p in ('bin/haptic_node', 'bin/visual_node', 'bin/surgsim-web', 'bench/rt_bench'):
@@ -134,10 +135,12 @@ def main():
     fields = ['pair', 'rt_bench_misses', 'rt_bench_ticks', 'rt_bench_pct', 'misses', 'ticks', 'miss_pct',
               'miss_diff_points', 'misses_within', 'tick_p99_us', 'visual_fps_run', 'visual_share', 'visual_within',
               'visual_fps_life', 'page_frames']
-    with open(os.path.join(args.out, 'field_live.csv'), 'w', newline='') as f:
-        w = csv.DictWriter(f, fieldnames=fields, extrasaction='ignore')
-        w.writeheader()
-        w.writerows(rows)
+    for path in [os.path.join(args.out, 'field_live.csv')] + ([args.csv] if args.csv else []):
+        with open(path, 'w', newline='') as f:
+            w = csv.DictWriter(f, fieldnames=fields, extrasaction='ignore')
+            w.writeheader()
+            w.writerows([dict(r, misses_within=int(r['misses_within']), visual_within=int(r['visual_within']))
+                          for r in rows])
     worst_miss = max(rows, key=lambda r: r['miss_diff_points'])
     worst_vis = min(rows, key=lambda r: r['visual_share'])
     print(f'field_live: worst misses: pair {worst_miss["pair"]}, {worst_miss["miss_diff_points"]:+.3f} points '

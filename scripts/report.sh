@@ -113,6 +113,7 @@ device_points="0.05,0.1,3 0.05,1,0.5 0.2,0.1,3 0.2,1,0.5 0.1,0.5,2"
 two_hands_s=5.5                         # the two-instrument trajectory (5 s), held 0.5 s
 abdomen_s=8.5                           # the abdomen trajectory (8 s), held 0.5 s
 abdomen_args=()
+field_args=(--pairs 3 --seconds 30 --rt-seconds 10)   # field_live.py: the field with a browser open, in pairs
 intestine_live_max_s=                   # empty: each intestine trajectory's length + 0.5 s
 intestine_load_step=${SURGSIM_REPORT_INTESTINE_LOAD_STEP:-2:2:1.5}
 tool_size_args=()                       # tool_size_bench: livers at 1500, 5000, 20000 target nodes (the last the reference)
@@ -132,6 +133,7 @@ if [ $quick = 1 ]; then
   scale_sizes=1500,5000
   web_s=6
   network_s=2
+  field_args=(--pairs 2 --seconds 10 --rt-seconds 10)
 fi
 if [ $smoke = 1 ]; then
   # Each program still runs and writes every file its section reads, on the least work that does: one size, few
@@ -148,6 +150,7 @@ if [ $smoke = 1 ]; then
   two_hands_s=2
   abdomen_s=2
   abdomen_args=(--quick)
+  field_args=(--pairs 1 --seconds 2 --rt-seconds 2)
   intestine_live_max_s=3
   intestine_load_step=${SURGSIM_REPORT_INTESTINE_LOAD_STEP:-1:1:1.5}
   tool_size_args=(--meshes 500,1500)
@@ -245,6 +248,9 @@ live_abdomen() {
     "$root/scripts/run_local.sh" abdomen
 }
 step live_abdomen live_abdomen
+# The field again with surgsim-web and a headless chromium showing the page for the whole run, in pairs after rt_bench.
+step field_live /usr/bin/python3 "$root/scripts/field_live.py" "$out/raw/field_live" "${field_args[@]}" --build "$build" \
+  --csv "$csv/field_live.csv"
 # The intestine live at 1 kHz with the visual node on one host, for both shipped trajectories, each just
 # after the machine's floor for as long as it runs (rt_bench, a row of its own in rt_floor.csv), so the missed
 # deadlines are set beside the floor of the same minute. The visual node's frame trace (frames/frame_trace.csv: time,

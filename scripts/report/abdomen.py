@@ -95,4 +95,27 @@ def write(rep):
     elif v is None:
         table.append(("live: visual node", "missing: `raw/live_abdomen/visual_stats.json` (%s)" % step_note(
             rep, "live_abdomen"), "", ""))
+    # The field with a browser showing the page for the whole run (scripts/field_live.py), in pairs after rt_bench.
+    pairs = rep.csv_rows("field_live")
+    if pairs:
+        worst_miss = max(pairs, key=lambda r: r["miss_diff_points"])
+        worst_vis = min(pairs, key=lambda r: r["visual_share"])
+        within_m = sum(1 for r in pairs if r["miss_diff_points"] <= BUDGETS["abdomen_missed_points"])
+        within_v = sum(1 for r in pairs if r["visual_share"] >= BUDGETS["visual_rate_fraction"])
+        table.append(("live with a browser open (field_live, %d pairs of %d ticks): missed deadlines, worst pair"
+                      % (len(pairs), worst_miss["ticks"]),
+                      "%.3f %% against rt_bench's %.3f %% just before (%+.3f points); %d of %d pairs within" % (
+                          worst_miss["miss_pct"], worst_miss["rt_bench_pct"], worst_miss["miss_diff_points"],
+                          within_m, len(pairs)),
+                      "within %g points of the floor" % BUDGETS["abdomen_missed_points"],
+                      verdict(within_m == len(pairs))))
+        table.append(("live with a browser open: visual node while the field ran, worst pair",
+                      "%.2f fps (%.1f %%); %d of %d pairs within" % (worst_vis["visual_fps_run"],
+                                                                   100 * worst_vis["visual_share"], within_v,
+                                                                   len(pairs)),
+                      ">= %g %% of its rate" % (100 * BUDGETS["visual_rate_fraction"]),
+                      verdict(within_v == len(pairs))))
+    else:
+        table.append(("live with a browser open (field_live)", "missing: `csv/field_live.csv` (%s)" % step_note(
+            rep, "field_live"), "", ""))
     budget_table(rep, table, "budget", "several organs: ")
