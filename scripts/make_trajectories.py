@@ -307,6 +307,50 @@ def abdomen(t):
     return [probe, grasper]
 
 
+# --- config/abdomen.yaml, second trajectory: the probe lifts the liver's edge into the ribs ---
+# The ribs: arcs of radius 0.12 m about y through (0, y, -0.08) at y = 0.10, 0.13, 0.16, each spanning x in
+# [-0.085, 0.085] over the top (bars 6 mm thick). The liver's right lobe runs out under the first one: its top at
+# (0.07, 0.09) is at z = -0.0125, 2 cm under the rib's underside (z ~ 0.010 at x = 0.07).
+ABD_LIFT_AIM = (0.072, 0.108, -0.03)  # the probe's line onto the right lobe's anterior edge: it touches the liver's
+                                      # top at about (0.068, 0.089, -0.011), under the first rib's caudal side
+ABD_LIFT_UP = (0.0, -0.004, 0.06)  # m, the grasped point carried up, past the rib's top, its tip caudal of the rib
+ABD_LIFT_OVER = 0.028             # m, then cranially over the rib (the tip between the first two): the lifted edge
+                                  # is drawn onto the first rib's caudal face
+
+
+def _probe_at(point):
+    """(pitch, yaw, insertion) of the probe whose tip is at `point`."""
+    d = _v(point, ABD_PROBE_TROCAR, lambda a, b: a - b)
+    pitch, yaw = aim(ABD_PROBE_AXIS, d)
+    return pitch, yaw, math.sqrt(_dot(d, d))
+
+
+def abdomen_lift(t):
+    # Probe: turned onto the right lobe's anterior edge under the first rib with its jaw open, in 3 mm past touching,
+    # the jaw closed (grasp), the grasped edge lifted ABD_LIFT_UP in 1.5 s and carried ABD_LIFT_OVER cranially over the
+    # rib in 1 s (the edge drawn onto it), held 0.9 s, back the same way, released, out.
+    d = _unit(_v(ABD_LIFT_AIM, ABD_PROBE_TROCAR, lambda a, b: a - b))
+    touch = liver_touch(ABD_PROBE_TROCAR, d)
+    grasp = tuple(ABD_PROBE_TROCAR[i] + (touch + 0.003) * d[i] for i in range(3))
+    pitch, yaw = aim(ABD_PROBE_AXIS, d)
+    if t < 1.5:
+        probe = (ramp(t, 0.0, 0.5, 0.0, pitch), ramp(t, 0.0, 0.5, 0.0, yaw),
+                 ramp(t, 0.4, 1.4, touch - 0.02, touch + 0.003), 0.0, 0.5)
+    else:
+        up = ramp(t, 2.0, 3.5, 0.0, 1.0) if t < 5.0 else ramp(t, 6.4, 7.4, 1.0, 0.0)
+        over = ramp(t, 3.5, 4.5, 0.0, ABD_LIFT_OVER) if t < 5.0 else ramp(t, 5.4, 6.4, ABD_LIFT_OVER, 0.0)
+        at = tuple(grasp[i] + up * ABD_LIFT_UP[i] + (over if i == 1 else 0.0) for i in range(3))
+        pw, yw, iw = _probe_at(at)
+        if t >= 8.0:
+            iw = ramp(t, 8.0, 9.0, iw, iw - 0.03)
+        jaw = ramp(t, 1.5, 1.8, 0.5, 0.0) if t < 7.6 else ramp(t, 7.6, 7.9, 0.0, 0.5)
+        probe = (pw, yw, iw, 0.0, jaw)
+    # Grasper, jaw open: along its base axis into the bowel's folds, a loop pushed onto the liver's lower edge and held
+    # there while the edge is lifted, back out.
+    g = ramp(t, 1.0, 2.2, 0.03, 0.15) if t < 7.6 else ramp(t, 7.6, 8.6, 0.15, 0.03)
+    return [probe, (0.0, 0.0, g, 0.0, 0.5)]
+
+
 def abdomen_loop(t):
     """abdomen() six times, 9 s apart: each 8 s run, then 1 s back to its start pose along a straight line (a load
     for paired live runs as long as rt_bench's: not shipped, written only when asked for)."""
@@ -325,6 +369,10 @@ if __name__ == "__main__":
         write("abdomen.csv", 8.0, abdomen,
               "abdomen: the probe presses the liver 8 mm while the grasper pushes into the bowel's folds, then the "
               "probe slides 10 cm along the side wall 0.5 mm deep", instruments=("probe", "grasper"))
+        write("abdomen_lift.csv", 9.5, abdomen_lift,
+              "abdomen: the probe grasps the right lobe's anterior edge and lifts it %.0f mm and over the first rib (the "
+              "edge onto it) while the grasper pushes a loop of bowel onto the liver's lower edge" % (1e3 * ABD_LIFT_UP[2]),
+              instruments=("probe", "grasper"))
     if which == "abdomen_loop":  # not in "all": a measurement load, not a shipped trajectory (git ignores it)
         write("abdomen_loop.csv", 53.0, abdomen_loop,
               "abdomen.csv six times, 9 s apart (1 s back to the start pose between): a 53 s load for paired live "

@@ -214,6 +214,8 @@ class ToolContacts {
 
   int instruments() const { return static_cast<int>(tools_.size()); }
   const compliance::ContactSolution& solution() const { return solution_; }
+  /// The tensors' superposition the solutions are read through (solution_displacement).
+  const compliance::Superposition& superposition() const { return superposition_; }
   /// The instrument whose contact holds solution node l (the first, when shared).
   int node_instrument(int l) const { return node_instrument_[static_cast<std::size_t>(l)]; }
   /// Solution nodes held by instrument t this tick.

@@ -524,7 +524,7 @@ NonlinearSpec read_nonlinear(const Reader& r, const Field& f) {
 }
 
 LiverOptions read_liver(const Reader& r, const Field& f) {
-  const Map m(r, f, {"deformation", "curves"});
+  const Map m(r, f, {"deformation", "curves", "wall_reach"});
   LiverOptions o;
   if (m.has("deformation")) {
     const std::string d = r.one_of(m.at("deformation"), {"linear", "corotational", "multirate"});
@@ -533,6 +533,11 @@ LiverOptions read_liver(const Reader& r, const Field& f) {
                                         : LiverDeformation::kLinear;
   }
   if (m.has("curves")) o.organ_curves = r.one_of(m.at("curves"), {"cylinder", "organ"}) == "organ";
+  if (m.has("wall_reach")) {
+    o.wall_reach = r.number(m.at("wall_reach"), closed(0.001, 0.5),
+                            "m, 0.001..0.5: how far from a rigid organ at rest the liver's surface is held off it "
+                            "(at least the furthest an instrument moves the liver)");
+  }
   return o;
 }
 

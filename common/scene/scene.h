@@ -86,6 +86,8 @@ struct LiverOptions {
       compliance::LiverDeformation::kLinear;  // corotational: warped compliance (compliance/corotation.h);
                                               // multirate: neo-Hookean tracker (nonlinear/multirate.h)
   bool organ_curves = false;  // curves: organ: P and Q fitted on the organ's own Newton indentations (cached)
+  double wall_reach = 0.08;   // m, wall_reach: the field's rigid organs hold the liver's free surface nodes this near
+                              // them at rest (the motion an instrument may give the liver; run time only, not hashed)
   bool defaults() const { return deformation == compliance::LiverDeformation::kLinear && !organ_curves; }
 };
 

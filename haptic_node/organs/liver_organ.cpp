@@ -1,9 +1,14 @@
 #include "organs/liver_organ.h"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <ostream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/error.h"
 #include "haptic_dds.h"
@@ -137,27 +142,65 @@ void LiverOrgan::add_wall(const rigid::RigidSurface& surface, double stiffness, 
   w.surface = &surface;
   w.stiffness = stiffness;
   w.name = name;
+  w.nearest_at_rest = std::numeric_limits<double>::infinity();
+  std::vector<std::pair<double, int>> near;  // rest distance, node
   for (int node : this->surface().nodes) {
     if (model().fixed.node_touched(node)) continue;  // held: it does not move into anything
     const Eigen::Vector3d x = mesh().nodes.row(node).transpose();
-    if (surface.closest_point(x, kWallReach).found) w.nodes.push_back(node);
+    const rigid::ClosestPoint c = surface.closest_point(x, wall_reach_);
+    if (c.found) near.emplace_back(c.distance, node);
+  }
+  std::sort(near.begin(), near.end());
+  // The displacement bound's compliance: each loadable node's largest block towards the new nodes.
+  const compliance::Superposition& g = contacts_->superposition();
+  const int count = static_cast<int>(mesh().nodes.rows());
+  wall_compliance_.resize(static_cast<std::size_t>(count), 0.0);
+  for (const auto& [distance, node] : near) {
+    w.nodes.push_back(node);
+    w.reach.push_back(std::max(distance - kWallEngage, 0.0));
+    w.nearest_at_rest = std::min(w.nearest_at_rest, distance);
+    for (int c = 0; c < count; ++c) {
+      double f2 = 0;
+      for (int b = 0; b < 3; ++b) {
+        const Eigen::Vector3d e = Eigen::Vector3d::Unit(b);
+        Eigen::Vector3d u;
+        if (g.displacement(node, &c, &e, 1, u) != compliance::ContactStatus::kOk) break;
+        f2 += u.squaredNorm();
+      }
+      double& m = wall_compliance_[static_cast<std::size_t>(c)];
+      m = std::max(m, std::sqrt(f2));
+    }
   }
   walls_.push_back(std::move(w));
 }
 
 int LiverOrgan::gather_walls(int begin) noexcept {
   int n = begin;
+  // No wall node is displaced more than `bound` (each |u_n| <= sum_c |G(n, c)| |lambda_c|).
+  const compliance::ContactSolution& s = contacts_->solution();
+  double bound = 0;
+  for (int l = 0; l < s.count; ++l) {
+    const int c = s.nodes[static_cast<std::size_t>(l)];
+    if (c < 0 || c >= static_cast<int>(wall_compliance_.size())) continue;
+    bound += wall_compliance_[static_cast<std::size_t>(c)] * s.lambda[static_cast<std::size_t>(l)].norm();
+  }
+  if (!std::isfinite(bound)) bound = std::numeric_limits<double>::infinity();
   for (Wall& w : walls_) {
     w.first = n;
     w.count = 0;
     if (!(w.stiffness > 0)) continue;
-    for (int node : w.nodes) {
+    for (std::size_t i = 0; i < w.nodes.size() && w.reach[i] <= bound; ++i) {  // nearest first
+      const int node = w.nodes[i];
       Eigen::Vector3d u;
       if (!contacts_->solution_displacement(node, u)) continue;  // a fixed node, or no column: it does not move
+      if (u.squaredNorm() < w.reach[i] * w.reach[i]) continue;   // not moved far enough to be near the wall
       const Eigen::Vector3d rest = mesh().nodes.row(node).transpose();
-      const rigid::ClosestPoint c = w.surface->closest_point(rest + u, kWallEngage);
+      const rigid::ClosestPoint c = w.surface->closest_point(rest + u, kWallCatch);
       if (!c.found || !(c.distance < kWallEngage)) continue;
-      if (n == ToolContacts::kMaxBodyPoints) break;
+      if (n == ToolContacts::kMaxBodyPoints) {
+        ++w.dropped;
+        continue;
+      }
       BodyPoint& b = bodies_[static_cast<std::size_t>(n++)];
       b.nodes = {node, -1, -1};
       b.bary = Eigen::Vector3d(1, 0, 0);
@@ -203,6 +246,7 @@ LiverOrgan::LiverOrgan(const Scene& scene, const std::string& cache_dir, std::os
   }
   tools_ = scene.tools;
   deformation_ = scene.liver.deformation;
+  wall_reach_ = scene.liver.wall_reach;
   const LiverModelSource source{scene.material, scene.fixed, scene.nonlinear, scene.liver.organ_curves, scene.file};
   instance_ = std::make_unique<LiverInstance>(build_liver_model(std::move(mesh), source, cache_dir, progress), tools_,
                                               deformation_);
@@ -309,11 +353,15 @@ void LiverOrgan::add_stats(nlohmann::json& j) const {
   if (!walls_.empty()) {
     nlohmann::json walls = nlohmann::json::array();
     for (const Wall& w : walls_) {
-      walls.push_back({{"organ", w.name},
-                       {"nodes_near", w.nodes.size()},
-                       {"contact_ticks", w.contact_ticks},
-                       {"contacts_max", w.contacts_max},
-                       {"max_penetration_mm", 1e3 * w.max_penetration}});
+      walls.push_back(
+          {{"organ", w.name},
+           {"nodes_near", w.nodes.size()},
+           {"reach_mm", 1e3 * wall_reach_},
+           {"nearest_at_rest_mm", w.nodes.empty() ? nlohmann::json() : nlohmann::json(1e3 * w.nearest_at_rest)},
+           {"rows_dropped", w.dropped},
+           {"contact_ticks", w.contact_ticks},
+           {"contacts_max", w.contacts_max},
+           {"max_penetration_mm", 1e3 * w.max_penetration}});
     }
     j["walls"] = std::move(walls);
   }

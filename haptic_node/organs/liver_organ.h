@@ -147,11 +147,14 @@ class LiverOrgan final : public HapticOrgan {
   /// Init: a rigid organ's surface (which must outlive this) the liver may not pass: each surface node of the liver
   /// within kWallEngage of it (at its current position) is one more unilateral row of the liver's solve, pushed out
   /// along the wall's normal with the penalty `stiffness` (N/m) in series (contact::BodyPoint on the node alone), in
-  /// the same system as the instruments' rows and the bowel's. `name` in the stats ("walls"). Only the nodes within
-  /// kWallReach of the surface at rest are looked at.
+  /// the same system as the instruments' rows and the bowel's. `name` in the stats ("walls"). The free surface nodes
+  /// within the scene's liver.wall_reach of the surface at rest are looked at. Each tick, a bound on every such
+  /// node's displacement, sum over the solution's nodes of max_n |G(n, c)| |lambda_c| (O(contacts)), leaves out the
+  /// nodes whose rest distance less kWallEngage is beyond it; of the others, those displaced at least that far are
+  /// queried against the surface (none other can be nearer).
   void add_wall(const rigid::RigidSurface& surface, double stiffness, const std::string& name);
-  static constexpr double kWallReach = 0.01;     // m
   static constexpr double kWallEngage = 0.0005;  // m
+  static constexpr double kWallCatch = 0.005;    // m: a node this far past the surface is still pushed back out
   int wall_count() const { return static_cast<int>(walls_.size()); }
 
  private:
@@ -184,8 +187,11 @@ class LiverOrgan final : public HapticOrgan {
     const rigid::RigidSurface* surface = nullptr;
     double stiffness = 0;
     std::string name;
-    std::vector<int> nodes;    // the liver's surface nodes within kWallReach of it at rest
-    int first = 0, count = 0;  // its body points in the last step
+    std::vector<int> nodes;      // the liver's free surface nodes within wall_reach_ of it at rest, nearest first
+    std::vector<double> reach;   // each one's rest distance less kWallEngage: no row while |u| is below it
+    double nearest_at_rest = 0;  // m, the nearest of them at rest
+    int first = 0, count = 0;    // its body points in the last step
+    std::uint64_t dropped = 0;   // rows left out: the liver's solve full (ToolContacts::kMaxBodyPoints)
     double max_penetration = 0;
     std::uint64_t contact_ticks = 0;
     int contacts_max = 0;
@@ -195,6 +201,10 @@ class LiverOrgan final : public HapticOrgan {
   /// Loop thread, after the step: each wall's deepest push.
   void account_walls() noexcept;
   std::vector<Wall> walls_;
+  double wall_reach_ = 0;  // m, the scene's liver.wall_reach
+  // Per node c of the mesh: the largest |G(n, c)| (Frobenius, m/N) over the walls' nodes n (0 where c takes no
+  // load): the walls' displacement bound.
+  std::vector<double> wall_compliance_;
   std::array<contact::BodyPoint, contact::ToolContacts::kMaxBodyPoints> bodies_{};
   std::unique_ptr<LiverObstacle> obstacle_;  // obstacle(): built on demand, in a field with a bowel (gathers its
                                              // coupled body's points before each step)

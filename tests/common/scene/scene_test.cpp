@@ -934,7 +934,8 @@ INSTANTIATE_TEST_SUITE_P(
         ErrorCase{"LiverDeformation", kHead + "liver: {deformation: warped}\n", 3, "key 'liver.deformation'",
                   "multirate"},
         ErrorCase{"MultirateWithOrganCurves", kHead + "liver: {deformation: multirate, curves: organ}\n", 3,
-                  "key 'liver.deformation'", "the multirate tracker is the non-linear model itself"}),
+                  "key 'liver.deformation'", "the multirate tracker is the non-linear model itself"},
+        ErrorCase{"LiverWallReach", kHead + "liver: {wall_reach: 2}\n", 3, "key 'liver.wall_reach'", "0.001..0.5"}),
     [](const ::testing::TestParamInfo<ErrorCase>& info) { return std::string(info.param.name); });
 
 TEST(SceneLoad, LiverMultirateIsReadAndHashed) {

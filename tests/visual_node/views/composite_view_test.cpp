@@ -1,6 +1,6 @@
 // The picture of the operating field (config/abdomen.yaml, views/composite_view.h) through the real OSMesa renderer:
 // an object-id picture of the shipped frame (each organ flat in its own colour: Renderer::set_id_colour) in which every
-// organ covers at least 3 % of the picture, and the shipped trajectory's instruments in view all along.
+// organ covers at least 3 % of the picture, and the shipped trajectories' instruments in view all along.
 #include "views/composite_view.h"
 
 #include <gtest/gtest.h>
@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <map>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "intestine/intestine_model.h"
@@ -95,11 +96,10 @@ TEST(FieldPicture, EveryOrganCoversAtLeastThreePercentOfTheShippedFrame) {
   std::printf("no organ: %.1f %%\n", 100.0 * static_cast<double>(other) / total);
 }
 
-// The instruments of the scene's trajectory: each tip in front of the camera and inside the picture at every sample.
-TEST(FieldPicture, TheShippedTrajectorysInstrumentsStayInView) {
-  const Scene scene = shipped_field();
-  ASSERT_FALSE(scene.trajectory.empty());
-  const MultiTrajectory trajectory = MultiTrajectory::load(scene.trajectory);
+// No sample of `trajectory_file` at which an instrument's tip is behind the camera or outside the picture, for any
+// instrument of the scene.
+void expect_instruments_in_view(const Scene& scene, const std::string& trajectory_file) {
+  const MultiTrajectory trajectory = MultiTrajectory::load(trajectory_file);
   const Eigen::Matrix4f view = view_matrix(scene.visual.camera);
   const int w = scene.visual.width, h = scene.visual.height;
   for (std::size_t i = 0; i < scene.tools.size(); ++i) {
@@ -114,8 +114,21 @@ TEST(FieldPicture, TheShippedTrajectorysInstrumentsStayInView) {
       const bool in_front = (view * tip.homogeneous()).z() < 0.0f;
       if (!(in_front && px.x() >= 0 && px.x() < w && px.y() >= 0 && px.y() < h)) ++outside;
     }
-    EXPECT_EQ(outside, 0) << "instrument '" << scene.tools[i].name << "': samples with its tip out of the picture";
+    EXPECT_EQ(outside, 0) << trajectory_file << ": instrument '" << scene.tools[i].name
+                          << "': samples with its tip out of the picture";
   }
+}
+
+// The instruments of the scene's trajectory: each tip in front of the camera and inside the picture at every sample.
+TEST(FieldPicture, TheShippedTrajectorysInstrumentsStayInView) {
+  const Scene scene = shipped_field();
+  ASSERT_FALSE(scene.trajectory.empty());
+  expect_instruments_in_view(scene, scene.trajectory);
+}
+
+// The same for the field's second trajectory (the probe lifting the liver's edge into the ribs).
+TEST(FieldPicture, TheLiftTrajectorysInstrumentsStayInView) {
+  expect_instruments_in_view(shipped_field(), std::string(SURGSIM_TEST_CONFIG_DIR) + "/trajectories/abdomen_lift.csv");
 }
 
 }  // namespace
