@@ -5,7 +5,7 @@
 Each pair: `rt_bench --seconds R --work-us 95` (the machine's floor now), then the scene replaying its trajectory for
 --seconds (held at its end) with the browser open from before the haptic node starts until after it stops. Per pair:
   misses      the haptic node's missed deadlines, in % of its ticks, against rt_bench's just before: within when the
-              difference is at most 0.1 points (issues 29 and 30);
+              difference is at most 0.1 points;
   visual      frames the visual node rendered while the haptic node ran (its frame trace, t in [0, run]) per second,
               against the scene's visual.rate_hz: within at 97 % or more; also its rate over its whole life;
   page        frames the browser showed.

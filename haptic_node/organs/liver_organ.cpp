@@ -151,24 +151,21 @@ void LiverOrgan::add_wall(const rigid::RigidSurface& surface, double stiffness, 
     if (c.found) near.emplace_back(c.distance, node);
   }
   std::sort(near.begin(), near.end());
-  // The displacement bound's compliance: each loadable node's largest block towards the new nodes.
+  if (!near.empty()) w.nearest_at_rest = near.front().first;
+  // The displacement bound's compliance: each loadable node's largest block G(n, c) (Frobenius) towards the new
+  // nodes n, read straight from the tensors' block (only contactable nodes c take a load).
   const compliance::Superposition& g = contacts_->superposition();
-  const int count = static_cast<int>(mesh().nodes.rows());
-  wall_compliance_.resize(static_cast<std::size_t>(count), 0.0);
+  const compliance::Tensors& tensors = g.tensors();
+  const compliance::TensorBlock& block = g.block();
+  wall_compliance_.resize(static_cast<std::size_t>(mesh().nodes.rows()), 0.0);
   for (const auto& [distance, node] : near) {
     w.nodes.push_back(node);
     w.reach.push_back(std::max(distance - kWallEngage, 0.0));
-    w.nearest_at_rest = std::min(w.nearest_at_rest, distance);
-    for (int c = 0; c < count; ++c) {
-      double f2 = 0;
-      for (int b = 0; b < 3; ++b) {
-        const Eigen::Vector3d e = Eigen::Vector3d::Unit(b);
-        Eigen::Vector3d u;
-        if (g.displacement(node, &c, &e, 1, u) != compliance::ContactStatus::kOk) break;
-        f2 += u.squaredNorm();
-      }
-      double& m = wall_compliance_[static_cast<std::size_t>(c)];
-      m = std::max(m, std::sqrt(f2));
+    const int r = block.row_of_node[static_cast<std::size_t>(node)];
+    if (r < 0) continue;  // not a row of the block: no load moves it
+    for (std::size_t col = 0; col < tensors.contact_nodes.size(); ++col) {
+      double& m = wall_compliance_[static_cast<std::size_t>(tensors.contact_nodes[col])];
+      m = std::max(m, block.block3(r, static_cast<int>(col)).norm());
     }
   }
   walls_.push_back(std::move(w));
