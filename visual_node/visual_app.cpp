@@ -78,6 +78,11 @@ VisualApp::VisualApp(const VisualOptions& options) : options_(options), watch_(m
   // --- init: renderer (no GL context at all when headless) ---
   renderer_ = make_renderer(options_.headless ? "null" : "osmesa", scene_.visual.width, scene_.visual.height);
   renderer_->set_lighting(lighting_of(scene_.visual.render));
+  // Dynamic resolution: frame work aimed at 0.6 of the period, so that the frames that overrun it still catch up.
+  RenderScaleParams scale;
+  scale.min_scale = scene_.visual.min_render_scale;
+  scale.target_work_s = 0.6 / rate_hz_;
+  render_scale_ = RenderScaleController(scale);
   organ_->attach(*renderer_);
 
   // --- init: frame output (the folder and frames.csv when PNGs are written) ---
@@ -245,6 +250,8 @@ void VisualApp::render_frame(const msg::ContactFrame& frame, bool have_frame, bo
   if (fresh) take_frame_instruments(frame);
 
   const std::uint64_t r0 = monotonic_ns();
+  drawn_scale_ = render_scale_.scale();
+  renderer_->set_render_scale(static_cast<float>(drawn_scale_));
   renderer_->begin_frame(scene_.visual.camera);
   organ_->draw(*renderer_);
   // Every instrument: those of the organ's own state when it has them (the intestine's BodyState), else the newest
@@ -269,6 +276,7 @@ void VisualApp::render_frame(const msg::ContactFrame& frame, bool have_frame, bo
   }
   last_work_ms_ = static_cast<double>(work_end - work0) * 1e-6;
   organ_->frame_done(static_cast<double>(work_end - work0) * 1e-9);
+  render_scale_.update(static_cast<double>(work_end - work0) * 1e-9);
   ++frames_rendered_;
   const std::uint64_t done_ns = monotonic_ns();
   const bool png = output_->due(frames_rendered_) && renderer_->read_image(image_);
@@ -316,7 +324,8 @@ int VisualApp::run() {
     if (trace_.size() < kTraceCapacity) {
       const double t_s =
           first_shown_ns_ != 0 ? (static_cast<double>(end_ns) - static_cast<double>(first_shown_ns_)) * 1e-9 : -1.0;
-      trace_.push_back(TraceRow{t_s, last_work_ms_, interval_ms, frame_rate_.fps(), lod_drawn, last_load_on_});
+      trace_.push_back(
+          TraceRow{t_s, last_work_ms_, interval_ms, frame_rate_.fps(), lod_drawn, last_load_on_, drawn_scale_});
     } else {
       ++trace_dropped_;
     }
@@ -370,6 +379,17 @@ void VisualApp::shutdown() {
     j["load_step"] = {{"at_s", load_at_s_}, {"for_s", load_for_s_}, {"factor", load_factor_}};
   }
   write_trace(j);
+  // Dynamic resolution (visual.min_render_scale): the scale drawn at the end, the lowest, the frames below 1.
+  const RenderScaleParams& rs = render_scale_.params();
+  j["render_scale"] = {{"min_allowed", rs.min_scale},
+                       {"target_work_ms", rs.target_work_s * 1e3},
+                       {"final", render_scale_.scale()},
+                       {"min", render_scale_.min_seen()},
+                       {"frames_scaled", render_scale_.frames_scaled()},
+                       {"share_scaled", render_scale_.frames() > 0
+                                            ? static_cast<double>(render_scale_.frames_scaled()) /
+                                                  static_cast<double>(render_scale_.frames())
+                                            : 0.0}};
   j["wall_seconds"] = wall_seconds_;
   j["deform_us"] = to_json(deform);
   j["render_ms"] = to_json(render);
@@ -407,11 +427,11 @@ void VisualApp::write_trace(nlohmann::json& j) const {
     std::cerr << "visual_node: cannot write " << path << "\n";
     return;
   }
-  f << "t_s,lod,work_ms,interval_ms,fps,load_on\n";
-  char line[160];
+  f << "t_s,lod,work_ms,interval_ms,fps,load_on,scale\n";
+  char line[176];
   for (const TraceRow& r : trace_) {
-    std::snprintf(line, sizeof line, "%.6f,%d,%.4f,%.4f,%.3f,%d\n", r.t_s, r.lod, r.work_ms, r.interval_ms, r.fps,
-                  r.load_on ? 1 : 0);
+    std::snprintf(line, sizeof line, "%.6f,%d,%.4f,%.4f,%.3f,%d,%.4f\n", r.t_s, r.lod, r.work_ms, r.interval_ms, r.fps,
+                  r.load_on ? 1 : 0, r.scale);
     f << line;
   }
   j["frame_trace"] = path;

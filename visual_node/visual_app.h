@@ -28,6 +28,7 @@
 #include "haptic_watch.h"
 #include "instruments.h"
 #include "render/image.h"
+#include "render/render_scale.h"
 #include "scene/scene.h"
 
 namespace surgsim {
@@ -103,6 +104,7 @@ class VisualApp {
     double fps;          // FrameRateMeter, 1 s window
     int lod;             // the organ's LOD drawn (0 for organs without one)
     bool load_on;        // the synthetic load was on
+    double scale;        // the render scale it was drawn at (1: full size; visual.min_render_scale)
   };
   static constexpr std::size_t kTraceCapacity = 1 << 16;  // 36 min at 30 Hz
   void write_trace(nlohmann::json& stats) const;
@@ -133,6 +135,7 @@ class VisualApp {
   std::uint64_t instrument_states_ignored_ = 0;   // InstrumentStates naming no instrument of the scene (or repeated)
   bool instrument_states_reported_ = false;       // the first such frame was named on stderr
   FrameRateMeter frame_rate_;                    // measured rate, sent as VisualStatus.fps
+  RenderScaleController render_scale_{RenderScaleParams{}};  // dynamic resolution (off unless the scene asks)
   Image image_;  // read-back buffer, reused every frame
   double wall_seconds_ = 0;
   core::SampleRecorder deform_us_{1 << 18};
@@ -144,6 +147,7 @@ class VisualApp {
   double load_at_s_ = -1, load_for_s_ = 0, load_factor_ = 1;
   std::uint64_t first_shown_ns_ = 0;              // the first fresh frame (0 before)
   double last_work_ms_ = 0;
+  double drawn_scale_ = 1.0;  // the render scale of the frame drawn last
   bool last_load_on_ = false;
   std::uint64_t last_frame_end_ns_ = 0;
   std::vector<TraceRow> trace_;                   // reserved kTraceCapacity rows at init

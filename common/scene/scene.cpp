@@ -714,7 +714,7 @@ RenderSpec read_render(const Reader& r, const Field& f, const RenderSpec& defaul
 VisualSpec read_visual(const Reader& r, const Field& f) {
   const Map m(r, f,
               {"rate_hz", "width", "height", "camera", "render", "png_every", "vtk", "video", "surface", "target_fps",
-               "stream_fps", "stream_quality"});
+               "stream_fps", "stream_quality", "min_render_scale"});
   VisualSpec v;
   if (m.has("rate_hz")) v.rate_hz = r.number(m.at("rate_hz"), closed(1, 1000), "frame rate in Hz, e.g. 50");
   if (m.has("target_fps")) {
@@ -727,6 +727,10 @@ VisualSpec read_visual(const Reader& r, const Field& f) {
   }
   if (m.has("stream_quality")) {
     v.stream_quality = r.integer(m.at("stream_quality"), 1, 100, "JPEG quality of the streamed frames, e.g. 75");
+  }
+  if (m.has("min_render_scale")) {
+    v.min_render_scale = r.number(m.at("min_render_scale"), closed(0.25, 1),
+                                  "lowest scale of the picture's resolution when frames overrun, e.g. 0.6; 1 = off");
   }
   if (m.has("width")) v.width = r.integer(m.at("width"), 16, 8192, "image width in pixels");
   if (m.has("height")) v.height = r.integer(m.at("height"), 16, 8192, "image height in pixels");

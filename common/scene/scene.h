@@ -77,6 +77,8 @@ struct VisualSpec {
   double target_fps = 0;   // Hz, target of the intestine's frame-rate controller (paper eq. 15), 1..1000; 0 = rate_hz
   double stream_fps = 0;   // Hz, frames JPEG-encoded onto surgsim/frame for the web view; 0 = off, 0..120
   int stream_quality = 75; // JPEG quality of the streamed frames, 1..100 (not in the scene hash: no physics)
+  double min_render_scale = 1.0;  // dynamic resolution: the lowest scale frames may be drawn at when their work does
+                                  // not fit the period (scaled back up to width x height), 0.25..1; 1 = always full
 };
 
 /// The liver's run-time model, YAML

@@ -20,6 +20,12 @@ struct Image {
   std::uint8_t* at(int x, int y) { return rgb.data() + (static_cast<std::size_t>(y) * width + x) * 3; }
 };
 
+/// Scales `src` to width x height into `dst` (resized; its capacity is reused) by bilinear interpolation between
+/// pixel centres: destination pixel (x, y) samples the source at ((x + 0.5) sw / width - 0.5, (y + 0.5) sh / height -
+/// 0.5), clamped to the outer pixel centres, rounded to the nearest byte. The same size copies. Empty `src`: `dst`
+/// empty.
+void resize_bilinear(const Image& src, int width, int height, Image& dst);
+
 /// Writes `image` as an 8-bit RGB PNG, compressed for speed rather than size (frames are written while running).
 /// Throws surgsim::core::Error naming `path` when the file cannot be written or the image is malformed.
 void write_png(const std::string& path, const Image& image);

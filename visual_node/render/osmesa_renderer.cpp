@@ -35,6 +35,7 @@ namespace {
   X(PFNGLGETSTRINGPROC, GetString)                                 \
   X(PFNGLGETERRORPROC, GetError)                                   \
   X(PFNGLVIEWPORTPROC, Viewport)                                   \
+  X(PFNGLSCISSORPROC, Scissor)                                     \
   X(PFNGLCLEARCOLORPROC, ClearColor)                               \
   X(PFNGLCLEARPROC, Clear)                                         \
   X(PFNGLENABLEPROC, Enable)                                       \
@@ -483,10 +484,11 @@ class OsMesaRenderer final : public Renderer {
     upload_static(make_unit_cylinder(), cylinder_);
     upload_static(make_unit_sphere(kSphereSubdivisions), sphere_);
     readback_.resize(static_cast<std::size_t>(width_) * height_ * 4);
+    scaled_.rgb.reserve(static_cast<std::size_t>(width_) * height_ * 3);
     vertex_staging_.reserve(6 * 4096);
     index_staging_.reserve(3 * 8192);
 
-    gl_.Viewport(0, 0, width_, height_);
+    set_viewport(width_, height_);
     gl_.Enable(GL_DEPTH_TEST);
     gl_.DepthFunc(GL_LESS);
     gl_.Disable(GL_CULL_FACE);  // both sides are drawn and lit
@@ -506,6 +508,7 @@ class OsMesaRenderer final : public Renderer {
     next_surface_slot_ = 0;
     view_ = view_matrix(camera);
     projection_ = projection_matrix(camera, static_cast<float>(width_) / static_cast<float>(height_));
+    set_viewport(render_width(), render_height());
     gl_.Clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
     gl_.UseProgram(program_.id);
   }
@@ -743,18 +746,22 @@ class OsMesaRenderer final : public Renderer {
   bool read_image(Image& out) override {
     if (counts_.frames == 0) return false;
     make_current();
-    gl_.ReadPixels(0, 0, width_, height_, GL_RGBA, GL_UNSIGNED_BYTE, readback_.data());
-    // GL's row 0 is the bottom: flip while dropping alpha.
-    out.resize(width_, height_);
-    for (int y = 0; y < height_; ++y) {
-      const std::uint8_t* src = readback_.data() + static_cast<std::size_t>(height_ - 1 - y) * width_ * 4;
-      std::uint8_t* dst = out.at(0, y);
-      for (int x = 0; x < width_; ++x, src += 4, dst += 3) {
+    const int w = viewport_width_;
+    const int h = viewport_height_;
+    gl_.ReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, readback_.data());
+    // GL's row 0 is the bottom: flip while dropping alpha; a scaled frame through scaled_ and back up to full size.
+    Image& flipped = w == width_ && h == height_ ? out : scaled_;
+    flipped.resize(w, h);
+    for (int y = 0; y < h; ++y) {
+      const std::uint8_t* src = readback_.data() + static_cast<std::size_t>(h - 1 - y) * w * 4;
+      std::uint8_t* dst = flipped.at(0, y);
+      for (int x = 0; x < w; ++x, src += 4, dst += 3) {
         dst[0] = src[0];
         dst[1] = src[1];
         dst[2] = src[2];
       }
     }
+    if (&flipped != &out) resize_bilinear(scaled_, width_, height_, out);
     return true;
   }
 
@@ -762,6 +769,20 @@ class OsMesaRenderer final : public Renderer {
   std::string info() const override { return info_; }
 
  private:
+  /// The frame's viewport (set_render_scale): the lower-left w x h pixels, the clear limited to them by the scissor.
+  void set_viewport(int w, int h) {
+    if (w == viewport_width_ && h == viewport_height_) return;
+    viewport_width_ = w;
+    viewport_height_ = h;
+    gl_.Viewport(0, 0, w, h);
+    gl_.Scissor(0, 0, w, h);
+    if (w < width_ || h < height_) {
+      gl_.Enable(GL_SCISSOR_TEST);
+    } else {
+      gl_.Disable(GL_SCISSOR_TEST);
+    }
+  }
+
   // --- init helpers ---
 
   /// llvmpipe allocates and frees its binning memory every frame. With glibc's default trim threshold the freed
@@ -1091,6 +1112,9 @@ class OsMesaRenderer final : public Renderer {
   std::vector<float> vertex_staging_;
   std::vector<std::uint32_t> index_staging_;
   std::vector<std::uint8_t> readback_;  // RGBA, bottom row first
+  Image scaled_;                        // a frame drawn at a render scale below 1, before it is scaled up
+  int viewport_width_ = 0;              // the viewport of the frames drawn since the last change (set_viewport)
+  int viewport_height_ = 0;
 };
 
 }  // namespace

@@ -8,6 +8,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -176,6 +177,20 @@ class Renderer {
   }
   void clear_id_colour() { id_mode_ = false; }
 
+  /// Dynamic resolution: the frames from the next begin_frame on are drawn into the lower-left render_width() x
+  /// render_height() pixels (the picture's width and height times `scale`, rounded, at least 16 each), and read_image
+  /// scales that back up to width() x height() (bilinear), so every consumer still gets a full-size picture. The
+  /// fragment work falls with the square of the scale. `scale` is clamped to [kMinRenderScale, 1]; a non-finite one is
+  /// ignored. 1 (the default) draws at full size, exactly as without it.
+  void set_render_scale(float scale) {
+    if (!std::isfinite(scale)) return;
+    render_scale_ = scale < kMinRenderScale ? kMinRenderScale : (scale > 1.0f ? 1.0f : scale);
+  }
+  float render_scale() const { return render_scale_; }
+  int render_width() const { return scaled(width_); }
+  int render_height() const { return scaled(height_); }
+  static constexpr float kMinRenderScale = 0.25f;
+
   int width() const { return width_; }
   int height() const { return height_; }
   const RenderCounts& counts() const { return counts_; }
@@ -188,6 +203,14 @@ class Renderer {
   Lighting lighting_;
   bool id_mode_ = false;
   Eigen::Vector3f id_rgb_ = Eigen::Vector3f::Zero();
+  float render_scale_ = 1.0f;
+
+ private:
+  int scaled(int size) const {
+    if (render_scale_ >= 1.0f) return size;
+    const int s = static_cast<int>(std::lround(static_cast<float>(size) * render_scale_));
+    return s < 16 ? (size < 16 ? size : 16) : s;
+  }
 };
 
 /// Creates a renderer: backend "osmesa" or "null"; width and height in pixels (16..8192).

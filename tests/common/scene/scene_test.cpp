@@ -620,6 +620,10 @@ TEST(SceneHash, IntestineParametersEnterTheHash) {
   const std::uint64_t h0 = load_scene(write(dir / "a.yaml", base)).hash();
   EXPECT_EQ(h0, load_scene(write(dir / "b.yaml", base + "intestine: {columns: 100}\n")).hash());  // the default
   EXPECT_EQ(h0, load_scene(write(dir / "c.yaml", base + "visual: {target_fps: 20}\n")).hash());
+  const Scene scaled = load_scene(write(dir / "s.yaml", base + "visual: {min_render_scale: 0.6}\n"));
+  EXPECT_EQ(scaled.visual.min_render_scale, 0.6);
+  EXPECT_EQ(load_scene(write(dir / "t.yaml", base)).visual.min_render_scale, 1.0) << "full size unless asked";
+  EXPECT_EQ(h0, scaled.hash()) << "the picture's resolution is no physics";
   for (const char* change : {"intestine: {columns: 90}\n", "intestine: {random_pairs: 11}\n", "intestine: {seed: 2}\n",
                              "intestine: {probe_radius: 0.02}\n", "intestine: {gravity: [0, 0, -9]}\n",
                              "intestine: {integrator: symplectic_euler}\n", "intestine: {mesentery_taper: 0.1}\n",
@@ -898,6 +902,8 @@ INSTANTIATE_TEST_SUITE_P(
         ErrorCase{"IntestineAxis", kIntestine + "intestine: {axis_direction: [0, 0, 0]}\n", 3,
                   "key 'intestine.axis_direction'", "zero vector"},
         ErrorCase{"TargetFps", kIntestine + "visual: {target_fps: 0}\n", 3, "key 'visual.target_fps'", "[1, 1000]"},
+        ErrorCase{"MinRenderScale", kIntestine + "visual: {min_render_scale: 0.1}\n", 3,
+                  "key 'visual.min_render_scale'", "[0.25, 1]"},
         // The picture: the scope camera, visual.render, an organ's colour (scene_picture_test.cpp)
         ErrorCase{"EyeAndPort", kVisual + "    eye: [1, 0, 0]\n    port: [0, 0, 1]\n", 6, "key 'visual.camera.port'",
                   "given together with 'eye' (line 5)"},

@@ -609,6 +609,59 @@ TEST(OsMesaRenderer, TintColoursVerticesAndIdPicturesAreFlat) {
   EXPECT_GT(n_background, 1000) << "no backdrop in an id picture";
 }
 
+// Dynamic resolution: at half scale the frame is drawn into a quarter of the pixels and read back at full size, the
+// same picture at a lower resolution; back at scale 1 the picture is bit for bit the one drawn before any scaling.
+TEST(OsMesaRenderer, RenderScaleDrawsFewerPixelsAndReadsBackFullSize) {
+  auto renderer = make_renderer("osmesa", kWidth, kHeight);
+  const Surface sphere = icosphere(3, 1.0f);
+  const Image full = render_surface(*renderer, sphere);
+
+  renderer->set_render_scale(0.5f);
+  EXPECT_EQ(renderer->render_width(), kWidth / 2);
+  EXPECT_EQ(renderer->render_height(), kHeight / 2);
+  const Image half = render_surface(*renderer, sphere);
+  ASSERT_EQ(half.width, kWidth);
+  ASSERT_EQ(half.height, kHeight);
+  EXPECT_EQ(renderer->counts().gl_errors, 0u);
+  EXPECT_FALSE(half.rgb == full.rgb) << "drawn at another resolution";
+  // The same sphere, centred, the same size: its area and centroid agree within a pixel or two of the half image.
+  auto outline = [](const Image& image, double& cx, double& cy) {
+    double n = 0, sx = 0, sy = 0;
+    for (int y = 0; y < image.height; ++y) {
+      for (int x = 0; x < image.width; ++x) {
+        if (is_background(image, x, y)) continue;
+        n += 1;
+        sx += x;
+        sy += y;
+      }
+    }
+    cx = sx / n;
+    cy = sy / n;
+    return n / (image.width * image.height);
+  };
+  double fx = 0, fy = 0, hx = 0, hy = 0;
+  const double f_full = outline(full, fx, fy), f_half = outline(half, hx, hy);
+  std::printf("sphere: %.4f of the picture at full size, %.4f at half scale; centroid (%.2f, %.2f) / (%.2f, %.2f)\n",
+              f_full, f_half, fx, fy, hx, hy);
+  EXPECT_NEAR(f_half, f_full, 0.02);
+  EXPECT_NEAR(hx, fx, 1.5);
+  EXPECT_NEAR(hy, fy, 1.5);
+  long diff = 0;
+  for (std::size_t i = 0; i < full.rgb.size(); ++i) diff += std::abs(static_cast<int>(full.rgb[i]) - half.rgb[i]);
+  const double mean_diff = static_cast<double>(diff) / static_cast<double>(full.rgb.size());
+  std::printf("mean absolute difference: %.2f levels\n", mean_diff);
+  EXPECT_LT(mean_diff, 6.0);
+
+  renderer->set_render_scale(1.0f);
+  const Image again = render_surface(*renderer, sphere);
+  EXPECT_TRUE(again.rgb == full.rgb) << "full size again: the viewport and scissor restored";
+
+  renderer->set_render_scale(0.01f);
+  EXPECT_EQ(renderer->render_scale(), Renderer::kMinRenderScale) << "clamped";
+  renderer->set_render_scale(std::nanf(""));
+  EXPECT_EQ(renderer->render_scale(), Renderer::kMinRenderScale) << "a NaN is ignored";
+}
+
 TEST(NullRenderer, CountsAndHasNoImage) {
   auto renderer = make_renderer("null", 640, 480);
   EXPECT_STREQ(renderer->name(), "null");
