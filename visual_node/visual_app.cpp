@@ -171,7 +171,7 @@ void VisualApp::offer_stream_frame(const msg::ContactFrame& frame, bool have_fra
   if (slot == nullptr) return;
   if (read != nullptr) {
     *slot = *read;  // same size as the preallocated slot: a copy, no allocation
-  } else if (!renderer_->read_image(*slot)) {
+  } else if (!renderer_->read_drawn_image(*slot)) {  // at the render scale: the page scales it to its view
     slot->resize(0, 0);
   }
   FrameStamp st;

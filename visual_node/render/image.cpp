@@ -24,8 +24,8 @@ struct Tap {
   int i1;
   float w;
 };
-Tap tap(int i, int from, int to) {
-  float s = (static_cast<float>(i) + 0.5f) * static_cast<float>(from) / static_cast<float>(to) - 0.5f;
+Tap tap(int i, int from, float ratio) {
+  float s = (static_cast<float>(i) + 0.5f) * ratio - 0.5f;
   if (s < 0.0f) s = 0.0f;
   const float last = static_cast<float>(from - 1);
   if (s > last) s = last;
@@ -45,11 +45,13 @@ void resize_bilinear(const Image& src, int width, int height, Image& dst) {
     std::memcpy(dst.rgb.data(), src.rgb.data(), src.rgb.size());
     return;
   }
+  const float rx = static_cast<float>(src.width) / static_cast<float>(width);
+  const float ry = static_cast<float>(src.height) / static_cast<float>(height);
   for (int y = 0; y < height; ++y) {
-    const Tap ty = tap(y, src.height, height);
+    const Tap ty = tap(y, src.height, ry);
     std::uint8_t* out = dst.at(0, y);
     for (int x = 0; x < width; ++x, out += 3) {
-      const Tap tx = tap(x, src.width, width);
+      const Tap tx = tap(x, src.width, rx);
       const std::uint8_t* a = src.at(tx.i0, ty.i0);
       const std::uint8_t* b = src.at(tx.i1, ty.i0);
       const std::uint8_t* c = src.at(tx.i0, ty.i1);

@@ -744,13 +744,19 @@ class OsMesaRenderer final : public Renderer {
   }
 
   bool read_image(Image& out) override {
+    const bool full = viewport_width_ == width_ && viewport_height_ == height_;
+    if (!read_drawn_image(full ? out : scaled_)) return false;
+    if (!full) resize_bilinear(scaled_, width_, height_, out);
+    return true;
+  }
+
+  bool read_drawn_image(Image& flipped) override {
     if (counts_.frames == 0) return false;
     make_current();
     const int w = viewport_width_;
     const int h = viewport_height_;
     gl_.ReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, readback_.data());
-    // GL's row 0 is the bottom: flip while dropping alpha; a scaled frame through scaled_ and back up to full size.
-    Image& flipped = w == width_ && h == height_ ? out : scaled_;
+    // GL's row 0 is the bottom: flip while dropping alpha.
     flipped.resize(w, h);
     for (int y = 0; y < h; ++y) {
       const std::uint8_t* src = readback_.data() + static_cast<std::size_t>(h - 1 - y) * w * 4;
@@ -761,7 +767,6 @@ class OsMesaRenderer final : public Renderer {
         dst[2] = src[2];
       }
     }
-    if (&flipped != &out) resize_bilinear(scaled_, width_, height_, out);
     return true;
   }
 

@@ -60,6 +60,7 @@ class NullRenderer final : public Renderer {
   }
   void end_frame() override { ++counts_.frames; }
   bool read_image(Image&) override { return false; }
+  bool read_drawn_image(Image&) override { return false; }
   const char* name() const override { return "null"; }
   std::string info() const override { return "null renderer (no GL context)"; }
 };

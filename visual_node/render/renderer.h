@@ -158,6 +158,9 @@ class Renderer {
   /// Copies the last finished frame into `out` (resized to width x height; row 0 = top; reuses its capacity).
   /// False when the backend has no image (null) or no frame has been finished yet.
   virtual bool read_image(Image& out) = 0;
+  /// The same without the scale-up: the last frame's render_width() x render_height() pixels as drawn (at a render
+  /// scale of 1, what read_image gives).
+  virtual bool read_drawn_image(Image& out) = 0;
 
   /// "osmesa" (core profile), "osmesa-compat" (core profile unavailable) or "null".
   virtual const char* name() const = 0;
@@ -178,8 +181,9 @@ class Renderer {
   void clear_id_colour() { id_mode_ = false; }
 
   /// Dynamic resolution: the frames from the next begin_frame on are drawn into the lower-left render_width() x
-  /// render_height() pixels (the picture's width and height times `scale`, rounded, at least 16 each), and read_image
-  /// scales that back up to width() x height() (bilinear), so every consumer still gets a full-size picture. The
+  /// render_height() pixels (the picture's width and height times `scale`, rounded to a multiple of 8 pixels, at
+  /// least 16 each), and read_image scales that back up to width() x height() (bilinear), so a PNG still gets a
+  /// full-size picture; read_drawn_image gives the pixels drawn (the web stream: the page scales them up). The
   /// fragment work falls with the square of the scale. `scale` is clamped to [kMinRenderScale, 1]; a non-finite one is
   /// ignored. 1 (the default) draws at full size, exactly as without it.
   void set_render_scale(float scale) {
@@ -208,7 +212,8 @@ class Renderer {
  private:
   int scaled(int size) const {
     if (render_scale_ >= 1.0f) return size;
-    const int s = static_cast<int>(std::lround(static_cast<float>(size) * render_scale_));
+    const int s = 8 * static_cast<int>(std::lround(static_cast<float>(size) * render_scale_ / 8.0f));
+    if (s >= size) return size;
     return s < 16 ? (size < 16 ? size : 16) : s;
   }
 };

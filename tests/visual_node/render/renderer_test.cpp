@@ -624,6 +624,13 @@ TEST(OsMesaRenderer, RenderScaleDrawsFewerPixelsAndReadsBackFullSize) {
   ASSERT_EQ(half.height, kHeight);
   EXPECT_EQ(renderer->counts().gl_errors, 0u);
   EXPECT_FALSE(half.rgb == full.rgb) << "drawn at another resolution";
+  Image drawn;
+  ASSERT_TRUE(renderer->read_drawn_image(drawn));
+  EXPECT_EQ(drawn.width, kWidth / 2) << "the pixels drawn, not scaled up";
+  EXPECT_EQ(drawn.height, kHeight / 2);
+  Image up;
+  resize_bilinear(drawn, kWidth, kHeight, up);
+  EXPECT_TRUE(up.rgb == half.rgb) << "read_image is the drawn pixels scaled up";
   // The same sphere, centred, the same size: its area and centroid agree within a pixel or two of the half image.
   auto outline = [](const Image& image, double& cx, double& cy) {
     double n = 0, sx = 0, sy = 0;
@@ -655,6 +662,11 @@ TEST(OsMesaRenderer, RenderScaleDrawsFewerPixelsAndReadsBackFullSize) {
   renderer->set_render_scale(1.0f);
   const Image again = render_surface(*renderer, sphere);
   EXPECT_TRUE(again.rgb == full.rgb) << "full size again: the viewport and scissor restored";
+  ASSERT_TRUE(renderer->read_drawn_image(drawn));
+  EXPECT_TRUE(drawn.rgb == full.rgb) << "at scale 1 the drawn pixels are the picture";
+  renderer->set_render_scale(0.6f);
+  EXPECT_EQ(renderer->render_width(), 192) << "a multiple of 8 pixels";
+  EXPECT_EQ(renderer->render_height(), 144);
 
   renderer->set_render_scale(0.01f);
   EXPECT_EQ(renderer->render_scale(), Renderer::kMinRenderScale) << "clamped";
