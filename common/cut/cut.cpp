@@ -143,7 +143,8 @@ bool projects_inside(const BladeTriangle& b, const Vec3& q) {
   return true;
 }
 
-// Stage: split the tets the triangle crosses along its plane (cut.h, step 2). Returns the input tets split.
+// Stage: split the tets the triangle crosses along its plane (cut.h, step 2), marking in input_split the input
+// tets that lose their shape.
 void split_along_triangle(Work& w, const BladeTriangle& b, double snap, std::vector<char>& input_split) {
   std::vector<double> dist;
   std::vector<signed char> side;

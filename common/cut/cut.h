@@ -74,7 +74,7 @@ struct CutResult {
   CutStatus status = CutStatus::kRefused;
   std::string reason;               // why the cut was refused ("" when applied)
   int elements_split = 0;           // tets of the input that were split
-  int elements_created = 0;         // tets of the result that are not tets of the input
+  int elements_created = 0;         // pieces of split tets in the result
   int elements_removed = 0;         // pieces removed (validator or min_quality), counted in volume_removed
   int nodes_created = 0;            // split points on edges
   int nodes_duplicated = 0;         // copies made to separate the two sides of the opened faces
