@@ -318,7 +318,7 @@ TEST(CutPlane, FiveCentimetreCutAcrossALiverSizedBoxLosesAtMostHalfAPercent) {
   // A liver lobe's size, about 1400 nodes; a blade 5 cm into it from the side y = 0, through its whole thickness,
   // in an oblique plane.
   mesh::TetMesh m = mesh::make_box_mesh_with_nodes(1400, {0.15, 0.1, 0.08});
-  const int nodes = static_cast<int>(m.nodes.rows());
+  const int nodes = static_cast<int>(m.nodes.rows()), tets = static_cast<int>(m.tets.rows());
   const double before = total_volume(m);
   const Vector3d n = Vector3d(1, 0.3, 0.1).normalized(), o(0.075, 0.0, 0.04);
   const Vector3d along = Vector3d::UnitZ().cross(n).normalized();  // in the plane, mostly +y
@@ -330,10 +330,10 @@ TEST(CutPlane, FiveCentimetreCutAcrossALiverSizedBoxLosesAtMostHalfAPercent) {
   ASSERT_EQ(r.status, CutStatus::kApplied) << r.reason;
   const double lost = (before - total_volume(m)) / before;
   std::printf(
-      "liver-sized box (%d nodes, %d tets): 5 cm cut split %d tets, %d nodes created, %d duplicated, "
+      "liver-sized box (%d nodes, %d tets): 5 cm cut split %d tets into %d pieces, %d nodes created, %d duplicated, "
       "%d faces opened, %d removed, volume lost %.3g %%\n",
-      nodes, static_cast<int>(r.volume_before > 0 ? m.tets.rows() : 0), r.elements_split, r.nodes_created,
-      r.nodes_duplicated, r.faces_opened, r.elements_removed, 100 * lost);
+      nodes, tets, r.elements_split, r.elements_created, r.nodes_created, r.nodes_duplicated, r.faces_opened,
+      r.elements_removed, 100 * lost);
   EXPECT_LE(lost, 0.005);
   EXPECT_GT(r.faces_opened, 0);
   EXPECT_TRUE(valid(m));
